@@ -1,0 +1,43 @@
+"""Where the real data of the article lives, and where bundled resources are.
+
+The article's data is never copied into the repository (licence and size); it is read from
+`../shared/data` beside the checkout, or from the folder named by $BEYOND_DATA.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from cognition.errors import InputError
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+SOURCES = (
+    "giampierosalvi/AffordancesAndSpeech (folder bayesian_net/) and "
+    "gsaponaro/tcds-gestures (folders src/matlab/ and app/dumps/) on GitHub"
+)
+
+
+def shared_data_dir() -> Path | None:
+    """The article's data folder if present: $BEYOND_DATA, else ../shared/data beside the repo."""
+    env = os.environ.get("BEYOND_DATA")
+    candidates = [Path(env)] if env else []
+    candidates.append(REPO_ROOT.parent / "shared" / "data")
+    for path in candidates:
+        if (path / "salvi2012").is_dir() or (path / "saponaro2019").is_dir():
+            return path
+    return None
+
+
+def require_shared_data(relative: str = "") -> Path:
+    """Path inside the article's data folder; a clear InputError saying where to get it if absent."""
+    root = shared_data_dir()
+    if root is None:
+        raise InputError(
+            "the article's data folder was not found (looked in $BEYOND_DATA and "
+            f"{REPO_ROOT.parent / 'shared' / 'data'}); get it from {SOURCES}"
+        )
+    path = root / relative
+    if not path.exists():
+        raise InputError(f"missing data file {path}; it comes from {SOURCES}")
+    return path

@@ -1,0 +1,1 @@
+"""Thin asyncio services: each subscribes, calls the `cognition` library, and publishes."""
