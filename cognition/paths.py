@@ -30,7 +30,7 @@ def shared_data_dir() -> Path | None:
 
 
 def require_shared_data(relative: str = "") -> Path:
-    """Path inside the article's data folder; a clear InputError saying where to get it if absent."""
+    """A path inside the article's data folder; a clear InputError saying where to get it."""
     root = shared_data_dir()
     if root is None:
         raise InputError(

@@ -1,4 +1,4 @@
-"""Shared fixtures. Tests needing the article's data skip, with the reason, only when it is absent."""
+"""Tests needing the article's data skip, with the reason, only when it is absent."""
 
 from __future__ import annotations
 
