@@ -1,2 +1,80 @@
 """The single source of truth for every message on the bus (versioned msgspec Structs) and for the
-key expressions they travel on."""
+key expressions they travel on.
+
+    from schemas import Header, SkeletonFrame, Joint, Keys, encode, decode
+"""
+
+from schemas.base import Header, Message
+from schemas.codec import (
+    REGISTRY,
+    SchemaError,
+    decode,
+    encode,
+    from_json,
+    json_schema,
+    json_schema_bytes,
+    lookup,
+    to_json,
+    type_from_encoding,
+    versions,
+    wire_encoding,
+)
+from schemas.keys import STREAMS, Keys, split_key, type_for_key, with_robot
+from schemas.messages import (
+    ActionPosterior,
+    AffordancePrediction,
+    CameraFrame,
+    CompressedCameraFrame,
+    Description,
+    DetectedObject,
+    DetectedObjects,
+    Evidence,
+    GestureSegment,
+    Joint,
+    ObjectEffect,
+    ObjectEffects,
+    ScoredSentence,
+    ServiceHealth,
+    SkeletonFrame,
+    Time,
+    WordProbabilities,
+)
+
+__all__ = [
+    "REGISTRY",
+    "STREAMS",
+    "ActionPosterior",
+    "AffordancePrediction",
+    "CameraFrame",
+    "CompressedCameraFrame",
+    "Description",
+    "DetectedObject",
+    "DetectedObjects",
+    "Evidence",
+    "GestureSegment",
+    "Header",
+    "Joint",
+    "Keys",
+    "Message",
+    "ObjectEffect",
+    "ObjectEffects",
+    "SchemaError",
+    "ScoredSentence",
+    "ServiceHealth",
+    "SkeletonFrame",
+    "Time",
+    "WordProbabilities",
+    "decode",
+    "encode",
+    "from_json",
+    "json_schema",
+    "json_schema_bytes",
+    "lookup",
+    "split_key",
+    "to_json",
+    "type_for_key",
+    "type_from_encoding",
+    "versions",
+    "wire_encoding",
+    "with_robot",
+]

@@ -1,0 +1,65 @@
+"""`beyond record KEYEXPR... -o FILE.mcap`: record live bus traffic."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import sys
+
+from runtime.bus import Bus
+from runtime.cliargs import add_bus_arguments, config_from_args
+from runtime.log import setup_logging
+from runtime.recorder import record
+from runtime.recording import COMPRESSIONS, DEFAULT_CHUNK_SIZE
+
+HELP = "record bus traffic on key expressions into an MCAP file"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "keys", nargs="*", metavar="KEYEXPR", help="key expressions (default: beyond/<robot>/**)"
+    )
+    parser.add_argument("-o", "--output", required=True, help="MCAP file to write")
+    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--count", type=int, help="stop after this many messages")
+    parser.add_argument("--chunk-size", type=int, default=DEFAULT_CHUNK_SIZE, help="bytes")
+    parser.add_argument("--compression", choices=list(COMPRESSIONS), default="zstd")
+    parser.add_argument(
+        "--flush-interval", type=float, default=1.0, help="close a chunk at least this often (s)"
+    )
+    add_bus_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    setup_logging(fmt="text")
+    config = config_from_args(args)
+
+    async def go() -> int:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        with Bus.open(config) as bus:
+            keys = args.keys or [bus.keys.everything]
+            print(f"recording {', '.join(keys)} -> {args.output}", file=sys.stderr, flush=True)
+            stats = await record(
+                bus,
+                keys,
+                args.output,
+                stop=stop,
+                duration=args.duration,
+                count=args.count,
+                chunk_size=args.chunk_size,
+                compression=args.compression,
+                flush_interval=args.flush_interval,
+                metadata={"robot": config.robot, "keys": " ".join(keys)},
+            )
+        print(
+            f"wrote {stats.messages} messages to {args.output} "
+            f"({stats.malformed} malformed skipped, {stats.dropped} dropped)",
+            file=sys.stderr,
+        )
+        return 0
+
+    return asyncio.run(go())

@@ -1,0 +1,32 @@
+"""`beyond router`: a Zenoh router for deployments across machines."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+
+from runtime.bus import Bus
+from runtime.cliargs import add_bus_arguments, config_from_args
+from runtime.config import ROUTER_LISTEN, describe
+
+HELP = "run a Zenoh router (multi-host deployments); peers/clients connect to it"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_bus_arguments(parser)
+    parser.epilog = f"Listens on {ROUTER_LISTEN} unless --listen or a config file says otherwise."
+
+
+def run(args: argparse.Namespace) -> int:
+    config = config_from_args(args).with_(mode="router")
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    with Bus.open(config) as bus:
+        print(f"zenoh router {bus.zid} up: {describe(config)}", file=sys.stderr, flush=True)
+        while not stop.wait(0.5):
+            pass
+    print("router stopped", file=sys.stderr)
+    return 0

@@ -1,0 +1,526 @@
+"""Typed publish/subscribe, query/reply and liveliness over one Zenoh session.
+
+Zenoh delivers samples on its own threads; asyncio code must not be touched from there. Each
+subscription therefore has an inbox: the Zenoh callback only appends the raw sample to a deque
+(bounded: when full the oldest is dropped and counted) and, if the consumer is parked, schedules
+one wake-up with `loop.call_soon_threadsafe`. Decoding happens on the event loop when the
+consumer takes the sample, so a burst costs one wake-up, not one per message, and the network
+thread never runs user code.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections import deque
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+import zenoh
+
+from cognition.errors import InputError
+from runtime.config import BusConfig, describe, load_config, zenoh_config
+from schemas.base import Message
+from schemas.codec import SchemaError, decode, encode, type_from_encoding, wire_encoding
+from schemas.keys import Keys, type_for_key
+
+M = TypeVar("M", bound=Message)
+T = TypeVar("T")
+log = logging.getLogger("beyond.bus")
+
+MalformedHandler = Callable[[str, SchemaError], None]
+
+
+@dataclass(slots=True, frozen=True)
+class RawSample:
+    """A sample as it came off the wire."""
+
+    key: str
+    payload: bytes
+    encoding: str
+    received_ns: int  # wall clock (ns since epoch) when the callback ran
+
+
+@dataclass(slots=True, frozen=True)
+class Received(Generic[M]):
+    """A decoded message and where/when it arrived."""
+
+    key: str
+    message: M
+    received_ns: int
+
+
+def _callback(fn: Callable[[Any], None]) -> Any:
+    """Run `fn` on the Zenoh network thread (it only appends to a deque), not on an extra
+    Python thread: one thread hop less per sample."""
+    try:
+        return zenoh.handlers.Callback(fn, indirect=False)
+    except TypeError:  # older zenoh-python without `indirect`
+        return fn
+
+
+class Inbox(Generic[T]):
+    """Thread-safe hand-off from Zenoh threads to one asyncio consumer."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, maxsize: int) -> None:
+        if maxsize < 1:
+            raise InputError(f"queue size {maxsize} must be at least 1")
+        self._loop = loop
+        self._items: deque[T] = deque()
+        self._maxsize = maxsize
+        self._waiter: asyncio.Future[None] | None = None
+        self._wake_pending = False
+        self.closed = False
+        self.dropped = 0
+
+    def push(self, item: T) -> None:  # any thread
+        items = self._items
+        if len(items) >= self._maxsize:
+            items.popleft()
+            self.dropped += 1
+        items.append(item)
+        if self._waiter is not None and not self._wake_pending:
+            self._wake_pending = True
+            # RuntimeError: the loop is closed, nobody is listening any more.
+            with contextlib.suppress(RuntimeError):
+                self._loop.call_soon_threadsafe(self._wake)
+
+    def _wake(self) -> None:  # loop thread
+        self._wake_pending = False
+        waiter, self._waiter = self._waiter, None
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    def close(self) -> None:  # loop thread
+        self.closed = True
+        self._wake()
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    async def get(self, timeout: float | None = None) -> T:
+        """The next item; TimeoutError after `timeout` s; EOFError once closed and drained."""
+        items = self._items
+        deadline = None if timeout is None else self._loop.time() + timeout
+        while not items:
+            if self.closed:
+                raise EOFError("inbox closed")
+            waiter = self._waiter = self._loop.create_future()
+            if items or self.closed:  # arrived between the check and parking
+                self._waiter = None
+                continue
+            if deadline is None:
+                await waiter
+            else:
+                remaining = deadline - self._loop.time()
+                if remaining <= 0:
+                    self._waiter = None
+                    raise TimeoutError("no message before the timeout")
+                try:
+                    await asyncio.wait_for(waiter, remaining)
+                except TimeoutError:
+                    self._waiter = None
+                    if not items:
+                        raise
+        return items.popleft()
+
+
+class RawSubscription:
+    """Undecoded samples of one or more key expressions, in arrival order (recorder, echo)."""
+
+    def __init__(
+        self, session: Any, keys: list[str], loop: asyncio.AbstractEventLoop, maxsize: int
+    ) -> None:
+        self.keys = keys
+        self._inbox: Inbox[RawSample] = Inbox(loop, maxsize)
+        push = self._inbox.push
+
+        def on_sample(sample: Any) -> None:
+            push(
+                RawSample(
+                    str(sample.key_expr),
+                    sample.payload.to_bytes(),
+                    str(sample.encoding),
+                    time.time_ns(),
+                )
+            )
+
+        self._subs = [session.declare_subscriber(key, _callback(on_sample)) for key in keys]
+
+    @property
+    def dropped(self) -> int:
+        return self._inbox.dropped
+
+    async def recv(self, timeout: float | None = None) -> RawSample:
+        return await self._inbox.get(timeout)
+
+    def __aiter__(self) -> AsyncIterator[RawSample]:
+        return self._iterate()
+
+    async def _iterate(self) -> AsyncIterator[RawSample]:
+        while True:
+            try:
+                yield await self._inbox.get()
+            except EOFError:
+                return
+
+    def close(self) -> None:
+        if not self._inbox.closed:
+            for sub in self._subs:
+                _undeclare(sub)
+            self._inbox.close()
+
+
+class Subscription(Generic[M]):
+    """Decoded messages of one type on a key expression. A payload that does not decode is
+    counted in `malformed`, reported to `on_malformed(key, error)` and skipped."""
+
+    def __init__(
+        self,
+        session: Any,
+        key: str,
+        cls: type[M],
+        loop: asyncio.AbstractEventLoop,
+        maxsize: int,
+        on_malformed: MalformedHandler | None,
+    ) -> None:
+        self.key = key
+        self.cls = cls
+        self.malformed = 0
+        self.received = 0
+        self._on_malformed = on_malformed
+        self._inbox: Inbox[tuple[str, bytes, int]] = Inbox(loop, maxsize)
+        push = self._inbox.push
+
+        def on_sample(sample: Any) -> None:
+            push((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+        self._sub = session.declare_subscriber(key, _callback(on_sample))
+
+    @property
+    def dropped(self) -> int:
+        return self._inbox.dropped
+
+    async def recv(self, timeout: float | None = None) -> Received[M]:
+        """The next well-formed message (malformed ones are counted and skipped)."""
+        while True:
+            key, payload, received_ns = await self._inbox.get(timeout)
+            try:
+                message = decode(payload, self.cls, key)
+            except SchemaError as exc:
+                self.malformed += 1
+                if self._on_malformed is not None:
+                    self._on_malformed(key, exc)
+                continue
+            self.received += 1
+            return Received(key, message, received_ns)
+
+    def __aiter__(self) -> AsyncIterator[Received[M]]:
+        return self._iterate()
+
+    async def _iterate(self) -> AsyncIterator[Received[M]]:
+        while True:
+            try:
+                yield await self.recv()
+            except EOFError:
+                return
+
+    def close(self) -> None:
+        if not self._inbox.closed:
+            with contextlib.suppress(Exception):
+                self._sub.undeclare()
+            self._inbox.close()
+
+
+class Publisher(Generic[M]):
+    """Publishes messages of one type on one key. `reliable` (the default) blocks briefly when
+    Zenoh's queue is full instead of dropping: derived results and replays must not vanish."""
+
+    def __init__(
+        self, session: Any, key: str, cls: type[M], *, reliable: bool = True, express: bool = False
+    ) -> None:
+        self.key = key
+        self.cls = cls
+        self.sent = 0
+        self._pub = session.declare_publisher(
+            key,
+            encoding=zenoh.Encoding(wire_encoding(cls)),
+            congestion_control=(
+                zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+            ),
+            express=express,
+        )
+
+    def put(self, message: M) -> None:
+        if type(message) is not self.cls:
+            raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
+        self._pub.put(encode(message))
+        self.sent += 1
+
+    def put_bytes(self, payload: bytes) -> None:
+        """Publish an already encoded payload (replay, benchmarks)."""
+        self._pub.put(payload)
+        self.sent += 1
+
+    def matching(self) -> bool:
+        """Whether any subscriber currently matches this key."""
+        return bool(self._pub.matching_status.matching)
+
+    async def wait_matching(self, timeout: float = 5.0) -> None:
+        """Wait until a subscriber matches (discovery handshake, not a fixed sleep)."""
+        loop = asyncio.get_running_loop()
+        inbox: Inbox[bool] = Inbox(loop, 16)
+        listener = self._pub.declare_matching_listener(
+            _callback(lambda status: inbox.push(bool(status.matching)))
+        )
+        try:
+            deadline = loop.time() + timeout
+            while not self.matching():
+                remaining = deadline - loop.time()
+                if remaining <= 0:
+                    raise TimeoutError(f"no subscriber for {self.key} within {timeout} s")
+                with contextlib.suppress(TimeoutError):
+                    await inbox.get(min(remaining, 0.5))
+        finally:
+            with contextlib.suppress(Exception):
+                listener.undeclare()
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self._pub.undeclare()
+
+
+QueryHandler = Callable[[str, bytes | None], Awaitable[list[tuple[str, Message]] | Message | None]]
+
+
+class Bus:
+    """One Zenoh session plus the helpers every service and tool uses."""
+
+    def __init__(self, session: Any, config: BusConfig) -> None:
+        self.session = session
+        self.config = config
+        self.keys = Keys(config.robot)
+        self._closers: list[Callable[[], None]] = []
+        self._tasks: set[asyncio.Task[None]] = set()
+
+    @classmethod
+    def open(cls, config: BusConfig | None = None) -> Bus:
+        config = config or load_config()
+        log.debug("opening Zenoh session: %s", describe(config))
+        try:
+            session = zenoh.open(zenoh_config(config))
+        except zenoh.ZError as exc:
+            raise InputError(f"cannot open the Zenoh session ({describe(config)}): {exc}") from None
+        return cls(session, config)
+
+    def __enter__(self) -> Bus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def zid(self) -> str:
+        return str(self.session.zid())
+
+    def publisher(
+        self, key: str, cls: type[M], *, reliable: bool = True, express: bool = False
+    ) -> Publisher[M]:
+        pub = Publisher(self.session, key, cls, reliable=reliable, express=express)
+        self._closers.append(pub.close)
+        return pub
+
+    def raw_publisher(self, key: str, encoding: str, *, reliable: bool = True) -> Any:
+        """A plain Zenoh publisher with an encoding string (replay of arbitrary channels)."""
+        pub = self.session.declare_publisher(
+            key,
+            encoding=zenoh.Encoding(encoding) if encoding else None,
+            congestion_control=(
+                zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+            ),
+        )
+        self._closers.append(lambda: _undeclare(pub))
+        return pub
+
+    def subscribe(
+        self,
+        key: str,
+        cls: type[M],
+        *,
+        maxsize: int = 1024,
+        on_malformed: MalformedHandler | None = None,
+    ) -> Subscription[M]:
+        """Typed subscription; must be called from the event loop that will consume it."""
+        sub = Subscription(
+            self.session, key, cls, asyncio.get_running_loop(), maxsize, on_malformed
+        )
+        self._closers.append(sub.close)
+        return sub
+
+    def subscribe_raw(self, keys: str | list[str], *, maxsize: int = 4096) -> RawSubscription:
+        """Raw samples of one or more key expressions (give non-overlapping ones: a sample
+        matching two of them arrives twice)."""
+        keys = [keys] if isinstance(keys, str) else list(keys)
+        sub = RawSubscription(self.session, keys, asyncio.get_running_loop(), maxsize)
+        self._closers.append(sub.close)
+        return sub
+
+    # --- query / reply -------------------------------------------------------------------
+
+    def queryable(self, key: str, handler: QueryHandler) -> Callable[[], None]:
+        """Answer queries on `key` with `handler(query_key, payload)`, run on the event loop.
+        The handler returns a message (replied on the query's key), a list of (key, message),
+        or None (no reply). Returns a function that undeclares the queryable."""
+        loop = asyncio.get_running_loop()
+        inbox: Inbox[Any] = Inbox(loop, 256)
+        queryable = self.session.declare_queryable(key, _callback(inbox.push))
+
+        async def serve() -> None:
+            while True:
+                try:
+                    query = await inbox.get()
+                except EOFError:
+                    return
+                try:
+                    payload = query.payload.to_bytes() if query.payload is not None else None
+                    answer = await handler(str(query.key_expr), payload)
+                    replies = (
+                        [(str(query.key_expr), answer)] if isinstance(answer, Message) else answer
+                    ) or []
+                    for reply_key, message in replies:
+                        query.reply(
+                            reply_key,
+                            encode(message),
+                            encoding=zenoh.Encoding(wire_encoding(type(message))),
+                        )
+                except Exception as exc:
+                    log.warning("query on %s failed: %s", key, exc)
+                    with contextlib.suppress(Exception):
+                        query.reply_err(str(exc))
+                finally:
+                    query.drop()
+
+        task = loop.create_task(serve())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+        def close() -> None:
+            _undeclare(queryable)
+            inbox.close()
+
+        self._closers.append(close)
+        return close
+
+    async def query(
+        self,
+        selector: str,
+        cls: type[M],
+        *,
+        payload: Message | None = None,
+        timeout: float = 2.0,
+    ) -> list[Received[M]]:
+        """Ask every matching queryable; their well-formed replies (malformed ones raise)."""
+        loop = asyncio.get_running_loop()
+        inbox: Inbox[Any] = Inbox(loop, 4096)
+        done = loop.create_future()
+
+        def resolve() -> None:
+            if not done.done():
+                done.set_result(None)
+
+        def finished() -> None:
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(resolve)
+
+        kwargs: dict[str, Any] = {"timeout": timeout}
+        if payload is not None:
+            kwargs["payload"] = encode(payload)
+            kwargs["encoding"] = zenoh.Encoding(wire_encoding(type(payload)))
+        handler = zenoh.handlers.Callback(inbox.push, finished)
+        self.session.get(selector, handler, **kwargs)
+        await asyncio.wait_for(done, timeout + 1.0)
+        replies: list[Received[M]] = []
+        while len(inbox):
+            reply = await inbox.get(0)
+            sample = reply.ok
+            if sample is None:
+                err = reply.err
+                detail = err.payload.to_string() if err is not None else "?"
+                raise InputError(f"query {selector} answered with an error: {detail}")
+            key = str(sample.key_expr)
+            message = decode(sample.payload.to_bytes(), cls, key)
+            replies.append(Received(key, message, time.time_ns()))
+        return replies
+
+    # --- liveliness ----------------------------------------------------------------------
+
+    def declare_token(self, key: str) -> Callable[[], None]:
+        """Liveliness token (other processes see it until we undeclare or die)."""
+        token = self.session.liveliness().declare_token(key)
+        closer = lambda: _undeclare(token)  # noqa: E731
+        self._closers.append(closer)
+        return closer
+
+    async def wait_alive(self, key_expr: str, count: int = 1, timeout: float = 10.0) -> set[str]:
+        """Wait until at least `count` distinct liveliness tokens match `key_expr`."""
+        loop = asyncio.get_running_loop()
+        inbox: Inbox[tuple[str, bool]] = Inbox(loop, 1024)
+
+        def on_sample(sample: Any) -> None:
+            inbox.push((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT))
+
+        sub = self.session.liveliness().declare_subscriber(
+            key_expr, _callback(on_sample), history=True
+        )
+        alive: set[str] = set()
+        deadline = loop.time() + timeout
+        try:
+            while len(alive) < count:
+                remaining = deadline - loop.time()
+                try:
+                    key, present = await inbox.get(max(remaining, 0.0))
+                except TimeoutError:
+                    raise TimeoutError(
+                        f"only {len(alive)} of {count} live tokens on {key_expr} after {timeout} s"
+                        f": {sorted(alive)}"
+                    ) from None
+                (alive.add if present else alive.discard)(key)
+        finally:
+            _undeclare(sub)
+        return alive
+
+    async def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
+        """Keys of the liveliness tokens currently matching `key_expr`."""
+
+        def get() -> list[str]:
+            replies = self.session.liveliness().get(key_expr, timeout=timeout)
+            return sorted({str(r.ok.key_expr) for r in replies if r.ok is not None})
+
+        return await asyncio.to_thread(get)
+
+    def close(self) -> None:
+        for closer in reversed(self._closers):
+            with contextlib.suppress(Exception):
+                closer()
+        self._closers.clear()
+        for task in list(self._tasks):
+            task.cancel()
+        with contextlib.suppress(Exception):
+            self.session.close()
+
+
+def _undeclare(entity: Any) -> None:
+    with contextlib.suppress(Exception):
+        entity.undeclare()
+
+
+def decode_any(sample: RawSample) -> Message | None:
+    """Decode a raw sample by its wire encoding or, failing that, by its key; None if neither
+    names one of our types. Raises SchemaError when it should be ours but is not valid."""
+    cls = type_from_encoding(sample.encoding) or type_for_key(sample.key)
+    if cls is None:
+        return None
+    return decode(sample.payload, cls, sample.key)

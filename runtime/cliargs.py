@@ -1,0 +1,37 @@
+"""Bus options shared by every command that opens a Zenoh session."""
+
+from __future__ import annotations
+
+import argparse
+
+from runtime.config import ENV_VARS, MODES, BusConfig, load_config
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group(
+        "bus",
+        "how to join the Zenoh network (defaults: " + "; ".join(f"{k}" for k in ENV_VARS) + ")",
+    )
+    group.add_argument("--robot", help="robot name, the second chunk of every key ($BEYOND_ROBOT)")
+    group.add_argument("--mode", choices=MODES, help="Zenoh mode ($BEYOND_ZENOH_MODE)")
+    group.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", help="endpoint to connect to (repeat)"
+    )
+    group.add_argument(
+        "--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on (repeat)"
+    )
+    group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file")
+    group.add_argument(
+        "--port", type=int, help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)"
+    )
+
+
+def config_from_args(args: argparse.Namespace) -> BusConfig:
+    return load_config(
+        robot=getattr(args, "robot", None),
+        mode=getattr(args, "mode", None),
+        connect=getattr(args, "connect", None),
+        listen=getattr(args, "listen", None),
+        config_file=getattr(args, "zenoh_config", None),
+        port=getattr(args, "port", None),
+    )

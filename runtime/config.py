@@ -1,0 +1,161 @@
+"""One place that decides how a process joins the bus.
+
+Default (nothing configured): peer mode on loopback, multicast scouting off, and a rendezvous
+port. Every process listens on `tcp/127.0.0.1:<port>` (the first to start gets it; the others'
+listen attempt fails quietly and keeps retrying in the background) and on an ephemeral loopback
+port, and connects to `tcp/127.0.0.1:<port>`. Zenoh's gossip then tells every peer about the
+others' ephemeral listeners, so the processes end up fully meshed with no router; if the process
+holding the rendezvous port exits, another one takes it over and newcomers still find the group.
+
+Multi-host: run `beyond router` on one machine and set BEYOND_ZENOH_MODE=client (or peer) with
+BEYOND_ZENOH_CONNECT=tcp/<router-host>:7447 on the others, or pass a full Zenoh JSON5 config file.
+
+Precedence: built-in defaults < config file (BEYOND_ZENOH_CONFIG) < environment < arguments.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from cognition.errors import InputError
+from schemas.keys import DEFAULT_ROBOT, check_name
+
+MODES = ("peer", "client", "router")
+DEFAULT_PORT = 7448  # rendezvous port of the default local group (7447 is Zenoh's router port)
+ROUTER_LISTEN = "tcp/[::]:7447"
+
+ENV_VARS: dict[str, str] = {
+    "BEYOND_ROBOT": "robot name, the second chunk of every key (default 'robot')",
+    "BEYOND_ZENOH_CONFIG": "path of a Zenoh JSON5 config file used as the base",
+    "BEYOND_ZENOH_MODE": "peer | client | router (default peer)",
+    "BEYOND_ZENOH_CONNECT": "comma-separated endpoints to connect to, e.g. tcp/10.0.0.2:7447",
+    "BEYOND_ZENOH_LISTEN": "comma-separated endpoints to listen on, e.g. tcp/0.0.0.0:7447",
+    "BEYOND_ZENOH_PORT": f"rendezvous port of the default local group (default {DEFAULT_PORT})",
+}
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """How to open the Zenoh session. `listen`/`connect` None = the mode's default."""
+
+    robot: str = DEFAULT_ROBOT
+    mode: str = "peer"
+    connect: tuple[str, ...] | None = None
+    listen: tuple[str, ...] | None = None
+    port: int = DEFAULT_PORT
+    config_file: Path | None = None
+    extra: dict[str, Any] = field(default_factory=dict)  # zenoh config path -> JSON value
+
+    def __post_init__(self) -> None:
+        check_name("robot", self.robot)
+        if self.mode not in MODES:
+            raise InputError(f"unknown Zenoh mode {self.mode!r}; valid: {', '.join(MODES)}")
+        if not 0 < self.port < 65536:
+            raise InputError(f"port {self.port} out of range; valid: 1-65535")
+
+    def with_(self, **changes: Any) -> BusConfig:
+        return replace(self, **changes)
+
+    def endpoints(self) -> tuple[list[str], list[str]]:
+        """(listen, connect) endpoints actually used."""
+        rendezvous = f"tcp/127.0.0.1:{self.port}"
+        if self.mode == "peer":
+            listen = [rendezvous, "tcp/127.0.0.1:0"]
+            connect = [rendezvous]
+        elif self.mode == "client":
+            listen, connect = [], ["tcp/127.0.0.1:7447"]
+        else:
+            listen, connect = [ROUTER_LISTEN], []
+        if self.config_file is not None:  # the file decides unless overridden explicitly
+            listen, connect = [], []
+        return (
+            list(self.listen) if self.listen is not None else listen,
+            list(self.connect) if self.connect is not None else connect,
+        )
+
+
+def _split(value: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in value.split(",") if part.strip())
+
+
+def load_config(
+    env: Mapping[str, str] | None = None,
+    *,
+    robot: str | None = None,
+    mode: str | None = None,
+    connect: list[str] | None = None,
+    listen: list[str] | None = None,
+    config_file: str | Path | None = None,
+    port: int | None = None,
+) -> BusConfig:
+    """The bus configuration from the environment, overridden by the given arguments."""
+    env = os.environ if env is None else env
+    file = config_file or env.get("BEYOND_ZENOH_CONFIG") or None
+    port_text = env.get("BEYOND_ZENOH_PORT")
+    if port is None and port_text:
+        try:
+            port = int(port_text)
+        except ValueError:
+            raise InputError(f"BEYOND_ZENOH_PORT={port_text!r} is not a port number") from None
+    env_connect = env.get("BEYOND_ZENOH_CONNECT")
+    env_listen = env.get("BEYOND_ZENOH_LISTEN")
+    path = Path(file) if file else None
+    if path is not None and not path.is_file():
+        raise InputError(f"Zenoh config file {path} does not exist")
+    return BusConfig(
+        robot=robot or env.get("BEYOND_ROBOT") or DEFAULT_ROBOT,
+        mode=mode or env.get("BEYOND_ZENOH_MODE") or "peer",
+        connect=tuple(connect) if connect else (_split(env_connect) if env_connect else None),
+        listen=tuple(listen) if listen else (_split(env_listen) if env_listen else None),
+        port=port or DEFAULT_PORT,
+        config_file=path,
+    )
+
+
+def zenoh_config(config: BusConfig) -> Any:
+    """A zenoh.Config for this BusConfig (imported lazily: zenoh is slow to import)."""
+    import zenoh
+
+    zc = zenoh.Config.from_file(str(config.config_file)) if config.config_file else zenoh.Config()
+    sets: dict[str, Any] = {}
+    if config.config_file is None or config.mode != "peer":
+        sets["mode"] = config.mode
+    listen, connect = config.endpoints()
+    if config.config_file is None:
+        sets["scouting/multicast/enabled"] = False
+        # Do not block open() on endpoints; retry quickly so a restarted rendezvous peer or
+        # router is found again within about a second.
+        retry = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
+        sets["connect/timeout_ms"] = 0
+        sets["connect/retry"] = retry
+        sets["connect/exit_on_failure"] = False
+        if config.mode == "peer":
+            sets["listen/timeout_ms"] = 0
+            sets["listen/retry"] = retry
+            sets["listen/exit_on_failure"] = False
+    if listen or config.listen is not None:
+        sets["listen/endpoints"] = listen
+    if connect or config.connect is not None:
+        sets["connect/endpoints"] = connect
+    sets.update(config.extra)
+    for key, value in sets.items():
+        try:
+            zc.insert_json5(key, json.dumps(value))
+        except Exception as exc:  # zenoh raises its own ZError
+            raise InputError(f"bad Zenoh setting {key}={value!r}: {exc}") from None
+    return zc
+
+
+def describe(config: BusConfig) -> str:
+    """One line for logs: mode, robot and endpoints."""
+    listen, connect = config.endpoints()
+    source = f" file={config.config_file}" if config.config_file else ""
+    return (
+        f"mode={config.mode} robot={config.robot} listen={','.join(listen) or '-'} "
+        f"connect={','.join(connect) or '-'}{source}"
+    )

@@ -1,0 +1,277 @@
+"""The base every service stands on: lifecycle, liveliness, health, counting, logging.
+
+A service subclasses `Service`, declares its inputs and outputs in `setup()` with
+`self.subscribe(key, Type, handler)` and `self.publisher(key, Type)`, and is run with
+`asyncio.run(service.run())` (or `Service.main()`). It stops cleanly on SIGINT/SIGTERM:
+consumers are cancelled, subscribers, publishers, queryables and the liveliness token are
+undeclared, then the session closes.
+
+Bad input never stops a service: a payload that does not decode is counted as malformed and
+logged once per (key, reason); an `InputError` raised by a handler is counted as an error and
+logged; the service goes on with the next message.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import inspect
+import logging
+import signal
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
+from cognition.errors import InputError
+from runtime.bus import Bus, Publisher, Subscription
+from runtime.clock import Clock
+from runtime.config import BusConfig, load_config
+from runtime.log import event, setup_logging
+from schemas.base import Header, Message
+from schemas.codec import SchemaError
+from schemas.keys import check_name
+from schemas.messages import ServiceHealth
+
+M = TypeVar("M", bound=Message)
+Handler = Callable[[M], Awaitable[None] | None]
+_MAX_REMEMBERED_REASONS = 1000
+
+
+class Service:
+    """Subclass, set `name` (or pass it), override `setup()`."""
+
+    name: str = "service"
+    health_period: float = 1.0
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        config: BusConfig | None = None,
+        bus: Bus | None = None,
+        clock: Clock | None = None,
+        health_period: float | None = None,
+    ) -> None:
+        self.name = check_name("service", name or self.name)
+        self.config = config
+        self._bus = bus
+        self._owns_bus = bus is None
+        self.clock = clock or Clock.from_env()
+        if health_period is not None:
+            self.health_period = health_period
+        self.log = logging.getLogger(f"beyond.{self.name}")
+        self.started = asyncio.Event()
+        self._stop = asyncio.Event()
+        self._subscriptions: list[tuple[Subscription[Any], Handler[Any]]] = []
+        self._publishers: list[Publisher[Any]] = []
+        self._tasks: list[asyncio.Task[None]] = []
+        self._seen_reasons: set[tuple[str, str]] = set()
+        self._seq = 0
+        self._health_seq = 0
+        self._started_at = time.monotonic()
+        self.errors = 0
+        self.malformed_other = 0
+        self.last_error = ""
+
+    # --- for subclasses --------------------------------------------------------------------
+
+    async def setup(self) -> None:
+        """Declare subscriptions and publishers here."""
+
+    async def teardown(self) -> None:
+        """Release anything `setup` acquired beyond subscriptions and publishers."""
+
+    @property
+    def bus(self) -> Bus:
+        if self._bus is None:
+            raise RuntimeError("the bus is open only while the service runs")
+        return self._bus
+
+    def subscribe(
+        self, key: str, cls: type[M], handler: Handler[M], *, maxsize: int = 1024
+    ) -> Subscription[M]:
+        """Call `handler(message)` for every well-formed `cls` message on `key`."""
+        sub = self.bus.subscribe(key, cls, maxsize=maxsize, on_malformed=self._malformed)
+        self._subscriptions.append((sub, handler))
+        if self.started.is_set():
+            self._tasks.append(asyncio.get_running_loop().create_task(self._consume(sub, handler)))
+        return sub
+
+    def publisher(self, key: str, cls: type[M], *, reliable: bool = True) -> Publisher[M]:
+        pub = self.bus.publisher(key, cls, reliable=reliable)
+        self._publishers.append(pub)
+        return pub
+
+    def derive(self, source: Header, cls: type[Message]) -> Header:
+        """Header of a `cls` output computed from `source`: same stamp, same sequence number and the
+        correlation id of the chain, so outputs are a pure function of inputs (replays of one
+        recording give identical bytes even into a long-running service)."""
+        return Header(
+            version=cls.VERSION,
+            source=self.name,
+            seq=source.seq,
+            stamp=source.stamp,
+            correlation=source.correlation or f"{source.source}/{source.seq}",
+        )
+
+    def header(self, cls: type[Message], stamp: int | None = None) -> Header:
+        """Header of an original `cls` message (a sensor): own sequence, clock stamp."""
+        seq = self._seq
+        self._seq += 1
+        return Header(
+            version=cls.VERSION,
+            source=self.name,
+            seq=seq,
+            stamp=self.clock.now_ns() if stamp is None else stamp,
+            correlation=f"{self.name}/{seq}",
+        )
+
+    # --- health ---------------------------------------------------------------------------
+
+    def health(self) -> ServiceHealth:
+        seq = self._health_seq
+        self._health_seq += 1
+        subs = [s for s, _ in self._subscriptions]
+        return ServiceHealth(
+            header=Header(
+                version=ServiceHealth.VERSION,
+                source=self.name,
+                seq=seq,
+                stamp=self.clock.now_ns(),
+                correlation=f"{self.name}/health/{seq}",
+            ),
+            service=self.name,
+            uptime_s=round(time.monotonic() - self._started_at, 3),
+            messages_in=sum(s.received for s in subs),
+            messages_out=sum(p.sent for p in self._publishers),
+            dropped=sum(s.dropped for s in subs),
+            malformed=sum(s.malformed for s in subs) + self.malformed_other,
+            errors=self.errors,
+            last_error=self.last_error,
+            inputs=sorted({s.key for s in subs}),
+            outputs=sorted({p.key for p in self._publishers}),
+        )
+
+    def _malformed(self, key: str, error: SchemaError) -> None:
+        reason = str(error)
+        self.last_error = reason
+        if (key, reason) not in self._seen_reasons:
+            if len(self._seen_reasons) < _MAX_REMEMBERED_REASONS:
+                self._seen_reasons.add((key, reason))
+            event(self.log, logging.WARNING, "malformed payload skipped", key=key, reason=reason)
+
+    def _failed(self, key: str, exc: BaseException) -> None:
+        self.errors += 1
+        self.last_error = f"{type(exc).__name__}: {exc}"
+        if isinstance(exc, InputError):
+            reason = str(exc)
+            if (key, reason) not in self._seen_reasons:
+                if len(self._seen_reasons) < _MAX_REMEMBERED_REASONS:
+                    self._seen_reasons.add((key, reason))
+                event(self.log, logging.WARNING, "bad input skipped", key=key, reason=reason)
+        else:
+            self.log.error(
+                "handler failed", exc_info=exc, extra={"fields": {"key": key, "service": self.name}}
+            )
+
+    async def _consume(self, sub: Subscription[Any], handler: Handler[Any]) -> None:
+        async for received in sub:
+            self.clock.observe(received.message.header.stamp)
+            try:
+                result = handler(received.message)
+                if inspect.isawaitable(result):
+                    await result
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:
+                self._failed(received.key, exc)
+
+    async def _publish_health(self) -> None:
+        pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, reliable=False)
+        while True:
+            pub.put(self.health())
+            await asyncio.sleep(self.health_period)
+
+    # --- lifecycle ------------------------------------------------------------------------
+
+    def stop(self) -> None:
+        """Ask the service to stop (safe from signal handlers and other tasks)."""
+        self._stop.set()
+
+    async def run(self, *, install_signals: bool = True) -> None:
+        """Open the bus (unless given one), set up, serve until stopped, clean up."""
+        loop = asyncio.get_running_loop()
+        if self._bus is None:
+            self._bus = Bus.open(self.config or load_config())
+            self._owns_bus = True
+        installed: list[signal.Signals] = []
+        if install_signals:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                try:
+                    loop.add_signal_handler(sig, self.stop)
+                    installed.append(sig)
+                except (NotImplementedError, RuntimeError, ValueError):
+                    pass  # not the main thread, or not supported here
+        undeclare_token = None
+        try:
+            await self.setup()
+            for sub, handler in self._subscriptions:
+                self._tasks.append(loop.create_task(self._consume(sub, handler)))
+            health_key = self.bus.keys.health(self.name)
+
+            async def answer_health(_key: str, _payload: bytes | None) -> list[tuple[str, Message]]:
+                return [(health_key, self.health())]
+
+            self.bus.queryable(health_key, answer_health)
+            self._tasks.append(loop.create_task(self._publish_health()))
+            undeclare_token = self.bus.declare_token(self.bus.keys.alive(self.name))
+            self.started.set()
+            event(self.log, logging.INFO, "started", service=self.name, robot=self.bus.keys.robot)
+            await self._stop.wait()
+        finally:
+            for task in self._tasks:
+                task.cancel()
+            for task in self._tasks:
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
+            self._tasks.clear()
+            if undeclare_token is not None:
+                undeclare_token()
+            for sub, _ in self._subscriptions:
+                sub.close()
+            for pub in self._publishers:
+                pub.close()
+            with contextlib.suppress(Exception):
+                await self.teardown()
+            health = self.health()
+            event(
+                self.log,
+                logging.INFO,
+                "stopped",
+                service=self.name,
+                messages_in=health.messages_in,
+                messages_out=health.messages_out,
+                malformed=health.malformed,
+                dropped=health.dropped,
+                errors=health.errors,
+            )
+            if self._owns_bus and self._bus is not None:
+                self._bus.close()
+                self._bus = None
+            for sig in installed:
+                loop.remove_signal_handler(sig)
+
+    @classmethod
+    def main(cls, *args: Any, **kwargs: Any) -> int:
+        """Entry point for a service process: logging, run until SIGINT/SIGTERM, exit 0."""
+        setup_logging()
+
+        async def go() -> None:
+            await cls(*args, **kwargs).run()
+
+        try:
+            asyncio.run(go())
+        except InputError as exc:
+            logging.getLogger("beyond").error(str(exc))
+            return 2
+        return 0

@@ -1,0 +1,152 @@
+"""Every key expression on the bus, defined here and nowhere else.
+
+All keys live under `beyond/<robot>/` so several robots share one Zenoh network and a recording
+can be replayed as another robot (swap the second chunk). `STREAMS` says which message type each
+stream carries; the recorder, `beyond echo` and the typed subscribers read it from here.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from cognition.errors import InputError
+from schemas import messages as m
+from schemas.base import Message
+
+PREFIX = "beyond"
+DEFAULT_ROBOT = "robot"
+_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
+
+# stream name -> (key suffix after beyond/<robot>/, message type)
+STREAMS: dict[str, tuple[str, type[Message]]] = {
+    "skeleton": ("sensors/skeleton", m.SkeletonFrame),
+    "camera": ("sensors/camera/raw", m.CameraFrame),
+    "camera_compressed": ("sensors/camera/compressed", m.CompressedCameraFrame),
+    "objects": ("vision/objects", m.DetectedObjects),
+    "effects": ("vision/effects", m.ObjectEffects),
+    "gesture_segment": ("gesture/segment", m.GestureSegment),
+    "gesture_posterior": ("gesture/posterior", m.ActionPosterior),
+    "affordance": ("affordance/prediction", m.AffordancePrediction),
+    "words": ("language/words", m.WordProbabilities),
+    "description": ("language/description", m.Description),
+}
+HEALTH = "health"  # beyond/<robot>/health/<service>: ServiceHealth (published and queryable)
+ALIVE = "alive"  # beyond/<robot>/alive/<service>: liveliness tokens
+
+
+def check_name(kind: str, name: str) -> str:
+    """A robot or service name usable as one key chunk (no '/', '*', '$', '?', '#')."""
+    if not _NAME.match(name):
+        raise InputError(
+            f"invalid {kind} name {name!r}; use letters, digits, '_', '-', '.' "
+            "(not starting with '-' or '.')"
+        )
+    return name
+
+
+@dataclass(frozen=True)
+class Keys:
+    """The key expressions of one robot."""
+
+    robot: str = DEFAULT_ROBOT
+
+    def __post_init__(self) -> None:
+        check_name("robot", self.robot)
+
+    @property
+    def root(self) -> str:
+        return f"{PREFIX}/{self.robot}"
+
+    @property
+    def everything(self) -> str:
+        return f"{self.root}/**"
+
+    def stream(self, name: str) -> str:
+        if name not in STREAMS:
+            from cognition.errors import unknown
+
+            raise unknown("stream", name, list(STREAMS))
+        return f"{self.root}/{STREAMS[name][0]}"
+
+    @property
+    def skeleton(self) -> str:
+        return self.stream("skeleton")
+
+    @property
+    def camera(self) -> str:
+        return self.stream("camera")
+
+    @property
+    def camera_compressed(self) -> str:
+        return self.stream("camera_compressed")
+
+    @property
+    def objects(self) -> str:
+        return self.stream("objects")
+
+    @property
+    def effects(self) -> str:
+        return self.stream("effects")
+
+    @property
+    def gesture_segment(self) -> str:
+        return self.stream("gesture_segment")
+
+    @property
+    def gesture_posterior(self) -> str:
+        return self.stream("gesture_posterior")
+
+    @property
+    def affordance(self) -> str:
+        return self.stream("affordance")
+
+    @property
+    def words(self) -> str:
+        return self.stream("words")
+
+    @property
+    def description(self) -> str:
+        return self.stream("description")
+
+    def health(self, service: str = "*") -> str:
+        """Health key of one service, or of all with the default "*"."""
+        return f"{self.root}/{HEALTH}/{_service_chunk(service)}"
+
+    def alive(self, service: str = "*") -> str:
+        """Liveliness token key of one service, or of all with the default "*"."""
+        return f"{self.root}/{ALIVE}/{_service_chunk(service)}"
+
+
+def _service_chunk(service: str) -> str:
+    return service if service == "*" else check_name("service", service)
+
+
+def split_key(key: str) -> tuple[str, str] | None:
+    """(robot, suffix) of a concrete `beyond/<robot>/<suffix>` key, else None."""
+    parts = key.split("/", 2)
+    if len(parts) < 3 or parts[0] != PREFIX:
+        return None
+    return parts[1], parts[2]
+
+
+def type_for_key(key: str) -> type[Message] | None:
+    """The message type a concrete key carries, if it is one of ours."""
+    split = split_key(key)
+    if split is None:
+        return None
+    suffix = split[1]
+    for stream_suffix, cls in STREAMS.values():
+        if suffix == stream_suffix:
+            return cls
+    if suffix.startswith(f"{HEALTH}/") and suffix.count("/") == 1:
+        return m.ServiceHealth
+    return None
+
+
+def with_robot(key: str, robot: str) -> str:
+    """The same key for another robot (for replaying a recording as a different robot)."""
+    split = split_key(key)
+    if split is None:
+        return key
+    return f"{PREFIX}/{check_name('robot', robot)}/{split[1]}"

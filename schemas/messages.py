@@ -1,0 +1,304 @@
+"""Every message type on the bus, one Struct each.
+
+Field names follow the article's variables (SPEC.md): effect variables ObjVel, HandVel, ObjHandVel,
+Contact; object features Color, Size, Shape with their cluster labels. Distributions are
+`dict[value, probability]` so a reader needs no side table to know what each number means.
+The two camera types are field-for-field Foxglove's well-known `foxglove.RawImage` and
+`foxglove.CompressedImage` (plus our header), so recordings display in Foxglove as they are.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar, Literal
+
+import msgspec
+
+from schemas.base import Header, Message
+
+# Bytes per pixel of the raw encodings Foxglove understands.
+RAW_ENCODINGS: dict[str, int] = {
+    "rgb8": 3,
+    "bgr8": 3,
+    "rgba8": 4,
+    "bgra8": 4,
+    "mono8": 1,
+    "mono16": 2,
+    "16UC1": 2,
+    "32FC1": 4,
+}
+COMPRESSED_FORMATS = ("jpeg", "png", "webp")
+
+
+def _check_distribution(name: str, dist: dict[str, float]) -> None:
+    if not dist:
+        raise ValueError(f"{name} is an empty distribution")
+    for value, p in dist.items():
+        if not (0.0 <= p <= 1.0) or math.isnan(p):
+            raise ValueError(f"{name}[{value!r}] = {p} is not a probability in [0, 1]")
+    total = sum(dist.values())
+    if abs(total - 1.0) > 1e-6:
+        raise ValueError(f"{name} sums to {total:.6g}, not 1")
+
+
+class Joint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """A tracked joint: position in metres in the sensor frame, and tracking confidence in [0, 1]
+    (Kinect/OpenNI report 0 not tracked, 0.5 inferred, 1 tracked)."""
+
+    position: tuple[float, float, float]
+    confidence: float = 1.0
+
+
+class SkeletonFrame(Message, frozen=True):
+    """One frame of a body tracker: joint name -> position and confidence."""
+
+    frame: int
+    joints: dict[str, Joint]
+    user: int = 0
+    frame_id: str = "depth_camera"
+
+    def __post_init__(self) -> None:
+        for name, joint in self.joints.items():
+            if not 0.0 <= joint.confidence <= 1.0:
+                raise ValueError(f"joint {name!r} confidence {joint.confidence} not in [0, 1]")
+            if not all(math.isfinite(v) for v in joint.position):
+                raise ValueError(f"joint {name!r} position {joint.position} is not finite")
+
+
+class Time(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Foxglove's timestamp layout."""
+
+    sec: int
+    nsec: int
+
+    @classmethod
+    def from_ns(cls, ns: int) -> Time:
+        return cls(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+    def to_ns(self) -> int:
+        return self.sec * 1_000_000_000 + self.nsec
+
+
+class CameraFrame(Message, frozen=True):
+    """An uncompressed image; the same fields as foxglove.RawImage (timestamp = header stamp)."""
+
+    SCHEMA_NAME: ClassVar[str] = "foxglove.RawImage"
+
+    timestamp: Time
+    frame_id: str
+    width: int
+    height: int
+    encoding: str
+    step: int
+    data: bytes
+
+    def __post_init__(self) -> None:
+        if self.encoding not in RAW_ENCODINGS:
+            raise ValueError(
+                f"encoding {self.encoding!r} unknown; valid: {', '.join(RAW_ENCODINGS)}"
+            )
+        if self.timestamp.to_ns() != self.header.stamp:
+            raise ValueError(f"timestamp {self.timestamp.to_ns()} differs from header stamp")
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f"size {self.width}x{self.height} must be positive")
+        if self.step < self.width * RAW_ENCODINGS[self.encoding]:
+            raise ValueError(f"step {self.step} too small for {self.width} px of {self.encoding}")
+        if len(self.data) != self.step * self.height:
+            raise ValueError(
+                f"data has {len(self.data)} bytes, expected step*height = {self.step * self.height}"
+            )
+
+    @classmethod
+    def build(
+        cls,
+        header: Header,
+        width: int,
+        height: int,
+        data: bytes,
+        encoding: str = "rgb8",
+        frame_id: str = "camera",
+    ) -> CameraFrame:
+        """A frame with timestamp and step derived from the header and encoding."""
+        bpp = RAW_ENCODINGS.get(encoding, 1)
+        return cls(
+            header=header,
+            timestamp=Time.from_ns(header.stamp),
+            frame_id=frame_id,
+            width=width,
+            height=height,
+            encoding=encoding,
+            step=width * bpp,
+            data=data,
+        )
+
+
+class CompressedCameraFrame(Message, frozen=True):
+    """A compressed image; the fields of foxglove.CompressedImage plus its size for consumers."""
+
+    SCHEMA_NAME: ClassVar[str] = "foxglove.CompressedImage"
+
+    timestamp: Time
+    frame_id: str
+    format: str
+    data: bytes
+    width: int = 0
+    height: int = 0
+
+    def __post_init__(self) -> None:
+        if self.timestamp.to_ns() != self.header.stamp:
+            raise ValueError(f"timestamp {self.timestamp.to_ns()} differs from header stamp")
+        if self.format not in COMPRESSED_FORMATS:
+            raise ValueError(
+                f"format {self.format!r} unknown; valid: {', '.join(COMPRESSED_FORMATS)}"
+            )
+
+
+class DetectedObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One segmented object: continuous features and the cluster labels they fall in
+    (the network's Color, Shape and Size values)."""
+
+    id: int
+    centroid: tuple[float, float]
+    area: float
+    colour: list[float]
+    shape: list[float]
+    size: list[float]
+    colour_label: str
+    shape_label: str
+    size_label: str
+
+
+class DetectedObjects(Message, frozen=True):
+    frame: int
+    objects: list[DetectedObject]
+
+
+class ObjectEffect(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Measured effect of an action on one object: velocities (metres or pixels per second,
+    as `units` says), contact, and their discretisation into the network's effect values
+    (labels keys: ObjVel, HandVel, ObjHandVel, Contact)."""
+
+    object_id: int
+    object_velocity: float
+    hand_velocity: float
+    object_hand_velocity: float
+    contact: bool
+    contact_duration: float
+    labels: dict[str, str] = msgspec.field(default_factory=dict)
+    units: str = "m/s"
+
+
+class ObjectEffects(Message, frozen=True):
+    frame: int
+    effects: list[ObjectEffect]
+
+
+class GestureSegment(Message, frozen=True):
+    """A gesture starts or ends; `end_stamp` is set on "end"."""
+
+    event: Literal["start", "end"]
+    segment_id: int
+    frame: int
+    start_stamp: int
+    end_stamp: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.event == "end" and self.end_stamp is None:
+            raise ValueError("an 'end' event needs end_stamp")
+
+
+class ActionPosterior(Message, frozen=True):
+    """P_HMM(A | G_1^t) at frame t of a segment, with the per-action log-likelihoods
+    (cumulative, and divided by t as plotted in the article)."""
+
+    segment_id: int
+    frame: int
+    actions: list[str]
+    posterior: list[float]
+    log_likelihood: list[float]
+    normalised_log_likelihood: list[float]
+
+    def __post_init__(self) -> None:
+        n = len(self.actions)
+        for name in ("posterior", "log_likelihood", "normalised_log_likelihood"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"{name} has {len(getattr(self, name))} values for {n} actions")
+        _check_distribution("posterior", dict(zip(self.actions, self.posterior, strict=True)))
+
+
+class AffordancePrediction(Message, frozen=True):
+    """P_comb over effect variables given the observed evidence and the action belief."""
+
+    segment_id: int
+    frame: int
+    action_belief: dict[str, float]
+    evidence: dict[str, str]
+    effects: dict[str, dict[str, float]]
+
+    def __post_init__(self) -> None:
+        _check_distribution("action_belief", self.action_belief)
+        for var, dist in self.effects.items():
+            _check_distribution(f"effects[{var!r}]", dist)
+
+
+class WordProbabilities(Message, frozen=True):
+    """P(word present | evidence) per vocabulary word."""
+
+    segment_id: int
+    words: dict[str, float]
+    evidence: dict[str, str] = msgspec.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for word, p in self.words.items():
+            if not 0.0 <= p <= 1.0:
+                raise ValueError(f"P({word!r}) = {p} is not in [0, 1]")
+
+
+class ScoredSentence(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    text: str
+    score: float
+
+
+class Evidence(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """What a description was computed from: hard values and soft distributions."""
+
+    hard: dict[str, str] = msgspec.field(default_factory=dict)
+    soft: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)
+
+
+class Description(Message, frozen=True):
+    """N-best sentences, best first, and the evidence that produced them."""
+
+    segment_id: int
+    sentences: list[ScoredSentence]
+    evidence: Evidence
+
+
+class ServiceHealth(Message, frozen=True):
+    """Periodic self-report of a service."""
+
+    service: str
+    uptime_s: float
+    messages_in: int
+    messages_out: int
+    dropped: int
+    malformed: int
+    errors: int
+    last_error: str = ""
+    inputs: list[str] = msgspec.field(default_factory=list)
+    outputs: list[str] = msgspec.field(default_factory=list)
+
+
+ALL_MESSAGES: tuple[type[Message], ...] = (
+    SkeletonFrame,
+    CameraFrame,
+    CompressedCameraFrame,
+    DetectedObjects,
+    ObjectEffects,
+    GestureSegment,
+    ActionPosterior,
+    AffordancePrediction,
+    WordProbabilities,
+    Description,
+    ServiceHealth,
+)
