@@ -466,6 +466,15 @@ class Bus:
 
     async def wait_alive(self, key_expr: str, count: int = 1, timeout: float = 10.0) -> set[str]:
         """Wait until at least `count` distinct liveliness tokens match `key_expr`."""
+        return await self._wait_tokens(key_expr, lambda n: n >= count, f"{count}", timeout)
+
+    async def wait_gone(self, key_expr: str, timeout: float = 10.0) -> None:
+        """Wait until no liveliness token matches `key_expr` (services have stopped)."""
+        await self._wait_tokens(key_expr, lambda n: n == 0, "0", timeout)
+
+    async def _wait_tokens(
+        self, key_expr: str, done: Callable[[int], bool], wanted: str, timeout: float
+    ) -> set[str]:
         loop = asyncio.get_running_loop()
         inbox: Inbox[tuple[str, bool]] = Inbox(loop, 1024)
 
@@ -475,22 +484,27 @@ class Bus:
         sub = self.session.liveliness().declare_subscriber(
             key_expr, _callback(on_sample), history=True
         )
-        alive: set[str] = set()
+        # The history arrives as samples too; a query answers "none" for the empty case.
+        alive: set[str] = set(await self.alive(key_expr, timeout=min(timeout, 1.0)))
         deadline = loop.time() + timeout
         try:
-            while len(alive) < count:
+            while True:
+                while len(inbox):
+                    key, present = await inbox.get(0)
+                    (alive.add if present else alive.discard)(key)
+                if done(len(alive)):
+                    return alive
                 remaining = deadline - loop.time()
                 try:
                     key, present = await inbox.get(max(remaining, 0.0))
                 except TimeoutError:
                     raise TimeoutError(
-                        f"only {len(alive)} of {count} live tokens on {key_expr} after {timeout} s"
-                        f": {sorted(alive)}"
+                        f"{len(alive)} live tokens on {key_expr} after {timeout} s, wanted "
+                        f"{wanted}: {sorted(alive)}"
                     ) from None
                 (alive.add if present else alive.discard)(key)
         finally:
             _undeclare(sub)
-        return alive
 
     async def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
         """Keys of the liveliness tokens currently matching `key_expr`."""

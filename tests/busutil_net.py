@@ -1,0 +1,85 @@
+"""Helpers for bus tests: a private Zenoh group per test and synthetic skeleton frames.
+
+Every test gets its own rendezvous port (probed free on 127.0.0.1) and its own robot name, so
+tests never meet each other or other people's processes; multicast scouting is off by default.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import sys
+import uuid
+from pathlib import Path
+
+from runtime.config import BusConfig
+from schemas import Header, Joint, SkeletonFrame
+
+REPO = Path(__file__).resolve().parent.parent
+EXAMPLES = Path(__file__).resolve().parent / "runtime_examples"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def private_config() -> BusConfig:
+    return BusConfig(robot=f"t{uuid.uuid4().hex[:10]}", port=free_port())
+
+
+def env_for(config: BusConfig, **extra: str) -> dict[str, str]:
+    """Environment that makes a child process join the same private group."""
+    env = dict(os.environ)
+    for name in ("BEYOND_ZENOH_CONFIG", "BEYOND_ZENOH_CONNECT", "BEYOND_ZENOH_LISTEN"):
+        env.pop(name, None)
+    env.update(
+        BEYOND_ROBOT=config.robot,
+        BEYOND_ZENOH_PORT=str(config.port),
+        BEYOND_ZENOH_MODE="peer",
+        BEYOND_LOG_FORMAT="json",
+        PYTHONPATH=str(REPO),
+        **extra,
+    )
+    return env
+
+
+def python() -> str:
+    return sys.executable
+
+
+JOINTS = ("head", "torso", "hand_left", "hand_right", "elbow_right", "shoulder_right")
+
+
+def skeleton_frames(n: int, *, start_ns: int = 1_700_000_000_000_000_000, hz: float = 30.0):
+    """A deterministic right-hand reach: `n` SkeletonFrames at `hz`."""
+    period = int(1e9 / hz)
+    frames = []
+    for i in range(n):
+        t = i / hz
+        joints = {}
+        for j, name in enumerate(JOINTS):
+            x = 0.1 * j + (0.3 * math.sin(2 * math.pi * 0.5 * t) if name == "hand_right" else 0)
+            y = (
+                0.5
+                + 0.05 * j
+                + (0.2 * (1 - math.cos(2 * math.pi * 0.5 * t)) if name == "hand_right" else 0.0)
+            )
+            joints[name] = Joint(position=(round(x, 6), round(y, 6), 2.0), confidence=1.0)
+        frames.append(
+            SkeletonFrame(
+                header=Header(
+                    version=1,
+                    source="synthetic",
+                    seq=i,
+                    stamp=start_ns + i * period,
+                    correlation=f"synthetic/{i}",
+                ),
+                frame=i,
+                joints=joints,
+            )
+        )
+    return frames

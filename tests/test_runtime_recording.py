@@ -1,0 +1,221 @@
+"""MCAP recordings: self-describing, deterministic, crash-safe, replayable."""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from busutil_net import env_for, private_config, skeleton_frames
+from mcap.reader import make_reader
+
+import schemas as s
+from runtime.bus import Bus
+from runtime.recording import RecordingWriter, inspect_recording, read_recording
+from runtime.replay import replay
+
+ROBOT_KEYS = s.Keys("r1")
+
+
+def camera(i: int, stamp: int) -> s.CameraFrame:
+    h = s.Header(version=1, source="cam", seq=i, stamp=stamp)
+    pixels = bytes((x * 7 + i) % 256 for x in range(8 * 6 * 3))
+    return s.CameraFrame.build(h, 8, 6, pixels)
+
+
+def write_sample(path: Path, n: int = 90, chunk_size: int = 2048) -> list[tuple[str, s.Message]]:
+    written: list[tuple[str, s.Message]] = []
+    with RecordingWriter(path, chunk_size=chunk_size) as w:
+        for f in skeleton_frames(n):
+            w.write(ROBOT_KEYS.skeleton, f)
+            written.append((ROBOT_KEYS.skeleton, f))
+            if f.frame % 3 == 0:
+                c = camera(f.frame, f.header.stamp + 1)
+                w.write(ROBOT_KEYS.camera, c)
+                written.append((ROBOT_KEYS.camera, c))
+    return written
+
+
+def test_same_messages_same_bytes(tmp_path: Path) -> None:
+    write_sample(tmp_path / "a.mcap")
+    write_sample(tmp_path / "b.mcap")
+    a, b = (tmp_path / "a.mcap").read_bytes(), (tmp_path / "b.mcap").read_bytes()
+    assert a == b and len(a) > 1000
+
+
+def test_standard_mcap_reader_decodes_without_project_code(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    written = write_sample(path)
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        rows = list(reader.iter_messages(log_time_order=False))
+        summary = reader.get_summary()
+    assert summary is not None and summary.statistics.message_count == len(written)
+    assert len(rows) == len(written)
+    for (schema, channel, message), (key, original) in zip(rows, written, strict=True):
+        assert channel.topic == key
+        assert channel.message_encoding == "json"
+        assert schema.encoding == "jsonschema"
+        json.loads(schema.data)  # a valid JSON Schema document
+        data = json.loads(message.data)
+        assert message.publish_time == original.header.stamp
+        assert data["header"]["stamp"] == original.header.stamp
+        if isinstance(original, s.CameraFrame):
+            assert schema.name == "foxglove.RawImage"
+            assert (data["width"], data["height"], data["encoding"]) == (8, 6, "rgb8")
+            assert base64.b64decode(data["data"]) == original.data
+            ts = data["timestamp"]
+            assert ts["sec"] * 10**9 + ts["nsec"] == original.header.stamp
+        else:
+            assert schema.name == "beyond.SkeletonFrame"
+            assert data["joints"]["hand_right"]["position"] == list(
+                original.joints["hand_right"].position
+            )
+
+
+def test_read_back_in_stamp_order_with_filters(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    written = write_sample(path)
+    got = list(read_recording(path))
+    assert [r.message() for r in got] == [m for _, m in written]
+    stamps = [r.publish_time for r in got]
+    assert stamps == sorted(stamps)
+    cams = list(read_recording(path, topics=["beyond/*/sensors/camera/**"]))
+    assert len(cams) == 30 and all(r.cls is s.CameraFrame for r in cams)
+    window = [
+        r.message() for r in read_recording(path, topics=[ROBOT_KEYS.skeleton], start=1.0, end=2.0)
+    ]
+    period = int(1e9 / 30)  # the synthetic frames' spacing
+    expected = [i for i in range(90) if 1.0 <= i * period / 1e9 <= 2.0]
+    assert [f.frame for f in window] == expected and len(expected) == 30
+    payload, encoding = got[0].wire()
+    assert s.decode(payload, s.SkeletonFrame) == written[0][1]
+    assert s.type_from_encoding(encoding) is s.SkeletonFrame
+
+
+def test_inspect_counts_channels_and_duration(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    write_sample(path)
+    info = inspect_recording(path)
+    assert info.complete and not info.error
+    assert info.messages == 120
+    counts = {c.topic: (c.count, c.schema_name) for c in info.channels}
+    assert counts == {
+        ROBOT_KEYS.skeleton: (90, "beyond.SkeletonFrame"),
+        ROBOT_KEYS.camera: (30, "foxglove.RawImage"),
+    }
+    assert info.duration_s == pytest.approx(89 / 30, abs=1e-3)
+
+
+def test_truncated_file_reports_what_is_readable(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    write_sample(path, n=60, chunk_size=1)  # one message per chunk
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    ends = sorted(ci.chunk_start_offset + ci.chunk_length for ci in summary.chunk_indexes)
+    data = path.read_bytes()
+    for cut in (ends[10] + 5, ends[41], len(data) // 2, 30):
+        cut_path = tmp_path / f"cut{cut}.mcap"
+        cut_path.write_bytes(data[:cut])
+        expected = sum(1 for end in ends if end <= cut)
+        info = inspect_recording(cut_path)
+        assert not info.complete and info.error
+        assert info.messages == expected
+        line = info.damage()
+        assert f"of {cut}" in line and f"readable: {expected} messages" in line
+        result = subprocess.run(
+            [sys.executable, "-m", "beyond", "inspect", str(cut_path)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert result.returncode == 2
+        errors = result.stderr.strip().splitlines()
+        assert len(errors) == 1 and "truncated or corrupt" in errors[0]
+        assert f"readable: {expected} messages" in errors[0]
+
+
+def test_corrupt_chunk_is_detected(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    write_sample(path, n=30, chunk_size=1)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 3] ^= 0xFF
+    path.write_bytes(bytes(data))
+    info = inspect_recording(path)
+    assert info.error and info.messages < 40
+
+
+async def test_killed_recorder_leaves_readable_file(tmp_path: Path) -> None:
+    config = private_config()
+    out = tmp_path / "killed.mcap"
+    frames = skeleton_frames(40)
+    with Bus.open(config) as bus:
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "beyond",
+                "record",
+                bus.keys.everything,
+                "-o",
+                str(out),
+                "--flush-interval",
+                "0.1",
+            ],
+            env=env_for(config),
+            stderr=subprocess.DEVNULL,
+        )
+        try:
+            pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
+            await pub.wait_matching(timeout=20)
+            for f in frames:
+                pub.put(f)
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline:  # wait for the chunks to reach the file
+                if out.exists() and inspect_recording(out).messages == len(frames):
+                    break
+                await asyncio.sleep(0.05)
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    info = inspect_recording(out)
+    assert not info.complete  # no summary or footer: it really died mid-recording
+    assert info.messages == len(frames)
+    damaged = []
+    got = [r.message() for r in read_recording(out, on_damage=damaged.append)]
+    assert got == frames and len(damaged) == 1
+    assert all(r.log_time >= r.publish_time for r in read_recording(out, on_damage=print))
+
+
+async def test_replay_timing_filters_and_robot_rename(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    write_sample(path, n=31)  # 1.0 s of skeleton at 30 Hz
+    config = private_config()
+    with Bus.open(config) as bus, Bus.open(config) as listener:
+        sub = listener.subscribe(listener.keys.skeleton, s.SkeletonFrame)
+        cams = listener.subscribe(listener.keys.camera, s.CameraFrame)
+        probe = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
+        await probe.wait_matching(timeout=10)
+        stats = await replay(
+            bus, path, rate=4.0, robot=config.robot, topics=["beyond/*/sensors/skeleton"]
+        )
+        assert stats.messages == 31
+        assert 0.2 <= stats.wall_s < 1.0  # 1 s of recording at 4x
+        got = [(await sub.recv(timeout=5)).message for _ in range(31)]
+        assert [f.frame for f in got] == list(range(31))
+        assert len(cams._inbox) == 0  # filtered out
+        fast = await replay(bus, path, rate=None, robot=config.robot)
+        assert fast.messages == 42 and fast.speed > 50
+        assert [(await cams.recv(timeout=5)).message.header.seq for _ in range(11)] == list(
+            range(0, 31, 3)
+        )

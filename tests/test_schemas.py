@@ -1,0 +1,256 @@
+"""Schemas: round trips, strict decoding, JSON Schema export, keys."""
+
+from __future__ import annotations
+
+import json
+
+import msgspec
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import schemas as s
+from cognition.errors import InputError
+
+H = s.Header(version=1, source="test", seq=7, stamp=1_700_000_000_123_456_789, correlation="x/1")
+
+
+def examples() -> list[s.Message]:
+    return [
+        s.SkeletonFrame(header=H, frame=3, joints={"hand_right": s.Joint((0.1, -0.2, 1.5), 0.5)}),
+        s.CameraFrame.build(H, 4, 2, bytes(range(24))),
+        s.CompressedCameraFrame(
+            header=H,
+            timestamp=s.Time.from_ns(H.stamp),
+            frame_id="camera",
+            format="png",
+            data=b"\x89PNG",
+        ),
+        s.DetectedObjects(
+            header=H,
+            frame=3,
+            objects=[
+                s.DetectedObject(
+                    id=1,
+                    centroid=(10.0, 20.0),
+                    area=300.0,
+                    colour=[0.1, 0.9, 0.2],
+                    shape=[0.8, 0.3],
+                    size=[300.0],
+                    colour_label="green1",
+                    shape_label="box",
+                    size_label="small",
+                )
+            ],
+        ),
+        s.ObjectEffects(
+            header=H,
+            frame=3,
+            effects=[
+                s.ObjectEffect(
+                    object_id=1,
+                    object_velocity=0.2,
+                    hand_velocity=0.5,
+                    object_hand_velocity=0.3,
+                    contact=True,
+                    contact_duration=0.4,
+                    labels={"ObjVel": "slow", "Contact": "short"},
+                )
+            ],
+        ),
+        s.GestureSegment(header=H, event="end", segment_id=2, frame=9, start_stamp=1, end_stamp=5),
+        s.ActionPosterior(
+            header=H,
+            segment_id=2,
+            frame=9,
+            actions=["grasp", "tap", "touch"],
+            posterior=[0.2, 0.5, 0.3],
+            log_likelihood=[-30.0, -29.1, -29.6],
+            normalised_log_likelihood=[-3.0, -2.91, -2.96],
+        ),
+        s.AffordancePrediction(
+            header=H,
+            segment_id=2,
+            frame=9,
+            action_belief={"tap": 0.7, "grasp": 0.3},
+            evidence={"Shape": "sphere"},
+            effects={"ObjVel": {"slow": 0.1, "medium": 0.3, "fast": 0.6}},
+        ),
+        s.WordProbabilities(header=H, segment_id=2, words={"rolls": 0.4, "the": 1.0}),
+        s.Description(
+            header=H,
+            segment_id=2,
+            sentences=[s.ScoredSentence("the robot taps the ball and the ball rolls", -0.5)],
+            evidence=s.Evidence(hard={"Shape": "sphere"}, soft={"Action": {"tap": 1.0}}),
+        ),
+        s.ServiceHealth(
+            header=H,
+            service="x",
+            uptime_s=1.0,
+            messages_in=1,
+            messages_out=2,
+            dropped=0,
+            malformed=3,
+            errors=0,
+        ),
+    ]
+
+
+def test_every_registered_type_has_an_example() -> None:
+    assert {type(m).__name__ for m in examples()} == set(s.REGISTRY)
+
+
+@pytest.mark.parametrize("message", examples(), ids=lambda m: type(m).__name__)
+def test_round_trip_msgpack_and_json(message: s.Message) -> None:
+    cls = type(message)
+    assert s.decode(s.encode(message), cls, "k") == message
+    assert s.from_json(s.to_json(message), cls, "k") == message
+    # JSON -> msgpack -> JSON is lossless (what replay of a recording does)
+    again = s.decode(s.encode(s.from_json(s.to_json(message), cls)), cls)
+    assert s.encode(again) == s.encode(message)
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    st.dictionaries(
+        st.text(min_size=1, max_size=12),
+        st.tuples(
+            st.tuples(*[st.floats(allow_nan=False, allow_infinity=False)] * 3),
+            st.floats(0, 1),
+        ),
+        max_size=8,
+    ),
+    st.integers(0, 2**63 - 1),
+)
+def test_skeleton_round_trip_any_values(joints: dict, stamp: int) -> None:
+    frame = s.SkeletonFrame(
+        header=s.Header(version=1, source="h", seq=0, stamp=stamp),
+        frame=0,
+        joints={k: s.Joint(pos, c) for k, (pos, c) in joints.items()},
+    )
+    assert s.decode(s.encode(frame), s.SkeletonFrame) == frame
+    assert s.from_json(s.to_json(frame), s.SkeletonFrame) == frame
+
+
+KEY = "beyond/r/sensors/skeleton"
+
+
+def skeleton_dict(**header: object) -> dict:
+    return {
+        "type": "SkeletonFrame",
+        "header": {"version": 1, "source": "a", "seq": 0, "stamp": 0, **header},
+        "frame": 0,
+        "joints": {"head": {"position": [0.0, 1.0, 2.0], "confidence": 1.0}},
+    }
+
+
+@pytest.mark.parametrize(
+    ("payload", "expected"),
+    [
+        (b"\xc1\xc1", "malformed"),
+        (b"", "truncated"),
+        (msgspec.msgpack.encode([1, 2, 3]), "Expected `object`"),
+        (msgspec.msgpack.encode({**skeleton_dict(), "type": "CameraFrame"}), "$.type"),
+        (msgspec.msgpack.encode(skeleton_dict(version=2)), "schema version 2"),
+        (msgspec.msgpack.encode({**skeleton_dict(), "extra": 1}), "unknown field `extra`"),
+        (msgspec.msgpack.encode({**skeleton_dict(), "frame": "zero"}), "$.frame"),
+        (
+            msgspec.msgpack.encode(
+                {**skeleton_dict(), "joints": {"h": {"position": [0, 0, 0], "confidence": 2.0}}}
+            ),
+            "confidence 2.0",
+        ),
+    ],
+)
+def test_strict_decoding_names_key_and_problem(payload: bytes, expected: str) -> None:
+    with pytest.raises(s.SchemaError) as info:
+        s.decode(payload, s.SkeletonFrame, KEY)
+    text = str(info.value)
+    assert isinstance(info.value, InputError)
+    assert "\n" not in text
+    assert f"SkeletonFrame on {KEY}" in text
+    assert expected in text
+
+
+def test_json_decoding_is_strict_too() -> None:
+    with pytest.raises(s.SchemaError, match="schema version 9"):
+        s.from_json(json.dumps(skeleton_dict(version=9)), s.SkeletonFrame)
+
+
+@pytest.mark.parametrize(
+    ("make", "problem"),
+    [
+        (lambda: s.CameraFrame.build(H, 4, 2, b"\x00" * 23), "expected step\\*height = 24"),
+        (lambda: s.CameraFrame.build(H, 4, 2, b"\x00" * 24, encoding="yuv"), "encoding 'yuv'"),
+        (
+            lambda: s.ActionPosterior(
+                header=H,
+                segment_id=0,
+                frame=0,
+                actions=["a", "b"],
+                posterior=[0.5, 0.6],
+                log_likelihood=[0, 0],
+                normalised_log_likelihood=[0, 0],
+            ),
+            "sums to 1.1",
+        ),
+        (
+            lambda: s.GestureSegment(header=H, event="end", segment_id=0, frame=0, start_stamp=0),
+            "end_stamp",
+        ),
+    ],
+)
+def test_invalid_values_are_refused_on_decode(make, problem: str) -> None:
+    # __post_init__ checks run on construction and (as SchemaError) on decoding
+    with pytest.raises(ValueError, match=problem):
+        make()
+
+
+def test_camera_frame_is_foxglove_raw_image() -> None:
+    schema = s.json_schema(s.CameraFrame)
+    assert schema["title"] == "foxglove.RawImage"
+    props = schema["properties"]
+    for name in ("timestamp", "frame_id", "width", "height", "encoding", "step", "data"):
+        assert name in props
+    assert props["data"] == {"type": "string", "contentEncoding": "base64"}
+    assert props["timestamp"]["properties"].keys() == {"sec", "nsec"}
+    frame = s.CameraFrame.build(H, 4, 2, bytes(range(24)))
+    as_json = json.loads(s.to_json(frame))
+    assert as_json["timestamp"] == {"sec": 1_700_000_000, "nsec": 123_456_789}
+    assert as_json["step"] == 12
+
+
+@pytest.mark.parametrize("cls", list(s.REGISTRY.values()), ids=lambda c: c.__name__)
+def test_json_schemas_are_self_contained(cls: type[s.Message]) -> None:
+    text = s.json_schema_bytes(cls).decode()
+    assert "$ref" not in text and "$defs" not in text
+    schema = json.loads(text)
+    assert schema["x-beyond-version"] == cls.VERSION
+    assert "header" in schema["required"]
+    assert s.json_schema_bytes(cls) == s.json_schema_bytes(cls)
+
+
+def test_registry_and_wire_encoding() -> None:
+    assert s.lookup("SkeletonFrame") is s.SkeletonFrame
+    assert s.lookup("foxglove.RawImage") is s.CameraFrame
+    assert s.type_from_encoding(s.wire_encoding(s.ActionPosterior)) is s.ActionPosterior
+    assert s.type_from_encoding("application/json") is None
+    with pytest.raises(InputError, match="unknown message type 'Nope'"):
+        s.lookup("Nope")
+    assert s.versions()["SkeletonFrame"] == 1
+
+
+def test_keys_are_prefixed_by_robot() -> None:
+    keys = s.Keys("icub")
+    assert keys.skeleton == "beyond/icub/sensors/skeleton"
+    assert keys.gesture_posterior == "beyond/icub/gesture/posterior"
+    assert keys.alive("segmenter") == "beyond/icub/alive/segmenter"
+    assert keys.health() == "beyond/icub/health/*"
+    assert s.type_for_key("beyond/other/sensors/camera/raw") is s.CameraFrame
+    assert s.type_for_key("beyond/other/health/x") is s.ServiceHealth
+    assert s.type_for_key("elsewhere/sensors/skeleton") is None
+    assert s.with_robot("beyond/a/vision/objects", "b") == "beyond/b/vision/objects"
+    with pytest.raises(InputError, match="invalid robot name"):
+        s.Keys("bad/name")
+    with pytest.raises(InputError, match="invalid service name"):
+        keys.alive("a*")
