@@ -1,0 +1,57 @@
+"""The Affordance–Words Bayesian network: readers, structure and parameter learning, inference.
+
+What other modules call (see README.md in this folder for the model file format):
+
+    load_definition(path) -> NetworkDefinition        # networkDefinition.txt format
+    load_bag(path, definition) -> Dataset             # bag-of-words table format
+    synthetic_dataset() -> Dataset                    # the bundled synthetic training set
+    learn_network(dataset, ...) -> BayesNet           # K2 + BIC structure, BDeu/ML parameters
+    save_model(model, path) / load_model(path)        # versioned JSON, no pickle
+    model.query(query, evidence, soft) -> Posterior   # exact, compiled numpy
+    model.word_probabilities(evidence, soft) -> {word: P(present)}
+
+Importing this package does not import pgmpy (slow); `cognition.bn.pgmpy_bridge` does.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from cognition.bn.bag import Dataset, load_bag, parse_bag
+from cognition.bn.definition import NetworkDefinition, Variable, load_definition, parse_definition
+from cognition.bn.inference import Posterior
+from cognition.bn.model import BayesNet, learn_network, load_model, save_model
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+__all__ = [
+    "BayesNet",
+    "Dataset",
+    "NetworkDefinition",
+    "Posterior",
+    "Variable",
+    "learn_network",
+    "load_bag",
+    "load_definition",
+    "load_model",
+    "parse_bag",
+    "parse_definition",
+    "save_model",
+    "synthetic_dataset",
+    "synthetic_paths",
+]
+
+
+def synthetic_dataset() -> Dataset:
+    """The bundled synthetic training set (see cognition.bn.synthetic)."""
+    from cognition.bn import synthetic  # not at import time: `python -m` runs that module
+
+    return synthetic.synthetic_dataset()
+
+
+def synthetic_paths() -> tuple[Path, Path]:
+    """The bundled synthetic (definition, bag table) files."""
+    from cognition.bn import synthetic
+
+    return synthetic.synthetic_paths()

@@ -1,0 +1,60 @@
+"""Conditional probability tables from counts, with the reference's priors and its unseen rule.
+
+Affordance nodes: BDeu Dirichlet prior with equivalent sample size `ess` (1 in the reference): a
+pseudo-count ess/(q·r) in every cell, q parent configurations, r values. A configuration never seen
+in training thus gets the uniform distribution.
+
+Word nodes: maximum likelihood. For a parent configuration never seen in training the counts are
+all zero and maximum likelihood is undefined. The rule is an explicit choice (`unseen`):
+
+- "absent" (default, the reference's behaviour): P(absent) = 1. BNT leaves such a column all zero,
+  so that configuration adds nothing to P(word present); P(absent) = 1 reproduces exactly that for
+  P(present) while keeping a proper distribution (which pgmpy requires).
+- "uniform": 1/r for every value.
+- "dirichlet": give word nodes a BDeu prior of equivalent sample size `word_ess` as well, which
+  changes every word column slightly, not only the unseen ones.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from cognition.errors import InputError, unknown
+
+UnseenRule = Literal["absent", "uniform", "dirichlet"]
+UNSEEN_RULES: tuple[str, ...] = ("absent", "uniform", "dirichlet")
+
+
+def bdeu_cpt(counts: np.ndarray, ess: float) -> np.ndarray:
+    """Posterior-mean CPT under a BDeu prior: (N_jk + ess/(q r)) / (N_j + ess/q). Rows = configs."""
+    if ess <= 0:
+        raise InputError(f"equivalent sample size must be > 0; got {ess}")
+    q, r = counts.shape
+    smoothed = counts + ess / (q * r)
+    return np.asarray(smoothed / smoothed.sum(axis=1, keepdims=True), dtype=float)
+
+
+def ml_cpt(counts: np.ndarray, unseen: str, absent_index: int = 0) -> np.ndarray:
+    """Maximum-likelihood CPT; rows with no counts follow `unseen` ("absent" or "uniform")."""
+    q, r = counts.shape
+    totals = counts.sum(axis=1, keepdims=True)
+    cpt = np.divide(counts, totals, out=np.zeros((q, r)), where=totals > 0)
+    empty = totals[:, 0] == 0
+    if unseen == "absent":
+        cpt[empty, absent_index] = 1.0
+    elif unseen == "uniform":
+        cpt[empty, :] = 1.0 / r
+    else:
+        raise unknown("rule for unseen parent configurations", unseen, ["absent", "uniform"])
+    return cpt
+
+
+def word_cpt(counts: np.ndarray, unseen: str, word_ess: float = 1.0) -> np.ndarray:
+    """A word node's CPT (value 0 is `-`, absent) under the chosen unseen rule."""
+    if unseen == "dirichlet":
+        return bdeu_cpt(counts, word_ess)
+    if unseen not in UNSEEN_RULES:
+        raise unknown("rule for unseen parent configurations", unseen, UNSEEN_RULES)
+    return ml_cpt(counts, unseen, absent_index=0)

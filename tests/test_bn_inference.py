@@ -1,0 +1,203 @@
+"""Compiled exact inference: by hand on a tiny network, and against pgmpy's VariableElimination."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from cognition.bn import BayesNet, learn_network, load_bag, load_definition, synthetic_dataset
+from cognition.bn.definition import NetworkDefinition, Variable
+from cognition.errors import InputError
+
+
+def tiny() -> BayesNet:
+    """A -> B -> w, A -> v: small enough to enumerate by hand."""
+    definition = NetworkDefinition(
+        (
+            Variable("A", ("a0", "a1")),
+            Variable("B", ("b0", "b1", "b2")),
+            Variable("w", ("-", "w")),
+            Variable("v", ("-", "v")),
+        )
+    )
+    cpts = {
+        "A": np.array([0.3, 0.7]),
+        "B": np.array([[0.5, 0.3, 0.2], [0.1, 0.1, 0.8]]),
+        "w": np.array([[0.9, 0.1], [0.4, 0.6], [0.0, 1.0]]),
+        "v": np.array([[0.2, 0.8], [1.0, 0.0]]),
+    }
+    parents = {"A": (), "B": ("A",), "w": ("B",), "v": ("A",)}
+    return BayesNet(definition, parents, cpts)
+
+
+def test_tiny_network_by_hand() -> None:
+    model = tiny()
+    # P(w present) = sum_a P(a) sum_b P(b|a) P(w|b)
+    pw_a0 = 0.5 * 0.1 + 0.3 * 0.6 + 0.2 * 1.0
+    pw_a1 = 0.1 * 0.1 + 0.1 * 0.6 + 0.8 * 1.0
+    pw = 0.3 * pw_a0 + 0.7 * pw_a1
+    assert model.word_probabilities()["w"] == pytest.approx(pw, abs=1e-12)
+    # Bayes: P(A | w present)
+    post = model.query("A", {"w": "w"}).marginal("A")
+    assert post["a0"] == pytest.approx(0.3 * pw_a0 / pw, abs=1e-12)
+    # Soft evidence on A: likelihood (2, 1) -> prior (0.6, 0.7)/1.3
+    soft = model.query("A", soft={"A": [2.0, 1.0]}).marginal("A")
+    assert soft["a0"] == pytest.approx(0.6 / 1.3, abs=1e-12)
+    # Joint of a word and a core node given the other word.
+    joint = model.query(["w", "A"], {"v": "v"})
+    assert joint.variables == ("w", "A")
+    # v present only when A = a0, so A = a0 for sure.
+    assert joint.probability({"w": "w", "A": "a0"}) == pytest.approx(pw_a0, abs=1e-12)
+    assert joint.probability({"w": "w", "A": "a1"}) == 0.0
+    assert joint.table.sum() == pytest.approx(1.0, abs=1e-12)
+
+
+def test_soft_evidence_is_scale_free_and_one_hot_equals_hard() -> None:
+    model = tiny()
+    a = model.query("B", soft={"A": [0.2, 0.6]}).table
+    b = model.query("B", soft={"A": [1, 3]}).table
+    assert np.allclose(a, b, atol=1e-15)
+    hard = model.query(["B", "w"], {"A": "a1"}).table
+    onehot = model.query(["B", "w"], soft={"A": [0, 1]}).table
+    assert np.allclose(hard, onehot, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"query": ["C"]}, "unknown query variable 'C'; valid: A, B, w, v"),
+        ({"query": ["A"], "evidence": {"B": "b9"}}, "unknown value of B 'b9'; valid: b0, b1, b2"),
+        ({"query": ["A"], "evidence": {"A": "a0"}}, "A: both observed and queried"),
+        ({"query": ["B"], "evidence": {"A": "a0"}, "soft": {"A": [1, 1]}}, "both hard and soft"),
+        ({"query": ["B"], "soft": {"A": [1, 1, 1]}}, "soft evidence on A needs 2 numbers"),
+        ({"query": ["B"], "soft": {"A": [0, 0]}}, "not all zero"),
+        ({"query": ["B"], "soft": {"A": [-1, 2]}}, "non-negative"),
+        ({"query": ["B"], "evidence": {"v": "v", "A": "a1"}}, "zero probability"),
+        ({"query": ["A"], "evidence": {"B": "b2", "w": "-"}}, "zero probability"),
+        ({"query": []}, "nothing to query"),
+        ({"query": ["A", "A"]}, "twice"),
+    ],
+)
+def test_bad_queries_are_input_errors(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(InputError) as err:
+        tiny().query(**kwargs)
+    assert message in str(err.value)
+
+
+def test_zero_probability_evidence_in_word_probabilities() -> None:
+    with pytest.raises(InputError, match="zero probability"):
+        tiny().word_probabilities({"v": "v", "A": "a1"})
+
+
+def test_observed_and_soft_words_in_word_probabilities() -> None:
+    model = tiny()
+    probs = model.word_probabilities({"v": "v"}, {"w": [0.5, 0.5]})
+    assert probs["v"] == 1.0
+    assert probs["w"] == pytest.approx(model.query("w", {"v": "v"}).table[1], abs=1e-12)
+
+
+# -- against pgmpy ------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def synthetic_model() -> BayesNet:
+    return learn_network(synthetic_dataset())
+
+
+@pytest.fixture(scope="module")
+def pgmpy_network(synthetic_model: BayesNet) -> Any:
+    return synthetic_model.to_pgmpy()
+
+
+def _queries(
+    model: BayesNet,
+) -> st.SearchStrategy[tuple[list[str], dict[str, str], dict[str, list[float]]]]:
+    names = list(model.variables)
+    values = model.values
+
+    @st.composite
+    def build(draw: st.DrawFn) -> tuple[list[str], dict[str, str], dict[str, list[float]]]:
+        chosen = draw(st.lists(st.sampled_from(names), min_size=1, max_size=6, unique=True))
+        n_query = draw(st.integers(1, min(2, len(chosen))))
+        query, rest = chosen[:n_query], chosen[n_query:]
+        evidence: dict[str, str] = {}
+        soft: dict[str, list[float]] = {}
+        for name in rest:
+            if draw(st.booleans()):
+                evidence[name] = draw(st.sampled_from(values[name]))
+            else:
+                soft[name] = draw(
+                    st.lists(
+                        st.floats(0.001, 1.0, allow_nan=False),
+                        min_size=len(values[name]),
+                        max_size=len(values[name]),
+                    )
+                )
+        return query, evidence, soft
+
+    return build()
+
+
+def _agree(model: BayesNet, network: Any, data: st.DataObject) -> None:
+    from cognition.bn.pgmpy_bridge import reference_query
+
+    query, evidence, soft = data.draw(_queries(model))
+    try:
+        ours = model.query(query, evidence, soft)
+    except InputError as exc:
+        assert "zero probability" in str(exc)
+        assume(False)
+    theirs = reference_query(network, model, query, evidence, soft)
+    assert ours.variables == theirs.variables
+    assert np.max(np.abs(ours.table - theirs.table)) < 1e-9
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_compiled_agrees_with_pgmpy_on_random_queries(
+    synthetic_model: BayesNet, pgmpy_network: Any, data: st.DataObject
+) -> None:
+    _agree(synthetic_model, pgmpy_network, data)
+
+
+@pytest.fixture(scope="module")
+def real_model(shared_data: Path) -> BayesNet:
+    d = load_definition(shared_data / "salvi2012/networkDefinition.txt")
+    return learn_network(load_bag(shared_data / "salvi2012/sent-1-5_lab_aff_bag.txt", d))
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_compiled_agrees_with_pgmpy_on_the_real_network(
+    real_model: BayesNet, data: st.DataObject
+) -> None:
+    _agree(real_model, _real_network(real_model), data)
+
+
+_NETWORKS: dict[int, Any] = {}
+
+
+def _real_network(model: BayesNet) -> Any:
+    if id(model) not in _NETWORKS:
+        _NETWORKS[id(model)] = model.to_pgmpy()
+    return _NETWORKS[id(model)]
+
+
+def test_word_probabilities_agree_with_pgmpy(real_model: BayesNet) -> None:
+    from cognition.bn.pgmpy_bridge import reference_query
+
+    scene = {"Color": "yellow", "Size": "big", "Shape": "circle", "ObjVel": "fast"}
+    soft = {"Action": [0.2, 0.5, 0.3]}
+    probs = real_model.word_probabilities(scene, soft)
+    network = _real_network(real_model)
+    for word in ("and", "rolling", "tapping", "ball", "is"):
+        ref = reference_query(network, real_model, [word], scene, soft)
+        assert probs[word] == pytest.approx(ref.table[1], abs=1e-9)
+    assert probs["and"] == pytest.approx(
+        real_model.query("and", scene, soft).marginal("and")["and"], abs=1e-12
+    )
