@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import itertools
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 from cognition.errors import InputError
@@ -56,6 +56,10 @@ class Grammar:
 
     slots: tuple[str, ...]
     phrases: dict[str, tuple[Phrase, ...]]
+    # The rule bodies as written (name -> body), kept so that random generation can walk the
+    # grammar's own structure the way HTK's HSGen walks the network HParse builds from it; empty
+    # for a grammar built from phrases alone (each phrase is then one alternative of its slot).
+    rules: dict[str, str] = field(default_factory=dict, compare=False)
 
     @cached_property
     def vocabulary(self) -> tuple[str, ...]:
@@ -141,7 +145,7 @@ def parse_grammar(text: str, top: str = "sentence") -> Grammar:
     if missing:
         raise InputError(f"top rule {top!r} must name rules only; not rules: {', '.join(missing)}")
     phrases = {s: tuple(dict.fromkeys(_expand(rules[s], rules))) for s in dict.fromkeys(slots)}
-    return Grammar(slots=slots, phrases=phrases)
+    return Grammar(slots=slots, phrases=phrases, rules=rules)
 
 
 DEFAULT_GRAMMAR = parse_grammar(GRAMMAR_TEXT)

@@ -1,0 +1,56 @@
+"""Verbal descriptions: score the grammar's sentences by word probabilities and find the N best.
+
+What other modules call (word_probs = {word: P(word present | evidence)} for every grammar word):
+
+    nbest_exact(word_probs, n=10, *, legacy_offset=False, require=None, grammar=DEFAULT_GRAMMAR)
+        -> list[ScoredSentence]        # exact N-best over all ~9.3M sentences, < 1 ms
+    nbest_from_file(path, word_probs, n=10, *, legacy_offset, require, grammar)
+    nbest_from_sentences(lines, word_probs, n=10, *, legacy_offset, require, grammar, source)
+    nbest_sampled(word_probs, samples, seed, n=10, *, legacy_offset, require, grammar)
+    sample_sentences(count, seed, *, grammar) -> list[str]      # like HTK's HSGen -n count
+    score_sentence(sentence, word_probs, *, legacy_offset=False) -> float
+    brute_force_scores(word_probs, *, legacy_offset, grammar) -> ndarray   # every sentence
+    brute_force_nbest(word_probs, n=10, *, legacy_offset, grammar)
+    plot_nbest(items, path, title) -> Path                        # PNG bar chart
+
+A sentence of L words scores (1/L) Σ log P(w_k), repeated words counted each time; a word with
+P = 0 makes it −inf. `legacy_offset=True` scores (1 + Σ log P)/L, as the reference code that
+produced the article's tables did. `require` keeps only sentences matching a regex (re.search).
+Ties: input order for given or sampled sentences, lexicographic sentence order for exact search.
+"""
+
+from __future__ import annotations
+
+from cognition.descriptions.plot import plot_nbest
+from cognition.descriptions.sampling import (
+    hsgen_phrase_probabilities,
+    sample_keys,
+    sample_sentences,
+)
+from cognition.descriptions.search import (
+    brute_force_nbest,
+    brute_force_scores,
+    nbest_exact,
+    nbest_from_file,
+    nbest_from_sentences,
+    nbest_sampled,
+    top_keys,
+)
+from cognition.descriptions.space import ScoredSentence, SentenceSpace, score_sentence
+
+__all__ = [
+    "ScoredSentence",
+    "SentenceSpace",
+    "brute_force_nbest",
+    "brute_force_scores",
+    "hsgen_phrase_probabilities",
+    "nbest_exact",
+    "nbest_from_file",
+    "nbest_from_sentences",
+    "nbest_sampled",
+    "plot_nbest",
+    "sample_keys",
+    "sample_sentences",
+    "score_sentence",
+    "top_keys",
+]

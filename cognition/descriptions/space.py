@@ -1,0 +1,342 @@
+"""A grammar's sentences compiled for scoring: phrase tables, two blocks of slots, sentence keys.
+
+Why this shape: every sentence is one phrase per slot, chosen independently. Splitting the slots
+into a prefix block and a suffix block (3 + 3 slots for the article's grammar: 6,480 prefixes and
+1,440 suffixes) makes every per-call table small, while any sentence is still one (prefix, suffix)
+pair.
+
+Log-probabilities are rounded to multiples of 2**-32 (a change below 1.2e-10 per word) so that
+every sum of them is exact in floating point: a sentence's score then does not depend on the order
+its words are added in. Without that, "... the big ball but the big green ball ..." and the same
+sentence with the two objects swapped would differ in the last bit, and rounding noise, not the
+lexicographic rule, would order them. With it, the exact search, the brute force, scoring a file
+and `score_sentence` give bit-identical scores, and equal scores are real ties.
+
+Phrases are stored sorted by their words, and blocks are enumerated in row-major order, so the
+integer key of a sentence, `prefix_index * n_suffixes + suffix_index`, is its rank in
+lexicographic order of its phrase tuple. When no phrase of a slot is a word-prefix of another
+phrase of the same slot (true of the article's grammar, `lexicographic_keys` says so), that is
+exactly the lexicographic order of the sentence strings: the space sorts before every letter, so
+comparing space-joined strings is comparing word tuples. Ties are broken by this key.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import numpy.typing as npt
+
+from cognition.errors import InputError
+from cognition.grammar import DEFAULT_GRAMMAR, Grammar, Phrase
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+# Probabilities a hair above 1 come out of normalisations in floating point; anything further is
+# a caller's bug.
+_PROB_SLACK = 1e-9
+# log P rounded to this many fractional bits: |log P| <= 745 for any positive double, so a sum of
+# up to MAX_WORDS of them needs at most 52 bits and is exact.
+LOG_FRACTION_BITS = 32
+MAX_WORDS = 2000
+
+
+@dataclass(frozen=True)
+class ScoredSentence:
+    """One entry of an N-best list; `score` is unrounded (the CLI rounds for display)."""
+
+    sentence: str
+    score: float
+
+
+@dataclass(frozen=True)
+class _Block:
+    """Consecutive slots enumerated in row-major order (the last slot varies fastest)."""
+
+    slots: tuple[int, ...]  # positions in the sentence
+    sizes: tuple[int, ...]
+    lengths: IntArray  # words per block entry
+    groups: tuple[IntArray, ...]  # entry indices of each distinct length, ascending
+
+    @property
+    def size(self) -> int:
+        return int(self.lengths.shape[0])
+
+
+class SentenceSpace:
+    """Everything about a grammar that does not depend on the word probabilities."""
+
+    def __init__(self, grammar: Grammar) -> None:
+        self.grammar = grammar
+        self.vocabulary: tuple[str, ...] = grammar.vocabulary
+        self._word_index = {w: i for i, w in enumerate(self.vocabulary)}
+        names = tuple(dict.fromkeys(grammar.slots))
+        self.slot_names = names
+        # phrases of each distinct slot name, sorted by their words (the lexicographic ranks)
+        self.phrases: dict[str, tuple[Phrase, ...]] = {
+            name: tuple(sorted(grammar.phrases[name])) for name in names
+        }
+        for name in names:
+            if not self.phrases[name]:
+                raise InputError(f"grammar slot {name!r} has no phrases; every slot needs one")
+        self.phrase_strings = {
+            name: tuple(" ".join(p) for p in self.phrases[name]) for name in names
+        }
+        self.lexicographic_keys = all(
+            not _has_word_prefix_pair(self.phrases[name]) for name in names
+        )
+        # one padded table of word indices for every phrase of every distinct slot; the pad
+        # index points one past the vocabulary, where the log-probability table holds 0.0
+        width = max(1, max(len(p) for name in names for p in self.phrases[name]))
+        pad = len(self.vocabulary)
+        rows: list[list[int]] = []
+        self._slices: dict[str, slice] = {}
+        for name in names:
+            start = len(rows)
+            for phrase in self.phrases[name]:
+                idx = [self._word_index[w] for w in phrase]
+                rows.append(idx + [pad] * (width - len(idx)))
+            self._slices[name] = slice(start, len(rows))
+        self._table = np.asarray(rows, dtype=np.int64).reshape(len(rows), width)
+        self._phrase_lengths = {
+            name: np.array([len(p) for p in self.phrases[name]], dtype=np.int64) for name in names
+        }
+        split = _best_split([len(self.phrases[s]) for s in grammar.slots])
+        self.prefix = self._block(tuple(range(split)))
+        self.suffix = self._block(tuple(range(split, len(grammar.slots))))
+        self.count = self.prefix.size * self.suffix.size
+        if self.count >= 2**62:
+            raise InputError(f"grammar has {self.count} sentences; at most 2**62 are supported")
+        if int(self.prefix.lengths.min()) + int(self.suffix.lengths.min()) == 0:
+            raise InputError("grammar derives the empty sentence, which has no score")
+        if int(self.prefix.lengths.max()) + int(self.suffix.lengths.max()) > MAX_WORDS:
+            raise InputError(f"grammar derives sentences over {MAX_WORDS} words; not supported")
+
+    # -- construction helpers ------------------------------------------------------------------
+
+    def _block(self, slots: tuple[int, ...]) -> _Block:
+        names = [self.grammar.slots[i] for i in slots]
+        lengths = np.zeros(1, dtype=np.int64)
+        for name in names:
+            lengths = (lengths[:, None] + self._phrase_lengths[name][None, :]).ravel()
+        groups = tuple(np.flatnonzero(lengths == n) for n in np.unique(lengths))
+        sizes = tuple(len(self.phrases[n]) for n in names)
+        return _Block(slots=slots, sizes=sizes, lengths=lengths, groups=groups)
+
+    @cached_property
+    def _prefix_lookup(self) -> dict[tuple[str, ...], int]:
+        return self._lookup(self.prefix)
+
+    @cached_property
+    def _suffix_lookup(self) -> dict[tuple[str, ...], int]:
+        return self._lookup(self.suffix)
+
+    def _lookup(self, block: _Block) -> dict[tuple[str, ...], int]:
+        """Word tuple -> lowest block index deriving it (the first parse of an ambiguous one)."""
+        table: dict[tuple[str, ...], int] = {}
+        choices = [self.phrases[self.grammar.slots[slot]] for slot in block.slots]
+        for index, combo in enumerate(itertools.product(*choices)):  # row-major = key order
+            table.setdefault(sum(combo, ()), index)
+        return table
+
+    def _block_phrases(self, block: _Block, index: int) -> tuple[Phrase, ...]:
+        ranks = np.unravel_index(index, block.sizes) if block.sizes else ()
+        return tuple(
+            self.phrases[self.grammar.slots[slot]][int(r)]
+            for slot, r in zip(block.slots, ranks, strict=True)
+        )
+
+    @cached_property
+    def sentence_lengths(self) -> npt.NDArray[np.int16]:
+        """Words per sentence for every key (static; the brute force divides by it)."""
+        return np.add.outer(
+            self.prefix.lengths.astype(np.int16), self.suffix.lengths.astype(np.int16)
+        ).ravel()
+
+    # -- per-call tables -----------------------------------------------------------------------
+
+    def word_logprobs(self, word_probs: Mapping[str, float]) -> FloatArray:
+        """log P(word) for the vocabulary, in order, rounded to 2**-32; P = 0 gives -inf quietly.
+
+        Keys outside the vocabulary are ignored (a network may know more words than the grammar).
+        """
+        missing = [w for w in self.vocabulary if w not in word_probs]
+        if missing:
+            more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+            raise InputError(
+                f"word probabilities lack the word {missing[0]!r}{more}; "
+                f"every grammar word is needed: {', '.join(self.vocabulary)}"
+            )
+        try:
+            values = np.array([float(word_probs[w]) for w in self.vocabulary], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"word probabilities must be numbers: {exc}") from None
+        bad = ~np.isfinite(values) | (values < 0.0) | (values > 1.0 + _PROB_SLACK)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(
+                f"word probability of {self.vocabulary[i]!r} is {float(values[i])!r}; "
+                "a probability must be in [0, 1]"
+            )
+        with np.errstate(divide="ignore"):
+            logs = np.log(np.minimum(values, 1.0))
+        return np.ldexp(np.round(np.ldexp(logs, LOG_FRACTION_BITS)), -LOG_FRACTION_BITS)
+
+    def phrase_logprobs(self, word_lp: FloatArray) -> dict[str, FloatArray]:
+        """Each phrase's log-probability: its words summed left to right."""
+        ext = np.append(word_lp, 0.0)[self._table]
+        acc = ext[:, 0].copy()
+        for column in range(1, ext.shape[1]):
+            acc += ext[:, column]
+        return {name: acc[sl] for name, sl in self._slices.items()}
+
+    def block_sums(self, word_lp: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Summed log-probability of every prefix and every suffix, in key order."""
+        phrase_lp = self.phrase_logprobs(word_lp)
+        return self._block_sum(self.prefix, phrase_lp), self._block_sum(self.suffix, phrase_lp)
+
+    def _block_sum(self, block: _Block, phrase_lp: dict[str, FloatArray]) -> FloatArray:
+        acc = np.zeros(1)
+        for slot in block.slots:
+            acc = (acc[:, None] + phrase_lp[self.grammar.slots[slot]][None, :]).ravel()
+        return acc
+
+    # -- keys <-> sentences ----------------------------------------------------------------------
+
+    def split_keys(self, keys: IntArray) -> tuple[IntArray, IntArray]:
+        """Sentence keys -> (prefix index, suffix index)."""
+        return np.divmod(keys, self.suffix.size)
+
+    def sentence(self, key: int) -> str:
+        """The sentence string of a key."""
+        p, s = divmod(int(key), self.suffix.size)
+        phrases = self._block_phrases(self.prefix, p) + self._block_phrases(self.suffix, s)
+        return " ".join(w for phrase in phrases for w in phrase)
+
+    def phrase_ranks(self, keys: IntArray) -> list[IntArray]:
+        """Per slot, the rank of the chosen phrase (in `phrases[slot]`) for each key."""
+        p, s = self.split_keys(np.asarray(keys, dtype=np.int64))
+        out: list[IntArray] = []
+        for block, idx in ((self.prefix, p), (self.suffix, s)):
+            if block.sizes:
+                out.extend(
+                    np.asarray(r, dtype=np.int64) for r in np.unravel_index(idx, block.sizes)
+                )
+        return out
+
+    def keys_from_ranks(self, ranks: list[IntArray]) -> IntArray:
+        """Inverse of `phrase_ranks`: per-slot phrase ranks -> sentence keys (mixed radix)."""
+        key = np.zeros_like(np.asarray(ranks[0], dtype=np.int64))
+        for slot, r in enumerate(ranks):
+            key = key * len(self.phrases[self.grammar.slots[slot]]) + r
+        return key
+
+    def parse(self, words: tuple[str, ...]) -> int | None:
+        """The key of a word sequence, or None if the grammar does not derive it."""
+        prefixes = self._prefix_lookup
+        suffixes = self._suffix_lookup
+        for cut in range(len(words) + 1):
+            p = prefixes.get(words[:cut])
+            if p is not None:
+                s = suffixes.get(words[cut:])
+                if s is not None:
+                    return p * self.suffix.size + s
+        return None
+
+    def parse_lines(self, lines: Iterable[str], source: str = "sentences") -> IntArray:
+        """Keys of the non-blank lines, in order; a clear error naming the first bad line."""
+        keys: list[int] = []
+        for lineno, line in enumerate(lines, 1):
+            words = tuple(line.split())
+            if not words:
+                continue
+            unknown = [w for w in words if w not in self._word_index]
+            if unknown:
+                raise InputError(
+                    f"{source} line {lineno}: unknown word {unknown[0]!r} in {line.strip()!r}; "
+                    f"valid words: {', '.join(self.vocabulary)}"
+                )
+            key = self.parse(words)
+            if key is None:
+                raise InputError(
+                    f"{source} line {lineno}: {line.strip()!r} is not a sentence of the grammar "
+                    f"({' '.join(self.grammar.slots)})"
+                )
+            keys.append(key)
+        return np.asarray(keys, dtype=np.int64)
+
+    # -- caching ---------------------------------------------------------------------------------
+
+    @staticmethod
+    def of(grammar: Grammar = DEFAULT_GRAMMAR) -> SentenceSpace:
+        """The compiled space of a grammar, built once per grammar object."""
+        hit = _CACHE.get(id(grammar))
+        if hit is not None and hit[0] is grammar:
+            return hit[1]
+        space = SentenceSpace(grammar)
+        _CACHE[id(grammar)] = (grammar, space)
+        return space
+
+
+_CACHE: dict[int, tuple[Grammar, SentenceSpace]] = {}
+
+
+def final_scores(
+    sums: FloatArray, lengths: npt.NDArray[np.integer], legacy_offset: bool
+) -> FloatArray:
+    """Length-normalised scores; with the reference implementation's offset if asked."""
+    if legacy_offset:
+        return np.asarray((1.0 + sums) / lengths, dtype=np.float64)
+    return np.asarray(sums / lengths, dtype=np.float64)
+
+
+def score_sentence(
+    sentence: str, word_probs: Mapping[str, float], *, legacy_offset: bool = False
+) -> float:
+    """(1/L) Σ log P(w_k) over the words of any sentence (no grammar needed), −inf if a P is 0.
+
+    Uses the same rounded log-probabilities as the N-best functions, so it gives the very same
+    score for a sentence of the grammar.
+    """
+    words = sentence.split()
+    if not words:
+        raise InputError("cannot score an empty sentence; give at least one word")
+    total = 1.0 if legacy_offset else 0.0
+    for w in words:
+        if w not in word_probs:
+            raise InputError(
+                f"word {w!r} has no probability; words given: {', '.join(sorted(word_probs))}"
+            )
+        p = float(word_probs[w])
+        if not (0.0 <= p <= 1.0 + _PROB_SLACK):
+            raise InputError(f"word probability of {w!r} is {p!r}; it must be in [0, 1]")
+        total += _rounded_log(p)
+    return total / len(words)
+
+
+def _rounded_log(p: float) -> float:
+    if p <= 0.0:
+        return -math.inf
+    return math.ldexp(
+        round(math.ldexp(math.log(min(p, 1.0)), LOG_FRACTION_BITS)), -LOG_FRACTION_BITS
+    )
+
+
+def _has_word_prefix_pair(phrases: tuple[Phrase, ...]) -> bool:
+    """Whether one phrase is a proper word-prefix of another (phrases sorted)."""
+    return any(len(b) > len(a) and b[: len(a)] == a for a, b in itertools.pairwise(phrases))
+
+
+def _best_split(sizes: list[int]) -> int:
+    """The slot index splitting the slots into two blocks with the fewest entries in total."""
+    best, best_cost = 0, math.inf
+    for cut in range(len(sizes) + 1):
+        cost = math.prod(sizes[:cut]) + math.prod(sizes[cut:])
+        if cost < best_cost:
+            best, best_cost = cut, cost
+    return best
