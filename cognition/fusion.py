@@ -1,0 +1,138 @@
+"""Fusing gesture evidence with the Affordance–Words network: P_comb of SPEC.md.
+
+The robot never observes the human's action directly; a gesture recogniser gives P_HMM(A | G).
+SPEC.md defines the combination in two cases:
+
+1. A among the inferred variables:  P_comb(X_inf | X_obs, G) ∝ P_BN(X_inf | X_obs) · P_HMM(A | G)
+2. A latent:  P_comb(X_inf | X_obs, G) = Σ_A P_HMM(A | G) · P_BN(X_inf, A | X_obs)   (normalised)
+
+Both equal entering P_HMM(A | G) as soft (virtual) evidence on A: with equal priors P_HMM(A | G)
+is proportional to the likelihood L(G | A), which is exactly a virtual-evidence vector. The
+formulas are implemented literally here (`method="formula"`) because they are the definition, and
+the soft-evidence route (`method="soft"`, one compiled query, the default) is what runs in
+services; a property test holds them equal to 1e-12.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Literal
+
+import numpy as np
+
+from cognition.bn.inference import Posterior
+from cognition.bn.model import BayesNet
+from cognition.errors import InputError, unknown
+
+ACTION = "Action"
+Method = Literal["soft", "formula"]
+
+
+def action_vector(model: BayesNet, p_hmm: Mapping[str, float] | Sequence[float]) -> np.ndarray:
+    """P_HMM(A | G) as a vector in the network's Action value order.
+
+    A mapping is matched by action name (gesture models and network may list actions in different
+    orders); a plain sequence must already be in the network's order.
+    """
+    actions = model.values[ACTION]
+    if isinstance(p_hmm, Mapping):
+        extra = [a for a in p_hmm if a not in actions]
+        if extra:
+            raise unknown("action in the gesture evidence", extra[0], actions)
+        missing = [a for a in actions if a not in p_hmm]
+        if missing:
+            raise InputError(
+                f"gesture evidence lacks action(s) {', '.join(missing)}; "
+                f"give a probability for each of {', '.join(actions)}"
+            )
+        vec = np.array([float(p_hmm[a]) for a in actions])
+    else:
+        vec = np.asarray([float(p) for p in p_hmm])
+        if vec.shape != (len(actions),):
+            raise InputError(
+                f"gesture evidence needs {len(actions)} probabilities ({', '.join(actions)}); "
+                f"got {vec.size}"
+            )
+    if not np.all(np.isfinite(vec)) or np.any(vec < 0) or vec.sum() <= 0:
+        raise InputError(
+            f"gesture evidence must be finite, non-negative and not all zero; got {vec.tolist()}"
+        )
+    return vec / vec.sum()
+
+
+def _check_observed(model: BayesNet, observed: Mapping[str, str]) -> None:
+    if ACTION in observed:
+        raise InputError(
+            "the action is never observed directly in fusion: it comes from the gesture "
+            f"evidence; remove {ACTION}={observed[ACTION]} from the evidence"
+        )
+    if ACTION not in model.variables:
+        raise InputError(f"the network has no {ACTION} node; fusion needs one")
+
+
+def fuse(
+    model: BayesNet,
+    query: str | Sequence[str],
+    observed: Mapping[str, str],
+    p_hmm: Mapping[str, float] | Sequence[float],
+    *,
+    method: Method = "soft",
+) -> Posterior:
+    """P_comb(query | observed, G) for any query variables (a joint table when several)."""
+    _check_observed(model, observed)
+    names = [query] if isinstance(query, str) else list(query)
+    vec = action_vector(model, p_hmm)
+    if method == "soft":
+        return model.query(names, observed, {ACTION: vec.tolist()})
+    if method != "formula":
+        raise unknown("fusion method", method, ("soft", "formula"))
+    if ACTION in names:  # case 1: multiply along the Action axis and renormalise
+        bn = model.query(names, observed)
+        shape = [1] * len(names)
+        shape[names.index(ACTION)] = vec.size
+        table = bn.table * vec.reshape(shape)
+    else:  # case 2: joint with the action, weight by P_HMM, sum the action out
+        bn = model.query([*names, ACTION], observed)
+        table = np.tensordot(bn.table, vec, axes=([len(names)], [0]))
+    total = float(table.sum())
+    if total <= 0:
+        raise InputError(
+            "the gesture evidence contradicts the observed variables: every action it allows "
+            "has zero probability under the network given the evidence"
+        )
+    values = tuple(model.values[n] for n in names)
+    return Posterior(tuple(names), values, table / total)
+
+
+def fuse_words(
+    model: BayesNet,
+    observed: Mapping[str, str],
+    p_hmm: Mapping[str, float] | Sequence[float],
+    *,
+    method: Method = "soft",
+) -> dict[str, float]:
+    """P_comb(word present | observed, G) for every word node, keyed by the word (case 2)."""
+    _check_observed(model, observed)
+    vec = action_vector(model, p_hmm)
+    if method == "soft":
+        return model.word_probabilities(observed, {ACTION: vec.tolist()})
+    if method != "formula":
+        raise unknown("fusion method", method, ("soft", "formula"))
+    # Σ_A P_HMM(A) P_BN(w, A | obs) / Σ_A P_HMM(A) P_BN(A | obs), with P_BN(w, A | obs) =
+    # P_BN(w | A, obs) P_BN(A | obs); actions impossible given obs contribute nothing.
+    p_action = model.query(ACTION, observed).table
+    weights = vec * p_action
+    total = float(weights.sum())
+    if total <= 0:
+        raise InputError(
+            "the gesture evidence contradicts the observed variables: every action it allows "
+            "has zero probability under the network given the evidence"
+        )
+    out: dict[str, float] = {}
+    for action, w in zip(model.values[ACTION], weights, strict=True):
+        if w == 0:
+            continue
+        words = model.word_probabilities({**observed, ACTION: action})
+        for word, p in words.items():
+            out[word] = out.get(word, 0.0) + w * p
+    return {word: p / total for word, p in out.items()}
