@@ -1,0 +1,498 @@
+"""Seeded synthetic skeleton streams of a seated person doing grasp, tap and touch on a table.
+
+The embedded default data set for training and testing without the article's recordings, and
+the source of `beyond simulate`'s human skeleton.
+
+Coordinate frame (as a Kinect/OpenNI depth sensor reports it, and as the article's logs are):
+metres, origin at the sensor, x to the right, y up, z away from the sensor. The person sits
+facing the sensor about 2 m away, so reaching forward means decreasing z; the acting hand is the
+right one, on the +x side of the torso (OpenNI mirrors the image, as in the article's logs). The
+table top is below the torso joint and the object lies on it between the person and the sensor.
+`SkeletonStream.joints["right_hand"]` is the hand position an object segmenter wants;
+`SkeletonStream.object_xyz` is the object's centre.
+
+Gestures, each from rest back to rest, with minimum-jerk motion between key poses:
+- grasp: vertical approach from above, close (hold), lift with the object, put it down, release,
+  retract;
+- tap: lateral approach at table height from the side, brief fast stroke that pushes the object
+  away along -x (it slides or rolls, then stops), retract;
+- touch: vertical approach from above, brief contact, retract.
+Variability: speed (global and per phase), amplitude of every offset, person size and position,
+object and rest positions, sensor noise (white jitter plus slow drift), optional tracking
+glitches.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cognition.errors import InputError, unknown
+from cognition.gestures.features import features_from_joints
+from cognition.variables import ACTIONS
+
+FloatArray = NDArray[np.float64]
+
+FPS = 30.0
+JOINTS: tuple[str, ...] = (
+    "head",
+    "neck",
+    "torso",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_hand",
+    "right_hand",
+)
+
+
+@dataclass(frozen=True)
+class GestureBounds:
+    """One gesture inside a stream: frames [start, stop) (0-based), and its contact frames."""
+
+    action: str
+    start: int
+    stop: int
+    contact_start: int
+    contact_stop: int
+
+    @property
+    def n_frames(self) -> int:
+        return self.stop - self.start
+
+
+@dataclass(frozen=True, eq=False)
+class SkeletonStream:
+    """A synthetic skeleton recording: joints (T, 3) in metres, camera frame (module docstring)."""
+
+    fps: float
+    joints: dict[str, FloatArray]
+    object_xyz: FloatArray
+    gestures: tuple[GestureBounds, ...]
+    seed: int | None = None
+    info: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.joints["torso"].shape[0])
+
+    @property
+    def action(self) -> str | None:
+        """The action of a single-gesture stream (None for a continuous one)."""
+        return self.gestures[0].action if len(self.gestures) == 1 else None
+
+    @property
+    def hand(self) -> FloatArray:
+        return self.joints["right_hand"]
+
+    def features(self) -> FloatArray:
+        """Recognition features of every frame (see `cognition.gestures.features`)."""
+        return features_from_joints(self.joints)
+
+    def gesture_features(self, i: int = 0) -> FloatArray:
+        """Features of the frames of gesture i only (what the models are trained on)."""
+        g = self.gestures[i]
+        return self.features()[g.start : g.stop]
+
+
+@dataclass(frozen=True)
+class SynthesisConfig:
+    """Variability of the generator (ranges are uniform; noise in metres)."""
+
+    fps: float = FPS
+    speed: tuple[float, float] = (0.75, 1.3)  # global duration factor
+    phase_jitter: float = 0.15  # per-phase duration factor 1 +- this
+    amplitude: tuple[float, float] = (0.8, 1.2)  # scale of approach heights, lifts, strokes
+    hand_noise: tuple[float, float] = (0.004, 0.012)  # white jitter of the hand, per axis
+    joint_noise: float = 0.004  # white jitter of the other joints
+    drift: float = 0.01  # amplitude of slow tracking drift
+    glitch_rate: float = 0.0  # chance per frame that the hand jumps (a tracking error)
+    rest: tuple[float, float] = (0.2, 0.6)  # s of rest before and after a single gesture
+    rest_between: tuple[float, float] = (1.0, 3.0)  # s of rest between gestures (continuous)
+
+
+def _min_jerk(tau: FloatArray) -> FloatArray:
+    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+
+
+@dataclass
+class _Path:
+    """Key poses and the durations between them (a hold repeats a pose).
+
+    A movement may pass through via points: one minimum-jerk time course drives the hand along a
+    smooth curve through them, so it slows down only where a person would, at the end.
+    """
+
+    start: FloatArray
+    times: list[float] = field(default_factory=lambda: [0.0])
+    poses: list[FloatArray] = field(default_factory=list)
+    vias: list[list[FloatArray]] = field(default_factory=list)  # per segment
+    marks: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.poses.append(np.asarray(self.start, dtype=np.float64))
+
+    def to(self, pose: FloatArray, duration: float, via: Sequence[FloatArray] = ()) -> None:
+        self.times.append(self.times[-1] + max(duration, 1e-3))
+        self.poses.append(np.asarray(pose, dtype=np.float64))
+        self.vias.append([np.asarray(v, dtype=np.float64) for v in via])
+
+    def hold(self, duration: float) -> None:
+        self.to(self.poses[-1], duration)
+
+    def mark(self, name: str, offset: float = 0.0) -> None:
+        self.marks[name] = self.times[-1] + offset
+
+    def extend(self, other: _Path) -> float:
+        """Append another path that starts where this one ends; returns its time offset."""
+        t0 = self.duration
+        for time, pose, via in zip(other.times[1:], other.poses[1:], other.vias, strict=True):
+            self.times.append(t0 + time)
+            self.poses.append(pose)
+            self.vias.append(via)
+        return t0
+
+    @property
+    def duration(self) -> float:
+        return self.times[-1]
+
+    def sample(self, t: FloatArray) -> FloatArray:
+        times = np.asarray(self.times)
+        out = np.repeat(self.poses[0][None, :], len(t), axis=0)
+        for i in range(len(times) - 1):
+            sel = (t >= times[i]) & (t < times[i + 1]) if i < len(times) - 2 else t >= times[i]
+            if not np.any(sel):
+                continue
+            tau = np.clip((t[sel] - times[i]) / (times[i + 1] - times[i]), 0.0, 1.0)
+            out[sel] = _along([self.poses[i], *self.vias[i], self.poses[i + 1]], _min_jerk(tau))
+        return out
+
+
+def _along(points: list[FloatArray], u: FloatArray) -> FloatArray:
+    """Points on a smooth curve through `points` at fractions u of its chord length."""
+    pts = np.stack(points)
+    if len(pts) == 2:
+        return pts[0] + (pts[1] - pts[0]) * u[:, None]
+    chord = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+    if chord[-1] <= 0:
+        return np.repeat(pts[:1], len(u), axis=0)
+    from scipy.interpolate import CubicSpline
+
+    knots = chord / chord[-1]
+    keep = np.r_[True, np.diff(knots) > 1e-9]
+    return np.asarray(CubicSpline(knots[keep], pts[keep], bc_type="natural")(u))
+
+
+@dataclass(frozen=True)
+class _Scene:
+    torso: FloatArray
+    shoulder_width: float
+    neck_height: float
+    upper_arm: float
+    forearm: float
+    rest: FloatArray
+    obj: FloatArray
+    obj_half: float
+
+
+def _scene(rng: np.random.Generator) -> _Scene:
+    torso = np.array([rng.uniform(-0.15, 0.15), rng.uniform(-0.1, 0.1), rng.uniform(1.8, 2.4)])
+    size = rng.uniform(0.94, 1.06)  # person size
+    table_drop = rng.uniform(0.27, 0.33) * size
+    obj_half = rng.uniform(0.025, 0.045)
+    obj = torso + np.array(
+        [rng.uniform(0.04, 0.12), -table_drop + obj_half, -rng.uniform(0.38, 0.46) * size]
+    )
+    rest = torso + np.array(
+        [rng.uniform(0.2, 0.28), -rng.uniform(0.3, 0.36) * size, rng.uniform(0.0, 0.08)]
+    )
+    return _Scene(
+        torso=torso,
+        shoulder_width=0.33 * size * rng.uniform(0.92, 1.08),
+        neck_height=0.23 * size * rng.uniform(0.92, 1.08),
+        upper_arm=0.30 * size,
+        forearm=0.33 * size,
+        rest=rest,
+        obj=obj,
+        obj_half=obj_half,
+    )
+
+
+def _gesture_path(
+    action: str, scene: _Scene, start: FloatArray, rng: np.random.Generator, cfg: SynthesisConfig
+) -> tuple[_Path, float]:
+    """The hand's key poses for one gesture from `start` back to rest; and the push speed."""
+    speed = rng.uniform(*cfg.speed)
+    amp = rng.uniform(*cfg.amplitude)
+
+    def dur(base: float) -> float:
+        return base * speed * rng.uniform(1.0 - cfg.phase_jitter, 1.0 + cfg.phase_jitter)
+
+    up = np.array([0.0, 1.0, 0.0])
+    top = scene.obj + up * scene.obj_half  # where a hand touches the object from above
+    p = _Path(start=start)
+    push_speed = 0.0
+    if action == "grasp":
+        # a careful reach: up over the object, then a vertical descent (the hand opens on the way)
+        above = top + up * amp * rng.uniform(0.18, 0.28)
+        p.to(top, dur(1.5), via=[above, top + up * 0.4 * (above - top)[1]])
+        p.mark("contact_start")
+        p.hold(dur(0.4))  # close the hand
+        p.to(top + up * amp * rng.uniform(0.18, 0.3), dur(0.7))  # lift, straight up
+        p.hold(dur(0.5))  # hold it up
+        p.to(top, dur(0.6))  # put it down
+        p.hold(dur(0.25))  # release
+        p.mark("contact_stop")
+        p.to(scene.rest, dur(1.1), via=[top + up * amp * rng.uniform(0.08, 0.14)])
+    elif action == "touch":
+        # a quick, direct reach: a low arc over the table edge, then down onto the object
+        low = top + (start - top) * 0.25 + up * amp * rng.uniform(0.06, 0.12)
+        p.to(top, dur(0.95), via=[low])
+        p.mark("contact_start")
+        p.hold(dur(0.2))
+        p.mark("contact_stop")
+        # retract: straight back towards the rest pose, only slightly raised
+        back = (
+            top + (scene.rest - top) * rng.uniform(0.3, 0.45) + up * amp * rng.uniform(0.04, 0.08)
+        )
+        p.to(scene.rest, dur(1.05), via=[back])
+    elif action == "tap":
+        # lateral approach at table height to beside the object, then a fast stroke through it
+        side = np.array([1.0, 0.0, 0.0])
+        height = up * rng.uniform(0.01, 0.03)
+        depth = np.array([0.0, 0.0, rng.uniform(-0.03, 0.03)])
+        beside = scene.obj + side * amp * rng.uniform(0.16, 0.26) + height + depth
+        p.to(beside, dur(0.75), via=[(start + beside) / 2 + up * 0.03])
+        reach = scene.obj_half + 0.01
+        follow = amp * rng.uniform(0.04, 0.08)
+        stroke = dur(0.35)
+        through = scene.obj + side * (reach - follow) + height + depth
+        # contact when the stroke reaches the object's side: invert the min-jerk profile
+        frac = (beside[0] - (scene.obj[0] + reach)) / (beside[0] - through[0])
+        grid = np.linspace(0.0, 1.0, 1001)
+        t_contact = float(np.interp(frac, _min_jerk(grid), grid)) * stroke
+        t_before = p.duration
+        p.to(through, stroke)
+        p.marks["contact_start"] = t_before + t_contact
+        p.mark("contact_stop")
+        push_speed = 1.875 * (beside[0] - through[0]) / stroke * rng.uniform(0.8, 1.1)
+        p.to(scene.rest, dur(1.1), via=[scene.obj + up * amp * rng.uniform(0.08, 0.14)])
+    else:
+        raise unknown("action", action, ACTIONS)
+    return p, push_speed
+
+
+def _object_track(
+    action: str,
+    hand: FloatArray,
+    t: FloatArray,
+    obj0: FloatArray,
+    contact: tuple[float, float],
+    push_speed: float,
+) -> FloatArray:
+    obj = np.repeat(obj0[None, :], len(t), axis=0)
+    c0, c1 = contact
+    if action == "grasp":
+        i0 = int(np.searchsorted(t, c0))
+        i1 = int(np.searchsorted(t, c1))
+        if i0 < len(t):
+            offset = obj0 - hand[i0]
+            obj[i0:i1] = hand[i0:i1] + offset
+            obj[i1:] = obj[max(i1 - 1, 0)]
+    elif action == "tap":
+        tau = 0.5  # s, how long the pushed object keeps going
+        dt = np.clip(t - c0, 0.0, None)
+        travel = push_speed * tau * (1.0 - np.exp(-dt / tau))
+        obj[:, 0] -= travel
+    return obj
+
+
+def _arm(
+    shoulder: FloatArray, hand: FloatArray, l1: float, l2: float, pole: FloatArray
+) -> FloatArray:
+    """Elbow positions from a two-link inverse kinematics with the elbow towards `pole`."""
+    v = hand - shoulder
+    d = np.linalg.norm(v, axis=1, keepdims=True)
+    d = np.clip(d, 1e-6, None)
+    u = v / d
+    dc = np.clip(d, abs(l1 - l2) + 1e-6, l1 + l2 - 1e-6)
+    a = (l1**2 - l2**2 + dc**2) / (2.0 * dc)
+    h = np.sqrt(np.clip(l1**2 - a**2, 0.0, None))
+    w = pole[None, :] - (pole[None, :] * u).sum(axis=1, keepdims=True) * u
+    w /= np.clip(np.linalg.norm(w, axis=1, keepdims=True), 1e-9, None)
+    return shoulder + a * u + h * w
+
+
+def _body(
+    scene: _Scene,
+    hand: FloatArray,
+    t: FloatArray,
+    rng: np.random.Generator,
+    cfg: SynthesisConfig,
+) -> dict[str, FloatArray]:
+    n = len(t)
+    sway = np.stack(
+        [
+            0.01 * np.sin(2 * np.pi * t / rng.uniform(4, 8) + rng.uniform(0, 2 * np.pi)),
+            0.005 * np.sin(2 * np.pi * t / rng.uniform(3, 6) + rng.uniform(0, 2 * np.pi)),
+            0.01 * np.sin(2 * np.pi * t / rng.uniform(5, 9) + rng.uniform(0, 2 * np.pi)),
+        ],
+        axis=1,
+    )
+    torso = scene.torso + sway
+    up = np.array([0.0, 1.0, 0.0])
+    right = np.array([1.0, 0.0, 0.0])
+    neck = torso + up * scene.neck_height
+    shoulders_y = up * (scene.neck_height - 0.03)
+    rs = torso + shoulders_y + right * scene.shoulder_width / 2
+    ls = torso + shoulders_y - right * scene.shoulder_width / 2
+    head = neck + up * 0.2 * scene.neck_height / 0.23
+    lh = scene.torso + np.array([-0.25, -0.33, 0.02]) + 0.6 * sway
+    pole = np.array([0.3, -1.0, 0.2])
+    re = _arm(rs, hand, scene.upper_arm, scene.forearm, pole)
+    le = _arm(ls, lh, scene.upper_arm, scene.forearm, pole * np.array([-1, 1, 1]))
+    joints = {
+        "head": head,
+        "neck": neck,
+        "torso": torso,
+        "left_shoulder": ls,
+        "right_shoulder": rs,
+        "left_elbow": le,
+        "right_elbow": re,
+        "left_hand": np.broadcast_to(lh, (n, 3)).copy(),
+        "right_hand": hand,
+    }
+    hand_sigma = rng.uniform(*cfg.hand_noise)
+    for name in JOINTS:
+        sigma = hand_sigma if name == "right_hand" else cfg.joint_noise
+        drift = np.cumsum(rng.normal(0.0, 1.0, (n, 3)), axis=0)
+        drift -= np.linspace(0, 1, n)[:, None] * drift[-1]  # bridge: bounded drift
+        drift *= cfg.drift / max(float(np.abs(drift).max()), 1e-9)
+        joints[name] = joints[name] + rng.normal(0.0, sigma, (n, 3)) + drift
+    if cfg.glitch_rate > 0:
+        glitch = rng.random(n) < cfg.glitch_rate
+        joints["right_hand"][glitch] += rng.normal(0.0, 0.15, (int(glitch.sum()), 3))
+    return joints
+
+
+def _check_action(action: str) -> None:
+    if action not in ACTIONS:
+        raise unknown("action", action, ACTIONS)
+
+
+def _render(
+    actions: Sequence[str],
+    seed: int,
+    cfg: SynthesisConfig,
+    first_rest: tuple[float, float],
+    between: tuple[float, float],
+) -> SkeletonStream:
+    rng = np.random.default_rng(seed)
+    scene = _scene(rng)
+    t_cursor = rng.uniform(*first_rest)
+    # the full hand path: rests and gestures chained, with their time bounds
+    full = _Path(start=scene.rest)
+    full.hold(t_cursor)
+    spans: list[tuple[str, float, float, float, float, float]] = []
+    for i, action in enumerate(actions):
+        path, push_speed = _gesture_path(action, scene, scene.rest, rng, cfg)
+        t0 = full.extend(path)
+        spans.append(
+            (
+                action,
+                t0,
+                full.duration,
+                t0 + path.marks["contact_start"],
+                t0 + path.marks["contact_stop"],
+                push_speed,
+            )
+        )
+        rest = rng.uniform(*between) if i < len(actions) - 1 else rng.uniform(*first_rest)
+        full.hold(rest)
+    n = int(np.ceil(full.duration * cfg.fps)) + 1
+    t = np.arange(n) / cfg.fps
+    hand = full.sample(t)
+    obj = np.repeat(scene.obj[None, :], n, axis=0)
+    for action, _, _, c0, c1, push in spans:
+        track = _object_track(action, hand, t, obj[int(np.searchsorted(t, c0)) - 1], (c0, c1), push)
+        after = t >= c0 - 1.0 / cfg.fps
+        obj[after] = track[after]
+    joints = _body(scene, hand.copy(), t, rng, cfg)
+
+    def frame(x: float) -> int:
+        return int(np.clip(np.searchsorted(t, x), 0, n))
+
+    bounds = tuple(
+        GestureBounds(a, frame(t0), frame(t1), frame(c0), frame(c1))
+        for a, t0, t1, c0, c1, _ in spans
+    )
+    return SkeletonStream(
+        fps=cfg.fps,
+        joints=joints,
+        object_xyz=obj,
+        gestures=bounds,
+        seed=seed,
+        info={
+            "shoulder_width": scene.shoulder_width,
+            "neck_height": scene.neck_height,
+            "object_half_size": scene.obj_half,
+        },
+    )
+
+
+def synthesize_gesture(
+    action: str, seed: int, config: SynthesisConfig | None = None
+) -> SkeletonStream:
+    """One gesture between two short rests; `gestures[0]` marks the moving part."""
+    _check_action(action)
+    cfg = config or SynthesisConfig()
+    return _render([action], seed, cfg, cfg.rest, cfg.rest)
+
+
+def synthesize_continuous(
+    actions: Sequence[str] | int, seed: int, config: SynthesisConfig | None = None
+) -> SkeletonStream:
+    """Several gestures separated by rests (for the segmenter); an int draws that many actions."""
+    cfg = config or SynthesisConfig()
+    if isinstance(actions, int):
+        if actions < 1:
+            raise InputError(f"number of gestures {actions}; valid: at least 1")
+        rng = np.random.default_rng([seed, 1])
+        actions = [ACTIONS[i] for i in rng.integers(len(ACTIONS), size=actions)]
+    if not actions:
+        raise InputError("no actions to synthesise; valid: at least one of grasp, tap, touch")
+    for a in actions:
+        _check_action(a)
+    return _render(list(actions), seed, cfg, cfg.rest_between, cfg.rest_between)
+
+
+def synthesize_dataset(
+    n_per_action: int,
+    seed: int,
+    config: SynthesisConfig | None = None,
+    actions: Sequence[str] = ACTIONS,
+) -> dict[str, list[FloatArray]]:
+    """`{action: [gesture features (T_i, 3), ...]}`: n_per_action gestures of each action.
+
+    Every gesture has its own seed derived from (seed, action, index), so data sets with
+    different seeds share no gesture, and adding gestures does not change the earlier ones.
+    """
+    if n_per_action < 1:
+        raise InputError(f"gestures per action {n_per_action}; valid: at least 1")
+    out: dict[str, list[FloatArray]] = {}
+    for a_i, action in enumerate(actions):
+        _check_action(action)
+        out[action] = [
+            synthesize_gesture(action, _gesture_seed(seed, a_i, i), config).gesture_features()
+            for i in range(n_per_action)
+        ]
+    return out
+
+
+def _gesture_seed(seed: int, action_index: int, i: int) -> int:
+    ss = np.random.SeedSequence([seed, action_index, i])
+    return int(ss.generate_state(1)[0])
