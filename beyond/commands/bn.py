@@ -3,6 +3,7 @@
     beyond bn learn [BAG] [--network DEF] -o MODEL
     beyond bn show MODEL [--json]
     beyond bn query MODEL --query VAR [VAR ...] [--evidence VAR=VALUE ...] [--soft VAR=p1,... ...]
+                    [--gesture MODELS LOG [--frames A:B] [--scale S]] [--json]
     beyond bn words MODEL [--evidence ...] [--soft ...] [--json]
 
 JSON goes to stdout, progress and tables for people to stderr/stdout through rich. Bad input is an
@@ -21,9 +22,9 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from beyond.commands.evidence_args import add_evidence_arguments, resolve_evidence
 from cognition.bn.bag import load_bag
 from cognition.bn.definition import load_definition
-from cognition.bn.evidence import parse_evidence, parse_soft
 from cognition.bn.model import BayesNet, learn_network, load_model, save_model
 from cognition.bn.parameters import UNSEEN_RULES
 from cognition.bn.structure import DEFAULT_MAX_PARENTS, DEFAULT_ROOTS
@@ -74,24 +75,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     query = sub.add_parser("query", help="exact posterior of one or more variables")
     query.add_argument("model", type=Path, metavar="MODEL")
     query.add_argument("--query", nargs="+", required=True, metavar="VAR")
-    _evidence_arguments(query)
+    add_evidence_arguments(query)
 
     words = sub.add_parser("words", help="P(word present) for every word")
     words.add_argument("model", type=Path, metavar="MODEL")
-    _evidence_arguments(words)
-
-
-def _evidence_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--evidence", nargs="+", action="extend", default=[], metavar="VAR=VALUE")
-    parser.add_argument(
-        "--soft",
-        nargs="+",
-        action="extend",
-        default=[],
-        metavar="VAR=p1,p2,...",
-        help="a distribution over VAR's values, in definition order",
-    )
-    parser.add_argument("--json", action="store_true")
+    add_evidence_arguments(words)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -178,13 +166,12 @@ def show_json(model: BayesNet) -> dict[str, Any]:
 
 def _query(args: argparse.Namespace) -> int:
     model = load_model(args.model)
-    evidence = parse_evidence(args.evidence, model.definition)
-    soft = parse_soft(args.soft, model.definition)
-    posterior = model.query(args.query, evidence, soft)
+    ev = resolve_evidence(args, model)
+    posterior = model.query(args.query, ev.observed, ev.soft)
     if args.json:
         print(json.dumps(posterior.as_dict()))
         return 0
-    table = Table(title=f"P({', '.join(args.query)} | {_given(args)})")
+    table = Table(title=f"P({', '.join(args.query)} | {ev.label()})")
     for name in posterior.variables:
         table.add_column(name)
     table.add_column("p", justify="right")
@@ -196,21 +183,15 @@ def _query(args: argparse.Namespace) -> int:
 
 def _words(args: argparse.Namespace) -> int:
     model = load_model(args.model)
-    evidence = parse_evidence(args.evidence, model.definition)
-    soft = parse_soft(args.soft, model.definition)
-    probs = model.word_probabilities(evidence, soft)
+    ev = resolve_evidence(args, model)
+    probs = model.word_probabilities(ev.observed, ev.soft)
     if args.json:
         print(json.dumps(probs))
         return 0
-    table = Table(title=f"P(word present | {_given(args)})")
+    table = Table(title=f"P(word present | {ev.label()})")
     table.add_column("word")
     table.add_column("p", justify="right")
     for word, p in sorted(probs.items(), key=lambda kv: -kv[1]):
         table.add_row(word, f"{p:.6f}")
     Console().print(table)
     return 0
-
-
-def _given(args: argparse.Namespace) -> str:
-    parts = [*args.evidence, *(f"soft {s}" for s in args.soft)]
-    return ", ".join(parts) if parts else "nothing"

@@ -1,0 +1,27 @@
+"""Gesture evidence from a recorded hand log: P_HMM(A | G) after the last frame of a span.
+
+One function, so `beyond gesture stream`, the `--gesture` option of the network commands and the
+article's experiments all cut, scale and recognise a log the same way.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cognition.gestures.features import LOG_SCALE, extract_features
+from cognition.gestures.hmm import GestureModels
+from cognition.gestures.logs import parse_frames, read_hand_log
+from cognition.gestures.streaming import SequenceResult, recognize_sequence
+
+
+def recognize_log(
+    models: GestureModels,
+    log_path: str | Path,
+    frames: str | None = None,
+    scale: float = LOG_SCALE,
+) -> tuple[SequenceResult, int]:
+    """Recognise frames `frames` ("A:B", 1-based inclusive) of a hand log; returns the per-frame
+    result and the 1-based number of the first frame used."""
+    log = read_hand_log(log_path)
+    span = parse_frames(frames, len(log))
+    return recognize_sequence(models, extract_features(log.xyz[span], scale=scale)), span.start + 1
