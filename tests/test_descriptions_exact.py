@@ -22,9 +22,11 @@ from cognition.descriptions import (
     ScoredSentence,
     SentenceSpace,
     brute_force_nbest,
+    brute_force_nbest_plain,
     brute_force_scores,
     nbest_exact,
     nbest_sampled,
+    top_keys,
 )
 from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR, Grammar, parse_grammar
@@ -93,8 +95,13 @@ def test_exact_equals_enumeration_on_a_small_grammar(
     probs: list[float], n: int, legacy: bool
 ) -> None:
     word_probs = dict(zip(SMALL.vocabulary, probs, strict=True))
-    got = nbest_exact(word_probs, n, legacy_offset=legacy, grammar=SMALL)
-    assert _pairs(got) == _reference(SMALL, word_probs, n, legacy)
+    expected = _reference(SMALL, word_probs, n, legacy)
+    got = nbest_exact(word_probs, n, legacy_offset=legacy, grammar=SMALL)  # bounds, else blocks
+    assert _pairs(got) == expected
+    space = SentenceSpace.of(SMALL)
+    keys, scores = top_keys(space, space.word_logprobs(word_probs), n, legacy, method="blocks")
+    assert [space.sentence(k) for k in keys] == [s for s, _ in expected]
+    assert scores.tolist() == [x for _, x in expected]
 
 
 @settings(max_examples=25, deadline=None)
@@ -130,6 +137,22 @@ def test_exact_equals_brute_force_on_the_full_grammar() -> None:
     for key in np.random.default_rng(1).integers(0, scores.shape[0], 200):
         words = space.sentence(int(key)).split()
         assert scores[key] == sum(_qlog(probs[w]) for w in words) / len(words)
+
+
+def test_both_search_methods_and_both_brute_forces_agree() -> None:
+    space = SentenceSpace.of()
+    for seed in range(3):
+        word_lp = space.word_logprobs(_random_probs(seed))
+        for legacy in (False, True):
+            # "bounds" raises if it does not apply: random probabilities must take the fast path
+            kb, sb = top_keys(space, word_lp, 15, legacy, method="bounds")
+            kk, sk = top_keys(space, word_lp, 15, legacy, method="blocks")
+            assert kb.tolist() == kk.tolist() and sb.tolist() == sk.tolist()
+    probs = _random_probs(5) | {"he": 0.0, "ball": 0.0}
+    probs["cube"] = probs["box"]
+    for legacy in (False, True):
+        chunked = brute_force_nbest(probs, 30, legacy_offset=legacy)
+        assert chunked == brute_force_nbest_plain(probs, 30, legacy_offset=legacy)
 
 
 def test_full_grammar_with_ties_zeros_and_a_colour_requirement() -> None:
@@ -169,6 +192,25 @@ def test_all_zero_probabilities_give_minus_inf_lexicographically_without_warning
     assert all(it.score == -math.inf for it in got)
     assert [it.sentence for it in got] == sorted(it.sentence for it in got)
     assert got[0].sentence == "baltazar grasped the ball and the ball falls"
+
+
+def test_few_possible_sentences_come_first_then_impossible_ones_by_alphabet() -> None:
+    probs = dict.fromkeys(DEFAULT_GRAMMAR.vocabulary, 0.0)
+    probs |= dict.fromkeys(["the", "robot", "pokes", "ball", "box", "and", "moves"], 0.6)
+    probs["box"] = 0.3
+    got = nbest_exact(probs, 12)
+    assert got == brute_force_nbest(probs, 12)
+    finite = [it.sentence for it in got if math.isfinite(it.score)]
+    assert finite == [
+        "the robot pokes the ball and the ball moves",
+        "the robot pokes the ball and the box moves",
+        "the robot pokes the box and the ball moves",
+        "the robot pokes the box and the box moves",
+    ]
+    assert [it.sentence for it in got[4:6]] == [
+        "baltazar grasped the ball and the ball falls",
+        "baltazar grasped the ball and the ball is falling",
+    ]
 
 
 def test_equal_probabilities_tie_everything_and_the_alphabet_decides() -> None:

@@ -27,6 +27,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -40,14 +41,17 @@ IntArray = npt.NDArray[np.int64]
 # Probabilities a hair above 1 come out of normalisations in floating point; anything further is
 # a caller's bug.
 _PROB_SLACK = 1e-9
-# log P rounded to this many fractional bits: |log P| <= 745 for any positive double, so a sum of
-# up to MAX_WORDS of them needs at most 52 bits and is exact.
+# log P rounded to this many fractional bits. |log P| <= 745 for any positive double, so a sum of
+# up to MAX_WORDS of them needs at most 19 + 32 bits and is exact. Two different sums then differ
+# by at least 2**-32, and divided by the same L <= MAX_WORDS by more than 2**-41, which is more
+# than the rounding of a score (|score| <= 746, ulp <= 2**-43) can hide: a better sum always
+# gives a strictly better score, the fact the exact search's pruning rests on.
 LOG_FRACTION_BITS = 32
-MAX_WORDS = 2000
+MAX_WORDS = 500
+_SCALE = float(2**LOG_FRACTION_BITS)
 
 
-@dataclass(frozen=True)
-class ScoredSentence:
+class ScoredSentence(NamedTuple):
     """One entry of an N-best list; `score` is unrounded (the CLI rounds for display)."""
 
     sentence: str
@@ -61,11 +65,80 @@ class _Block:
     slots: tuple[int, ...]  # positions in the sentence
     sizes: tuple[int, ...]
     lengths: IntArray  # words per block entry
-    groups: tuple[IntArray, ...]  # entry indices of each distinct length, ascending
+    by_length: IntArray  # entry indices ordered by length, then index (a stable sort)
+    bounds: tuple[tuple[int, int], ...]  # [start, stop) in `by_length` of each distinct length
 
     @property
     def size(self) -> int:
         return int(self.lengths.shape[0])
+
+
+@dataclass(frozen=True)
+class Positions:
+    """The phrases of each sentence position (a slot used twice appears twice), as flat arrays
+    ordered by (position, length, rank); what the bound-pruned search works on."""
+
+    table: IntArray  # word indices per entry, padded with len(vocabulary)
+    length: FloatArray
+    key: IntArray  # rank * (number of sentences per step of this position's rank)
+    position: IntArray
+    group: IntArray  # (position, length) group of each entry
+    group_starts: IntArray
+    second: IntArray  # per group, index of its second entry (or one past the end if none)
+    position_starts: IntArray
+    position_bounds: tuple[int, ...]  # starts plus the end
+    combos: IntArray  # every choice of one length group per position: (combos, positions)
+    combo_length: FloatArray
+
+    @staticmethod
+    def build(space: SentenceSpace) -> Positions:
+        slots = space.grammar.slots
+        pad = len(space.vocabulary)
+        width = space._table.shape[1]
+        sizes = [len(space.phrases[name]) for name in slots]
+        table: list[list[int]] = []
+        length: list[int] = []
+        key: list[int] = []
+        position: list[int] = []
+        group: list[int] = []
+        group_starts: list[int] = []
+        group_length: list[int] = []
+        position_starts: list[int] = []
+        groups_of: list[list[int]] = []
+        for j, name in enumerate(slots):
+            position_starts.append(len(table))
+            groups_of.append([])
+            step = math.prod(sizes[j + 1 :])
+            phrases = space.phrases[name]
+            for n in sorted({len(p) for p in phrases}):
+                groups_of[j].append(len(group_starts))
+                group_starts.append(len(table))
+                group_length.append(n)
+                for rank, phrase in enumerate(phrases):
+                    if len(phrase) == n:
+                        idx = [space._word_index[w] for w in phrase]
+                        table.append(idx + [pad] * (width - len(idx)))
+                        length.append(n)
+                        key.append(rank * step)
+                        position.append(j)
+                        group.append(len(group_starts) - 1)
+        total = len(table)
+        starts = np.array(group_starts, dtype=np.int64)
+        group_sizes = np.diff(np.append(starts, total))
+        combos = np.array(list(itertools.product(*groups_of)), dtype=np.int64)
+        return Positions(
+            table=np.array(table, dtype=np.int64).reshape(total, width),
+            length=np.array(length, dtype=np.float64),
+            key=np.array(key, dtype=np.int64),
+            position=np.array(position, dtype=np.int64),
+            group=np.array(group, dtype=np.int64),
+            group_starts=starts,
+            second=np.where(group_sizes >= 2, starts + 1, total),
+            position_starts=np.array(position_starts, dtype=np.int64),
+            position_bounds=(*position_starts, total),
+            combos=combos,
+            combo_length=np.array(group_length, dtype=np.float64)[combos].sum(axis=1),
+        )
 
 
 class SentenceSpace:
@@ -124,9 +197,18 @@ class SentenceSpace:
         lengths = np.zeros(1, dtype=np.int64)
         for name in names:
             lengths = (lengths[:, None] + self._phrase_lengths[name][None, :]).ravel()
-        groups = tuple(np.flatnonzero(lengths == n) for n in np.unique(lengths))
+        by_length = np.argsort(lengths, kind="stable")
+        edges = np.flatnonzero(np.diff(lengths[by_length])) + 1
+        starts = [0, *edges.tolist()]
+        stops = [*edges.tolist(), int(lengths.shape[0])]
         sizes = tuple(len(self.phrases[n]) for n in names)
-        return _Block(slots=slots, sizes=sizes, lengths=lengths, groups=groups)
+        return _Block(
+            slots=slots,
+            sizes=sizes,
+            lengths=lengths,
+            by_length=by_length,
+            bounds=tuple(zip(starts, stops, strict=True)),
+        )
 
     @cached_property
     def _prefix_lookup(self) -> dict[tuple[str, ...], int]:
@@ -144,12 +226,10 @@ class SentenceSpace:
             table.setdefault(sum(combo, ()), index)
         return table
 
-    def _block_phrases(self, block: _Block, index: int) -> tuple[Phrase, ...]:
-        ranks = np.unravel_index(index, block.sizes) if block.sizes else ()
-        return tuple(
-            self.phrases[self.grammar.slots[slot]][int(r)]
-            for slot, r in zip(block.slots, ranks, strict=True)
-        )
+    @cached_property
+    def positions(self) -> Positions:
+        """Every phrase at every sentence position, grouped by (position, length)."""
+        return Positions.build(self)
 
     @cached_property
     def sentence_lengths(self) -> npt.NDArray[np.int16]:
@@ -165,19 +245,21 @@ class SentenceSpace:
 
         Keys outside the vocabulary are ignored (a network may know more words than the grammar).
         """
-        missing = [w for w in self.vocabulary if w not in word_probs]
-        if missing:
+        try:
+            values = np.fromiter(
+                map(word_probs.__getitem__, self.vocabulary), np.float64, len(self.vocabulary)
+            )
+        except KeyError:
+            missing = [w for w in self.vocabulary if w not in word_probs]
             more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
             raise InputError(
                 f"word probabilities lack the word {missing[0]!r}{more}; "
                 f"every grammar word is needed: {', '.join(self.vocabulary)}"
-            )
-        try:
-            values = np.array([float(word_probs[w]) for w in self.vocabulary], dtype=np.float64)
+            ) from None
         except (TypeError, ValueError) as exc:
             raise InputError(f"word probabilities must be numbers: {exc}") from None
-        bad = ~np.isfinite(values) | (values < 0.0) | (values > 1.0 + _PROB_SLACK)
-        if bad.any():
+        if not (values.min() >= 0.0 and values.max() <= 1.0 + _PROB_SLACK):  # NaN fails too
+            bad = ~((values >= 0.0) & (values <= 1.0 + _PROB_SLACK))
             i = int(np.flatnonzero(bad)[0])
             raise InputError(
                 f"word probability of {self.vocabulary[i]!r} is {float(values[i])!r}; "
@@ -185,7 +267,8 @@ class SentenceSpace:
             )
         with np.errstate(divide="ignore"):
             logs = np.log(np.minimum(values, 1.0))
-        return np.ldexp(np.round(np.ldexp(logs, LOG_FRACTION_BITS)), -LOG_FRACTION_BITS)
+        # multiplying by a power of two is exact, so this is rounding to multiples of 2**-32
+        return np.round(logs * _SCALE) * (1.0 / _SCALE)
 
     def phrase_logprobs(self, word_lp: FloatArray) -> dict[str, FloatArray]:
         """Each phrase's log-probability: its words summed left to right."""
@@ -215,8 +298,20 @@ class SentenceSpace:
     def sentence(self, key: int) -> str:
         """The sentence string of a key."""
         p, s = divmod(int(key), self.suffix.size)
-        phrases = self._block_phrases(self.prefix, p) + self._block_phrases(self.suffix, s)
-        return " ".join(w for phrase in phrases for w in phrase)
+        prefix, suffix = self._prefix_strings[p], self._suffix_strings[s]
+        return f"{prefix} {suffix}" if prefix and suffix else prefix or suffix
+
+    @cached_property
+    def _prefix_strings(self) -> list[str]:
+        return self._strings(self.prefix)
+
+    @cached_property
+    def _suffix_strings(self) -> list[str]:
+        return self._strings(self.suffix)
+
+    def _strings(self, block: _Block) -> list[str]:
+        choices = [self.phrase_strings[self.grammar.slots[slot]] for slot in block.slots]
+        return [" ".join(filter(None, combo)) for combo in itertools.product(*choices)]
 
     def phrase_ranks(self, keys: IntArray) -> list[IntArray]:
         """Per slot, the rank of the chosen phrase (in `phrases[slot]`) for each key."""
