@@ -13,11 +13,15 @@ What other modules call (word_probs = {word: P(word present | evidence)} for eve
     brute_force_nbest(word_probs, n=10, *, legacy_offset, grammar)     # chunked, fastest
     brute_force_nbest_plain(word_probs, n=10, *, legacy_offset, grammar)  # full array + sort
     plot_nbest(items, path, title) -> Path                        # PNG bar chart
+    hsgen_phrase_probabilities(grammar) -> [{phrase: P}] per slot  # the sampler's distribution
+    SentenceSpace.of(grammar); top_keys(space, space.word_logprobs(p), k, legacy, method)
 
 A sentence of L words scores (1/L) Σ log P(w_k), repeated words counted each time; a word with
 P = 0 makes it −inf. `legacy_offset=True` scores (1 + Σ log P)/L, as the reference code that
 produced the article's tables did. `require` keeps only sentences matching a regex (re.search).
 Ties: input order for given or sampled sentences, lexicographic sentence order for exact search.
+log P is rounded to a multiple of 2**-32 (< 1.2e-10) so sums are exact: every route gives a
+sentence the same score to the last bit, and sentences with the same words tie exactly.
 """
 
 from __future__ import annotations
