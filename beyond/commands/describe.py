@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from rich.console import Console
@@ -67,12 +68,17 @@ def describe(args: argparse.Namespace) -> tuple[list[ScoredSentence], str]:
     return best, ev.label()
 
 
+def json_score(score: float) -> float | None:
+    """Rounded to 5 decimals; a sentence with an impossible word (score −inf) is null in JSON."""
+    return round(score, 5) if math.isfinite(score) else None
+
+
 def run(args: argparse.Namespace) -> int:
     best, label = describe(args)
     if args.plot is not None:
         plot_nbest(best, args.plot, f"{len(best)}-best given {label}")
     if args.json:
-        print(json.dumps([{"sentence": s.sentence, "score": round(s.score, 5)} for s in best]))
+        print(json.dumps([{"sentence": s.sentence, "score": json_score(s.score)} for s in best]))
         return 0
     if not best:
         Console(stderr=True).print("no sentence matches --require")
