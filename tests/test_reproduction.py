@@ -48,7 +48,7 @@ def test_exp1_network_favours_touch_and_threshold_is_where_tap_wins(
     x = r["exp1_tap_threshold"]
     for p_tap, tap_wins in ((x - 1e-6, False), (x + 1e-6, True)):
         fused = np.array([grasp * (1 - p_tap) / 2, tap * p_tap, touch * (1 - p_tap) / 2])
-        assert (fused.argmax() == 1) is tap_wins
+        assert bool(fused.argmax() == 1) is tap_wins
 
 
 def test_exp2_spheres_move_faster_than_boxes_under_tap(results: tuple[Path, dict]) -> None:
