@@ -176,7 +176,7 @@ def _stream(args: argparse.Namespace) -> int:
         json.dump(out, sys.stdout)
         sys.stdout.write("\n")
     else:
-        console = Console()
+        console = Console(width=None if sys.stdout.isatty() else 200)  # a table is never cut
         table = Table(title=f"{args.log} frames {first}-{span.stop}, scale {args.scale:g}")
         table.add_column("frame", justify="right")
         table.add_column("t", justify="right")
@@ -194,7 +194,7 @@ def _stream(args: argparse.Namespace) -> int:
         console.print(table)
         console.print(f"most probable action after {len(results)} frames: [bold]{results[-1].best}")
     if args.plot is not None:
-        from cognition.gestures.evaluate import plot_stream
+        from cognition.gestures.evaluation import plot_stream
         from cognition.gestures.streaming import recognize_sequence
 
         plot_stream(recognize_sequence(rec.compiled, feats), args.plot, str(args.log), first)
@@ -202,7 +202,7 @@ def _stream(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from cognition.gestures.evaluate import cross_validate, evaluate, plot_report
+    from cognition.gestures.evaluation import cross_validate, evaluate, plot_report
 
     console = Console(stderr=True)
     with console.status(f"loading gestures from {args.data}"):

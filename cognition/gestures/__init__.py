@@ -17,7 +17,7 @@ gestures; `synthesize_gesture`/`synthesize_continuous` make seeded skeleton stre
 Heavy dependencies (hmmlearn, scipy.io) are imported only by the functions that need them.
 """
 
-from cognition.gestures.evaluate import (
+from cognition.gestures.evaluation import (
     EvaluationReport,
     LabelledGesture,
     cross_validate,

@@ -16,7 +16,7 @@ import re
 from pathlib import Path
 
 from cognition.errors import InputError
-from cognition.gestures.evaluate import LabelledGesture
+from cognition.gestures.evaluation import LabelledGesture
 from cognition.gestures.features import LOG_SCALE, extract_features
 from cognition.gestures.logs import read_hand_log
 from cognition.gestures.segmentation import SegmenterConfig, segment_gestures

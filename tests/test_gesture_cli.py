@@ -1,0 +1,68 @@
+"""`beyond gesture` train / stream / evaluate, in-process."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from beyond.cli import main
+from cognition.gestures.hmm import load_models
+
+
+def test_stream_json_on_the_article_tap(
+    shared_data: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = shared_data / "saponaro2019/human_data"
+    argv = [
+        "gesture", "stream", str(folder / "HMM_M3_Q6_mixsplit.mat"),
+        str(folder / "tap_notable_seated_1"), "--frames", "121:214", "--scale", "0.001", "--json",
+    ]  # fmt: skip
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["actions"] == ["grasp", "tap", "touch"]
+    frames = out["frames"]
+    assert [f["t"] for f in frames] == list(range(1, 95))
+    last = frames[-1]
+    assert last["posterior"][1] > 0.99
+    assert np.argmax(last["loglik"]) == 1
+    assert abs(sum(last["posterior"]) - 1.0) < 1e-12
+
+
+def test_stream_table_and_bad_input(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = shared_data / "saponaro2019/human_data"
+    mat = str(folder / "HMM_M1_Q6_mixsplit.mat")
+    log = str(folder / "tap_notable_seated_1")
+    assert main(["gesture", "stream", mat, log, "--frames", "121:130", "--garbage"]) == 0
+    out = capsys.readouterr().out
+    assert "P(garbage)" in out and "most probable action after 10 frames" in out
+    assert main(["gesture", "stream", mat, log, "--frames", "300:999"]) == 2
+    err = capsys.readouterr().err
+    assert "out of range" in err and err.count("\n") == 1
+    assert main(["gesture", "stream", str(tmp_path / "none.json"), log]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_train_then_evaluate_synthetic(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    model_file = tmp_path / "models.json"
+    argv = ["gesture", "train", "--out", str(model_file), "--count", "4", "--iter", "3",
+            "--states", "4", "--mix", "1"]  # fmt: skip
+    assert main(argv) == 0
+    models = load_models(model_file)
+    assert models.actions == ("grasp", "tap", "touch")
+    assert models.meta["sequences"] == {"grasp": 4, "tap": 4, "touch": 4}
+    capsys.readouterr()
+    plots = tmp_path / "plots"
+    argv = ["gesture", "evaluate", str(model_file), "synthetic", "--count", "3", "--json",
+            "--out", str(plots)]  # fmt: skip
+    assert main(argv) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["n"] == 9
+    assert len(report["early"]["fractions"]) == 10
+    assert np.array(report["confusion"]).sum() == 9
+    assert (plots / "confusion.png").is_file() and (plots / "early_recognition.png").is_file()
+    assert main(["gesture", "train", "--out", str(tmp_path / "m.pkl")]) == 2
