@@ -108,6 +108,13 @@ class GestureSegmenter:
         """A gesture is under way."""
         return self._active
 
+    @property
+    def current_start(self) -> int | None:
+        """0-based frame where the gesture under way began (None between gestures), so a
+        streaming recogniser can start from the gesture's first frame, not from the frame the
+        segmenter noticed it."""
+        return self._start if self._active else None
+
     def push(self, position: ArrayLike) -> Segment | None:
         cfg = self.config
         p = np.asarray(position, dtype=np.float64)
