@@ -10,7 +10,7 @@ The two camera types are field-for-field Foxglove's well-known `foxglove.RawImag
 from __future__ import annotations
 
 import math
-from typing import ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
@@ -41,12 +41,19 @@ def _check_distribution(name: str, dist: dict[str, float]) -> None:
         raise ValueError(f"{name} sums to {total:.6g}, not 1")
 
 
+# Checked by msgspec's C decoder (fast enough for 30 Hz x many joints): finite, bounded values.
+# NaN and infinities fail the bounds; they would not survive JSON recordings either.
+Coordinate = Annotated[float, msgspec.Meta(ge=-1e6, le=1e6)]
+Probability = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+
+
 class Joint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """A tracked joint: position in metres in the sensor frame, and tracking confidence in [0, 1]
-    (Kinect/OpenNI report 0 not tracked, 0.5 inferred, 1 tracked)."""
+    (Kinect/OpenNI report 0 not tracked, 0.5 inferred, 1 tracked). Values are checked when
+    decoded (not when constructed, to keep publishing cheap)."""
 
-    position: tuple[float, float, float]
-    confidence: float = 1.0
+    position: tuple[Coordinate, Coordinate, Coordinate]
+    confidence: Probability = 1.0
 
 
 class SkeletonFrame(Message, frozen=True):
@@ -56,13 +63,6 @@ class SkeletonFrame(Message, frozen=True):
     joints: dict[str, Joint]
     user: int = 0
     frame_id: str = "depth_camera"
-
-    def __post_init__(self) -> None:
-        for name, joint in self.joints.items():
-            if not 0.0 <= joint.confidence <= 1.0:
-                raise ValueError(f"joint {name!r} confidence {joint.confidence} not in [0, 1]")
-            if not all(math.isfinite(v) for v in joint.position):
-                raise ValueError(f"joint {name!r} position {joint.position} is not finite")
 
 
 class Time(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

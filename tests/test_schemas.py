@@ -115,7 +115,7 @@ def test_round_trip_msgpack_and_json(message: s.Message) -> None:
     st.dictionaries(
         st.text(min_size=1, max_size=12),
         st.tuples(
-            st.tuples(*[st.floats(allow_nan=False, allow_infinity=False)] * 3),
+            st.tuples(*[st.floats(-1e6, 1e6)] * 3),
             st.floats(0, 1),
         ),
         max_size=8,
@@ -158,7 +158,7 @@ def skeleton_dict(**header: object) -> dict:
             msgspec.msgpack.encode(
                 {**skeleton_dict(), "joints": {"h": {"position": [0, 0, 0], "confidence": 2.0}}}
             ),
-            "confidence 2.0",
+            "`float` <= 1.0",
         ),
     ],
 )
@@ -170,6 +170,15 @@ def test_strict_decoding_names_key_and_problem(payload: bytes, expected: str) ->
     assert "\n" not in text
     assert f"SkeletonFrame on {KEY}" in text
     assert expected in text
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), 2e6])
+def test_non_finite_or_absurd_positions_are_refused(bad: float) -> None:
+    payload = msgspec.msgpack.encode(
+        {**skeleton_dict(), "joints": {"h": {"position": [0.0, bad, 0.0], "confidence": 1.0}}}
+    )
+    with pytest.raises(s.SchemaError, match="position"):
+        s.decode(payload, s.SkeletonFrame, KEY)
 
 
 def test_json_decoding_is_strict_too() -> None:
