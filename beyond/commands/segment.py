@@ -19,7 +19,9 @@ HELP = "segment tabletop objects in an image or MCAP recording; learn or evaluat
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("source", nargs="?", help="a PPM/PGM/PNG image or an MCAP recording")
+    parser.add_argument(
+        "source", nargs="?", metavar="IMAGE_OR_MCAP", help="a PPM/PGM/PNG image or an MCAP file"
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--overlay", metavar="OUT.png", help="draw contours, centroids, labels")
     parser.add_argument("--clusters", metavar="FILE.json", help="clusters file (default: shipped)")
