@@ -66,3 +66,55 @@ def test_train_then_evaluate_synthetic(tmp_path: Path, capsys: pytest.CaptureFix
     assert np.array(report["confusion"]).sum() == 9
     assert (plots / "confusion.png").is_file() and (plots / "early_recognition.png").is_file()
     assert main(["gesture", "train", "--out", str(tmp_path / "m.pkl")]) == 2
+
+
+def _write_mcap(path: Path, actions: list[str], seed: int, metadata: dict[str, str]) -> None:
+    from cognition.gestures.synthetic import synthesize_continuous
+    from runtime.recording import RecordingWriter
+    from schemas.base import Header
+    from schemas.keys import Keys
+    from schemas.messages import Joint, SkeletonFrame
+
+    stream = synthesize_continuous(actions, seed)
+    key = Keys().skeleton
+    with RecordingWriter(path, metadata=metadata) as writer:
+        for i in range(stream.n_frames):
+            joints = {
+                name: Joint(position=tuple(float(v) for v in stream.joints[name][i]))
+                for name in ("right_hand", "torso", "head")
+            }
+            stamp = 1_000_000_000 + i * 33_333_333
+            header = Header(version=1, source="test", seq=i, stamp=stamp)
+            writer.write(key, SkeletonFrame(header=header, frame=i + 1, joints=joints))
+
+
+def test_train_and_evaluate_from_mcap_recordings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    _write_mcap(
+        folder / "session.mcap",
+        ["grasp", "tap", "touch", "tap", "grasp", "touch"],
+        seed=21,
+        metadata={"gesture_actions": "grasp,tap,touch,tap,grasp,touch"},
+    )
+    _write_mcap(folder / "tap_extra.mcap", ["tap", "tap"], seed=22, metadata={})
+    model_file = tmp_path / "m.json"
+    argv = ["gesture", "train", "--data", str(folder), "--out", str(model_file),
+            "--states", "4", "--mix", "1", "--iter", "3"]  # fmt: skip
+    assert main(argv) == 0
+    assert load_models(model_file).meta["sequences"] == {"grasp": 2, "tap": 4, "touch": 2}
+    capsys.readouterr()
+    argv = ["gesture", "evaluate", str(model_file), str(folder / "session.mcap"), "--json",
+            "--out", str(tmp_path / "plots")]  # fmt: skip
+    assert main(argv) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["n"] == 6
+    assert [p["action"] for p in report["predictions"]] == [
+        "grasp", "tap", "touch", "tap", "grasp", "touch"
+    ]  # fmt: skip
+    unlabelled = tmp_path / "session2.mcap"
+    _write_mcap(unlabelled, ["tap"], seed=23, metadata={})
+    assert main(["gesture", "evaluate", str(model_file), str(unlabelled)]) == 2
+    assert "no gesture labels" in capsys.readouterr().err

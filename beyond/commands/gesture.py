@@ -5,10 +5,14 @@
     beyond gesture evaluate MODELS|cv DATA [--json] [--out DIR]
 
 MODELS is a model file written by `train` or one of the article's MATLAB files. DATA is
-`synthetic` (the seeded generator) or a folder of hand recordings named <action><n>... (the
+`synthetic` (the seeded generator), a folder of hand recordings named <action><n>... (the
 article's human_data/: grasp1_hand, tap1_hand, touch1_hand), cut into repetitions by the
-segmenter. `evaluate cv DATA` runs leave-one-gesture-out cross-validation instead of testing a
-trained model set.
+segmenter, or MCAP recordings (a .mcap file or a folder of them) of skeleton frames on
+beyond/<robot>/sensors/skeleton with joints `right_hand` (and `torso`). An MCAP recording's
+labels come from its "beyond" metadata, `gesture_actions` = "grasp,tap,..." (one per gesture, in
+order) and optionally `gesture_frames` = "start:stop,..." (0-based, over its skeleton frames;
+otherwise the segmenter cuts it), or else from its file name (tap_1.mcap: every gesture a tap).
+`evaluate cv DATA` runs leave-one-gesture-out cross-validation instead of testing a model set.
 """
 
 from __future__ import annotations
@@ -25,7 +29,13 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from cognition.errors import InputError
-from cognition.gestures.datasets import SYNTHETIC, load_gestures
+from cognition.gestures.datasets import (
+    SYNTHETIC,
+    action_from_name,
+    load_gestures,
+    skeleton_gestures,
+)
+from cognition.gestures.evaluation import LabelledGesture
 from cognition.gestures.features import LOG_SCALE, extract_features
 from cognition.gestures.hmm import TrainingConfig, load_models, save_models, train_models
 from cognition.gestures.logs import parse_frames, read_hand_log
@@ -73,7 +83,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     train.add_argument(
         "--data",
         default=SYNTHETIC,
-        help="'synthetic' (default) or a folder of hand recordings (grasp1_hand/ ...)",
+        help="'synthetic' (default), a folder of hand recordings (grasp1_hand/ ...), "
+        "or MCAP recordings (a .mcap file or a folder of them)",
     )
     train.add_argument("--out", required=True, type=Path, help="model file to write (.json)")
     _training_args(train)
@@ -98,7 +109,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     ev = sub.add_parser("evaluate", help="accuracy, confusion and early recognition")
     ev.add_argument("models", help="model file, or 'cv' for leave-one-gesture-out cross-validation")
-    ev.add_argument("data", help="'synthetic' or a folder of hand recordings")
+    ev.add_argument("data", help="'synthetic', a folder of hand recordings, or MCAP recordings")
     ev.add_argument("--json", action="store_true", help="print the report as JSON")
     ev.add_argument(
         "--out",
@@ -115,6 +126,69 @@ def run(args: argparse.Namespace) -> int:
     return handlers[args.gesture_command](args)
 
 
+def _mcap_gestures(path: Path, push_as: str | None) -> list[LabelledGesture]:
+    """Labelled gestures of one MCAP recording (labels: see the module docstring)."""
+    from runtime.recording import inspect_recording, read_recording
+    from schemas.keys import STREAMS
+    from schemas.messages import SkeletonFrame
+
+    suffix = "/" + STREAMS["skeleton"][0]
+    meta = inspect_recording(path).metadata.get("beyond", {})
+    frames = [
+        msg
+        for item in read_recording(path)
+        if item.key.endswith(suffix) and isinstance(msg := item.message(), SkeletonFrame)
+    ]
+    if not frames:
+        raise InputError(f"{path} holds no skeleton frames (keys ending in {suffix})")
+    names = set.intersection(*(set(f.joints) for f in frames))
+    if "right_hand" not in names:
+        raise InputError(f"{path}: the joint 'right_hand' is not in every skeleton frame")
+    joints: dict[str, np.ndarray] = {
+        n: np.array([f.joints[n].position for f in frames], dtype=np.float64)
+        for n in ("right_hand", "torso")
+        if n in names
+    }
+    if meta.get("gesture_actions"):
+        actions = [a.strip() for a in meta["gesture_actions"].split(",")]
+    else:
+        label = action_from_name(path.name, push_as)
+        if label is None:
+            raise InputError(
+                f"{path}: no gesture labels; add metadata gesture_actions or name the file "
+                "<action>....mcap"
+            )
+        actions = [label]
+    bounds = None
+    if meta.get("gesture_frames"):
+        try:
+            bounds = [
+                (int(a), int(b))
+                for a, b in (p.split(":") for p in meta["gesture_frames"].split(","))
+            ]
+        except ValueError:
+            raise InputError(
+                f"{path}: metadata gesture_frames {meta['gesture_frames']!r}; valid: 'a:b,c:d'"
+            ) from None
+    return skeleton_gestures(joints, actions, bounds=bounds, source=path.name)
+
+
+def _gestures(args: argparse.Namespace, spec: str) -> list[LabelledGesture]:
+    """DATA as labelled gestures: synthetic, recording folders, or MCAP recordings."""
+    path = Path(spec)
+    mcaps = [path] if path.suffix.lower() == ".mcap" else []
+    if not mcaps and spec != SYNTHETIC and path.is_dir() and not (path / "data.log").exists():
+        mcaps = sorted(path.glob("*.mcap"))
+    if not mcaps:
+        return load_gestures(spec, n_per_action=args.count, seed=args.seed, push_as=args.push_as)
+    out: list[LabelledGesture] = []
+    for p in mcaps:
+        if not p.is_file():
+            raise InputError(f"{p} does not exist; valid: an MCAP recording")
+        out.extend(_mcap_gestures(p, args.push_as))
+    return out
+
+
 def _config(args: argparse.Namespace, seed: int = 0) -> TrainingConfig:
     return TrainingConfig(n_states=args.states, n_mix=args.mix, n_iter=args.iter, seed=seed)
 
@@ -125,9 +199,7 @@ def _train(args: argparse.Namespace) -> int:
         raise InputError(f"--out {args.out} must end in .json")
     cfg = _config(args)
     with console.status(f"loading gestures from {args.data}"):
-        gestures = load_gestures(
-            args.data, n_per_action=args.count, seed=args.seed, push_as=args.push_as
-        )
+        gestures = _gestures(args, args.data)
     data: dict[str, list[Any]] = {}
     for g in gestures:
         data.setdefault(g.action, []).append(g.features)
@@ -206,9 +278,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     console = Console(stderr=True)
     with console.status(f"loading gestures from {args.data}"):
-        gestures = load_gestures(
-            args.data, n_per_action=args.count, seed=args.seed, push_as=args.push_as
-        )
+        gestures = _gestures(args, args.data)
     with _progress(console) as progress:
         if args.models == "cv":
             task = progress.add_task("cross-validation folds", total=len(gestures))

@@ -7,17 +7,22 @@
   unless `push_as` names the action to count them as (the article used its push model as touch;
   with real touch recordings at hand, mixing a different movement into touch blurs that class).
 - one recording folder (or its data.log) named the same way.
-- an MCAP recording: not read yet (the recording layer lives in `runtime/`).
+- a skeleton stream (joint name -> (T, 3) positions in metres, as in an MCAP recording, which
+  `beyond gesture` reads through `runtime.recording`): `skeleton_gestures` labels its gestures,
+  cut at given frame bounds or by the segmenter.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+
+from numpy.typing import ArrayLike
 
 from cognition.errors import InputError
 from cognition.gestures.evaluation import LabelledGesture
-from cognition.gestures.features import LOG_SCALE, extract_features
+from cognition.gestures.features import LOG_SCALE, extract_features, features_from_joints
 from cognition.gestures.logs import read_hand_log
 from cognition.gestures.segmentation import SegmenterConfig, segment_gestures
 from cognition.gestures.synthetic import SynthesisConfig, synthesize_dataset
@@ -25,6 +30,7 @@ from cognition.variables import ACTIONS
 
 SYNTHETIC = "synthetic"
 _NAME = re.compile(r"^(grasp|tap|touch|push)\d")
+_FILE_NAME = re.compile(r"^(grasp|tap|touch|push)(?![a-z])")
 
 
 def synthetic_gestures(
@@ -38,19 +44,26 @@ def synthetic_gestures(
     ]
 
 
-def recording_label(folder: Path, push_as: str | None) -> str | None:
-    """The action of a recording folder from its name; None when it is not used."""
-    m = _NAME.match(folder.name)
-    if m is None:
+def _label(word: str, push_as: str | None) -> str | None:
+    if word != "push":
+        return word
+    if push_as is None:
         return None
-    label = m.group(1)
-    if label == "push":
-        if push_as is None:
-            return None
-        if push_as not in ACTIONS:
-            raise InputError(f"push_as {push_as!r} is not an action; valid: {', '.join(ACTIONS)}")
-        return push_as
-    return label
+    if push_as not in ACTIONS:
+        raise InputError(f"push_as {push_as!r} is not an action; valid: {', '.join(ACTIONS)}")
+    return push_as
+
+
+def recording_label(folder: Path, push_as: str | None) -> str | None:
+    """The action of a recording folder from its name (<action><n>...); None when not used."""
+    m = _NAME.match(folder.name)
+    return None if m is None else _label(m.group(1), push_as)
+
+
+def action_from_name(name: str, push_as: str | None = None) -> str | None:
+    """The action a recording file's name starts with (tap.mcap, grasp_3.mcap, touch2.mcap)."""
+    m = _FILE_NAME.match(name)
+    return None if m is None else _label(m.group(1), push_as)
 
 
 def recording_gestures(
@@ -74,6 +87,43 @@ def recording_gestures(
     return out
 
 
+def skeleton_gestures(
+    joints: Mapping[str, ArrayLike],
+    actions: Sequence[str],
+    *,
+    bounds: Sequence[tuple[int, int]] | None = None,
+    source: str = "skeleton",
+    segmenter: SegmenterConfig | None = None,
+) -> list[LabelledGesture]:
+    """Labelled gestures of a skeleton stream: one action per gesture, or one for all of them.
+
+    `bounds`: [start, stop) frame pairs (0-based); by default the segmenter finds them.
+    """
+    feats = features_from_joints(joints)
+    if bounds is None:
+        found = [(s.start, s.stop) for s in segment_gestures(feats, segmenter)]
+    else:
+        found = [(int(a), int(b)) for a, b in bounds]
+        for a, b in found:
+            if not 0 <= a < b <= len(feats):
+                raise InputError(f"{source}: gesture frames {a}:{b} outside 0:{len(feats)}")
+    labels = list(actions)
+    if len(labels) == 1:
+        labels = labels * len(found)
+    if len(labels) != len(found):
+        raise InputError(
+            f"{source}: {len(found)} gestures but {len(labels)} action labels; give one label "
+            "per gesture, or their frame bounds"
+        )
+    for label in labels:
+        if label not in ACTIONS:
+            raise InputError(f"{source}: unknown action {label!r}; valid: {', '.join(ACTIONS)}")
+    return [
+        LabelledGesture(action=a, features=feats[b0:b1], source=f"{source} frames {b0 + 1}-{b1}")
+        for a, (b0, b1) in zip(labels, found, strict=True)
+    ]
+
+
 def load_gestures(
     spec: str | Path,
     *,
@@ -89,8 +139,8 @@ def load_gestures(
     path = Path(spec)
     if path.suffix.lower() == ".mcap":
         raise InputError(
-            f"{path}: MCAP input is not supported yet; valid: 'synthetic' or a folder of hand "
-            "recordings (grasp1_hand/ ... with data.log)"
+            f"{path}: MCAP recordings are read by `beyond gesture` (runtime layer); here give "
+            "'synthetic' or a folder of hand recordings (grasp1_hand/ ... with data.log)"
         )
     if not path.exists():
         raise InputError(
