@@ -125,3 +125,31 @@ def test_training_keeps_left_to_right_structure() -> None:
         train_hmm([np.full((5, 3), np.nan)], TrainingConfig(n_states=3))
     with pytest.raises(InputError, match="features"):
         train_hmm([np.zeros((5, 3)), np.zeros((5, 2))], TrainingConfig(n_states=3))
+
+
+def test_malformed_matlab_files_are_input_errors(tmp_path: Path) -> None:
+    rng = np.random.default_rng(3)
+    h = random_hmm(rng, q=6, m=3)
+    good = {
+        "prior": h.startprob[:, None],
+        "trans": h.transmat,
+        "mu": h.means.transpose(2, 0, 1),  # D x Q x M
+        "Sigma": h.covars.transpose(2, 3, 0, 1),  # D x D x Q x M
+        "mixmat": h.weights,
+    }
+    arrays = {f"hmm{k}_{f}": v for k in (1, 3, 4) for f, v in good.items()}
+    scipy.io.savemat(tmp_path / "ok.mat", arrays)
+    loaded = load_matlab_models(tmp_path / "ok.mat")
+    assert np.allclose(loaded["tap"].means, h.means)
+    assert "garbage" not in loaded.extra
+    broken = dict(arrays, hmm3_Sigma=good["Sigma"][:, :, :4])  # 4 states' covariances for 6
+    scipy.io.savemat(tmp_path / "shape.mat", broken)
+    with pytest.raises(InputError, match="hmm3"):
+        load_matlab_models(tmp_path / "shape.mat")
+    missing = {k: v for k, v in arrays.items() if k != "hmm4_trans"}
+    scipy.io.savemat(tmp_path / "missing.mat", missing)
+    with pytest.raises(InputError, match="hmm4_trans"):
+        load_matlab_models(tmp_path / "missing.mat")
+    (tmp_path / "junk.mat").write_bytes(b"not a mat file at all")
+    with pytest.raises(InputError):
+        load_matlab_models(tmp_path / "junk.mat")

@@ -59,7 +59,9 @@ def load_matlab_models(path: str | Path, *, include_garbage: bool = False) -> Ge
     p = Path(path)
     try:
         mat = loadmat(p)
-    except (OSError, ValueError, TypeError) as exc:
+    except Exception as exc:  # scipy raises anything from IndexError to MatReadError on junk
+        if isinstance(exc, InputError):
+            raise
         raise InputError(
             f"{p} is not a readable MATLAB v5 file ({exc.__class__.__name__})"
         ) from None
