@@ -22,7 +22,10 @@ from schemas.codec import (
 from schemas.keys import STREAMS, Keys, split_key, type_for_key, with_robot
 from schemas.messages import (
     ActionPosterior,
+    AffordanceAnswer,
     AffordancePrediction,
+    AffordanceQuery,
+    AnswerRow,
     CameraFrame,
     CompressedCameraFrame,
     Description,
@@ -36,6 +39,7 @@ from schemas.messages import (
     ScoredSentence,
     ServiceHealth,
     SkeletonFrame,
+    StreamEnd,
     Time,
     WordProbabilities,
 )
@@ -44,7 +48,10 @@ __all__ = [
     "REGISTRY",
     "STREAMS",
     "ActionPosterior",
+    "AffordanceAnswer",
     "AffordancePrediction",
+    "AffordanceQuery",
+    "AnswerRow",
     "CameraFrame",
     "CompressedCameraFrame",
     "Description",
@@ -62,6 +69,7 @@ __all__ = [
     "ScoredSentence",
     "ServiceHealth",
     "SkeletonFrame",
+    "StreamEnd",
     "Time",
     "WordProbabilities",
     "decode",

@@ -30,7 +30,9 @@ STREAMS: dict[str, tuple[str, type[Message]]] = {
     "affordance": ("affordance/prediction", m.AffordancePrediction),
     "words": ("language/words", m.WordProbabilities),
     "description": ("language/description", m.Description),
+    "stream_end": ("sensors/end", m.StreamEnd),
 }
+ASK = "affordance/ask"  # queryable of the reasoner: AffordanceQuery in, AffordanceAnswer out
 HEALTH = "health"  # beyond/<robot>/health/<service>: ServiceHealth (published and queryable)
 ALIVE = "alive"  # beyond/<robot>/alive/<service>: liveliness tokens
 
@@ -108,6 +110,14 @@ class Keys:
     @property
     def description(self) -> str:
         return self.stream("description")
+
+    @property
+    def stream_end(self) -> str:
+        return self.stream("stream_end")
+
+    @property
+    def ask(self) -> str:
+        return f"{self.root}/{ASK}"
 
     def health(self, service: str = "*") -> str:
         """Health key of one service, or of all with the default "*"."""

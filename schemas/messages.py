@@ -180,17 +180,22 @@ class ObjectEffect(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     object_id: int
     object_velocity: float
-    hand_velocity: float
-    object_hand_velocity: float
+    hand_velocity: float | None  # None: the hand was not seen
+    object_hand_velocity: float | None
     contact: bool
-    contact_duration: float
+    contact_duration: float | None
     labels: dict[str, str] = msgspec.field(default_factory=dict)
+    # the acted-on object's Color, Shape, Size labels (it may not be the biggest on the table)
+    object_labels: dict[str, str] = msgspec.field(default_factory=dict)
     units: str = "m/s"
 
 
 class ObjectEffects(Message, frozen=True):
+    """The effects measured over one gesture (`segment_id` of the gesture streamer)."""
+
     frame: int
     effects: list[ObjectEffect]
+    segment_id: int = 0
 
 
 class GestureSegment(Message, frozen=True):
@@ -217,6 +222,7 @@ class ActionPosterior(Message, frozen=True):
     posterior: list[float]
     log_likelihood: list[float]
     normalised_log_likelihood: list[float]
+    final: bool = False  # over exactly the gesture's frames, published just before its "end"
 
     def __post_init__(self) -> None:
         n = len(self.actions)
@@ -234,6 +240,7 @@ class AffordancePrediction(Message, frozen=True):
     action_belief: dict[str, float]
     evidence: dict[str, str]
     effects: dict[str, dict[str, float]]
+    final: bool = False  # anticipation while the gesture unfolds, or the belief once complete
 
     def __post_init__(self) -> None:
         _check_distribution("action_belief", self.action_belief)
@@ -247,6 +254,8 @@ class WordProbabilities(Message, frozen=True):
     segment_id: int
     words: dict[str, float]
     evidence: dict[str, str] = msgspec.field(default_factory=dict)
+    action_belief: dict[str, float] = msgspec.field(default_factory=dict)
+    final: bool = True
 
     def __post_init__(self) -> None:
         for word, p in self.words.items():
@@ -272,6 +281,7 @@ class Description(Message, frozen=True):
     segment_id: int
     sentences: list[ScoredSentence]
     evidence: Evidence
+    final: bool = True
 
 
 class ServiceHealth(Message, frozen=True):
@@ -289,6 +299,36 @@ class ServiceHealth(Message, frozen=True):
     outputs: list[str] = msgspec.field(default_factory=list)
 
 
+class StreamEnd(Message, frozen=True):
+    """A sensor source is exhausted (end of a recording or log): how much it published."""
+
+    source: str
+    messages: int
+    dropped: int = 0
+
+
+class AffordanceQuery(Message, frozen=True):
+    """An ad-hoc question to the reasoner: P(query | evidence, soft evidence, gesture evidence).
+    `soft`: variable -> {value: likelihood}; `gesture`: P_HMM(A | G) by action (fused)."""
+
+    query: list[str]
+    evidence: dict[str, str] = msgspec.field(default_factory=dict)
+    soft: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)
+    gesture: dict[str, float] = msgspec.field(default_factory=dict)
+
+
+class AnswerRow(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    assignment: dict[str, str]
+    p: float
+
+
+class AffordanceAnswer(Message, frozen=True):
+    """The reasoner's answer: the joint posterior of the queried variables, row by row."""
+
+    variables: list[str]
+    rows: list[AnswerRow]
+
+
 ALL_MESSAGES: tuple[type[Message], ...] = (
     SkeletonFrame,
     CameraFrame,
@@ -301,4 +341,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     WordProbabilities,
     Description,
     ServiceHealth,
+    StreamEnd,
+    AffordanceQuery,
+    AffordanceAnswer,
 )

@@ -93,6 +93,19 @@ def examples() -> list[s.Message]:
             malformed=3,
             errors=0,
         ),
+        s.StreamEnd(header=H, source="demo.mcap", messages=12, dropped=1),
+        s.AffordanceQuery(
+            header=H,
+            query=["ObjVel"],
+            evidence={"Shape": "circle"},
+            soft={"Size": {"small": 0.5, "big": 0.5}},
+            gesture={"grasp": 0.1, "tap": 0.8, "touch": 0.1},
+        ),
+        s.AffordanceAnswer(
+            header=H,
+            variables=["ObjVel"],
+            rows=[s.AnswerRow(assignment={"ObjVel": "fast"}, p=0.7)],
+        ),
     ]
 
 

@@ -1,0 +1,98 @@
+"""`beyond ask`: ask the running affordance reasoner a question over the bus.
+
+beyond ask --query VAR [VAR ...] [--evidence VAR=VALUE ...] [--soft VAR=value:p,... ...]
+           [--gesture grasp=p,tap=p,touch=p] [--json] [bus options]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+
+from rich.console import Console
+from rich.table import Table
+
+from cognition.errors import InputError
+from runtime.bus import Bus
+from runtime.cliargs import add_bus_arguments, config_from_args
+from schemas import AffordanceAnswer, AffordanceQuery, Header
+
+HELP = "query the running affordance reasoner (exact posterior, with optional gesture evidence)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--query", nargs="+", required=True, metavar="VAR")
+    parser.add_argument("--evidence", nargs="+", action="extend", default=[], metavar="VAR=VALUE")
+    parser.add_argument(
+        "--soft", nargs="+", action="extend", default=[], metavar="VAR=value:p,value:p"
+    )
+    parser.add_argument("--gesture", metavar="ACTION=p,...", help="P_HMM(A | G) to fuse")
+    parser.add_argument("--timeout", type=float, default=3.0)
+    parser.add_argument("--json", action="store_true")
+    add_bus_arguments(parser)
+
+
+def _pairs(text: str, sep: str, what: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for part in text.split(","):
+        name, ok, value = part.partition(sep)
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            ok = ""
+        if not ok:
+            raise InputError(
+                f"{what} expects name{sep}number pairs separated by commas; got {text!r}"
+            )
+    return out
+
+
+def build_query(args: argparse.Namespace) -> AffordanceQuery:
+    evidence: dict[str, str] = {}
+    for item in args.evidence:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise InputError(f"--evidence expects VAR=VALUE; got {item!r}")
+        evidence[name] = value
+    soft = {}
+    for item in args.soft:
+        name, sep, rest = item.partition("=")
+        if not sep:
+            raise InputError(f"--soft expects VAR=value:p,...; got {item!r}")
+        soft[name] = _pairs(rest, ":", "--soft")
+    gesture = _pairs(args.gesture, "=", "--gesture") if args.gesture else {}
+    header = Header(version=AffordanceQuery.VERSION, source="ask", seq=0, stamp=0)
+    return AffordanceQuery(
+        header=header, query=list(args.query), evidence=evidence, soft=soft, gesture=gesture
+    )
+
+
+async def ask(args: argparse.Namespace) -> AffordanceAnswer:
+    query = build_query(args)
+    with Bus.open(config_from_args(args)) as bus:
+        replies = await bus.query(
+            bus.keys.ask, AffordanceAnswer, payload=query, timeout=args.timeout
+        )
+    if not replies:
+        raise InputError(
+            f"no affordance reasoner answered on {bus.keys.ask} within {args.timeout} s; "
+            "start one with `beyond service reasoner` or `beyond up`"
+        )
+    return replies[0].message
+
+
+def run(args: argparse.Namespace) -> int:
+    answer = asyncio.run(ask(args))
+    if args.json:
+        rows = [{"assignment": r.assignment, "p": r.p} for r in answer.rows]
+        print(json.dumps({"variables": answer.variables, "rows": rows}))
+        return 0
+    table = Table(title=f"P({', '.join(answer.variables)} | evidence)")
+    for v in answer.variables:
+        table.add_column(v)
+    table.add_column("p", justify="right")
+    for row in answer.rows:
+        table.add_row(*(row.assignment[v] for v in answer.variables), f"{row.p:.6f}")
+    Console().print(table)
+    return 0

@@ -1,0 +1,30 @@
+"""Every service by name, in pipeline order (what `beyond service` and `beyond up` start)."""
+
+from __future__ import annotations
+
+import importlib
+
+from cognition.errors import unknown
+from runtime.service import Service
+
+SERVICES: dict[str, str] = {
+    "ingest": "services.ingest:SensorIngest",
+    "gestures": "services.gestures:GestureStreamer",
+    "objects": "services.objects:ObjectSegmenter",
+    "reasoner": "services.reasoner:AffordanceReasoner",
+    "describer": "services.describer:DescriptionGenerator",
+    "speech": "services.speech:SpeechSynthesizer",
+}
+PROFILES: dict[str, tuple[str, ...]] = {
+    "all": tuple(SERVICES),
+    "robot": ("ingest", "gestures", "objects"),
+    "workstation": ("reasoner", "describer", "speech"),
+}
+
+
+def service_class(name: str) -> type[Service]:
+    if name not in SERVICES:
+        raise unknown("service", name, list(SERVICES))
+    module, _, cls = SERVICES[name].partition(":")
+    found: type[Service] = getattr(importlib.import_module(module), cls)
+    return found

@@ -1,0 +1,70 @@
+"""Speech: speaks the best sentence of every final description with a real synthesizer.
+
+The synthesizer is espeak-ng through its command line: each sentence is written to a WAV file in
+`out_dir` (named by robot time stamp and gesture) and listed in `speech.log` next to it; with
+`play` on it is also spoken aloud. Without espeak-ng the service says so once and prints the
+sentences instead. To drop in another synthesizer, subclass and override `synthesize` (see the
+README's recipe): everything else — subscription, health, malformed input — is inherited.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import subprocess
+from pathlib import Path
+from typing import Any
+
+from runtime.log import event
+from runtime.service import Service
+from schemas import Description
+
+
+class SpeechSynthesizer(Service):
+    name = "speech"
+
+    def __init__(
+        self,
+        *,
+        out_dir: str = "out/speech",
+        voice: str = "en",
+        words_per_minute: int = 150,
+        play: bool = False,
+        **base: Any,
+    ) -> None:
+        super().__init__(**base)
+        self.out_dir = Path(out_dir)
+        self.voice = voice
+        self.wpm = words_per_minute
+        self.play = play
+        self.espeak = shutil.which("espeak-ng")
+        self.spoken = 0
+
+    async def setup(self) -> None:
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        if self.espeak is None:
+            event(self.log, logging.WARNING, "espeak-ng not found: printing descriptions instead")
+        self.subscribe(self.bus.keys.description, Description, self.on_description)
+
+    def on_description(self, msg: Description) -> None:
+        if not msg.final or not msg.sentences:
+            return
+        text = msg.sentences[0].text
+        wav = self.out_dir / f"{msg.header.stamp}-gesture{msg.segment_id}.wav"
+        spoken = self.synthesize(text, wav)
+        with (self.out_dir / "speech.log").open("a", encoding="utf-8") as log:
+            log.write(
+                f"{msg.header.stamp}\t{msg.segment_id}\t{wav.name if spoken else '-'}\t{text}\n"
+            )
+        self.spoken += 1
+        print(text, flush=True)
+
+    def synthesize(self, text: str, wav: Path) -> bool:
+        """Say `text` into `wav`; False when no synthesizer is installed."""
+        if self.espeak is None:
+            return False
+        cmd = [self.espeak, "-v", self.voice, "-s", str(self.wpm), "-w", str(wav), text]
+        subprocess.run(cmd, check=True, capture_output=True, timeout=30)
+        if self.play:
+            subprocess.run([self.espeak, "-v", self.voice, "-s", str(self.wpm), text], timeout=30)
+        return True
