@@ -1,0 +1,104 @@
+"""The whole pipeline as separate processes (`beyond up`), and a service killed and restarted."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from busutil_net import env_for, private_config
+
+import schemas as s
+from cognition.gestures import synthesize_continuous
+from cognition.grammar import DEFAULT_GRAMMAR
+from runtime.bus import Bus
+from runtime.config import BusConfig
+from runtime.recording import RecordingWriter
+from services.launcher import service_env, start_service, stop_services
+
+VERBS = {
+    "tap": r"\b(taps|tapped|tapping|pushes|pushed|pushing|pokes|poked|poking)\b",
+    "grasp": r"\b(grasps|grasped|grasping|picks|picked|picking)\b",
+    "touch": r"\b(touches|touched|touching|pokes|poked|poking)\b",
+}
+
+
+def skeleton_recording(path: Path, actions: list[str], seed: int) -> None:
+    stream = synthesize_continuous(actions, seed=seed)
+    keys = s.Keys("robot")
+    t0 = 1_546_300_800_000_000_000
+    with RecordingWriter(path) as writer:
+        for i in range(stream.n_frames):
+            joints = {
+                n: s.Joint(position=(float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
+                for n, p in stream.joints.items()
+            }
+            header = s.Header(version=1, source="sim", seq=i, stamp=t0 + i * 33_333_333)
+            writer.write(keys.skeleton, s.SkeletonFrame(header=header, frame=i + 1, joints=joints))
+
+
+def run_up(
+    recording: Path, tmp: Path, config: BusConfig, rate: str
+) -> subprocess.CompletedProcess[str]:
+    env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
+    cmd = [sys.executable, "-m", "beyond", "up", "--recording", str(recording), "--rate", rate,
+           "--no-live", "--timeout", "90"]  # fmt: skip
+    return subprocess.run(cmd, env=env, cwd=tmp, capture_output=True, text=True, timeout=150)
+
+
+@pytest.mark.slow
+def test_up_describes_every_gesture_with_the_right_verb_and_twice_the_same(tmp_path: Path) -> None:
+    recording = tmp_path / "tap-grasp.mcap"
+    skeleton_recording(recording, ["tap", "grasp"], seed=3)
+    config = private_config()
+    first = run_up(recording, tmp_path, config, "2")
+    assert first.returncode == 0, first.stdout + first.stderr[-3000:]
+    described = re.findall(r'^gesture (\d+): "(.*)"$', first.stdout, re.M)
+    assert [g for g, _ in described] == ["1", "2"], first.stdout
+    for (_, sentence), action in zip(described, ["tap", "grasp"], strict=True):
+        assert re.search(VERBS[action], sentence), (action, sentence)
+    assert re.search(r"gesture 1: anticipates ObjVel=\w+ .* before the gesture ends", first.stdout)
+    # paced replay: the same lines in the same order; as fast as possible: the same results
+    second = run_up(recording, tmp_path, config, "2")
+    assert second.returncode == 0
+    assert second.stdout == first.stdout
+    fastest = run_up(recording, tmp_path, config, "0")
+    assert fastest.returncode == 0
+    assert re.findall(r'^gesture (\d+): "(.*)"$', fastest.stdout, re.M) == described
+    spoken = (tmp_path / "out" / "speech" / "speech.log").read_text().splitlines()
+    assert [line.split("\t")[-1] for line in spoken] == [s for _, s in described] * 3
+
+
+async def test_a_killed_service_restarts_and_is_picked_up() -> None:
+    config = private_config()
+    env = service_env(config, {"BEYOND_LOG_FORMAT": "text"})
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parent.parent)
+    words = {w: 0.5 for w in DEFAULT_GRAMMAR.vocabulary}
+    words.update({"he": 0.99, "taps": 0.99, "the": 0.99, "box": 0.99, "and": 0.99, "slides": 0.99})
+    with Bus.open(config) as bus:
+        out = bus.subscribe(bus.keys.description, s.Description)
+        pub = bus.publisher(bus.keys.words, s.WordProbabilities)
+        processes = [await start_service("describer", env)]
+        try:
+            for round_ in range(2):
+                await bus.wait_alive(bus.keys.alive("describer"), timeout=30)
+                await pub.wait_matching(timeout=30)
+                header = s.Header(version=1, source="test", seq=round_, stamp=round_)
+                pub.put(s.WordProbabilities(header=header, segment_id=round_, words=words))
+                got = (await out.recv(timeout=20)).message
+                assert got.segment_id == round_
+                assert got.sentences[0].text == "he taps the box and the box slides"
+                if round_ == 0:  # kill it hard, and start a new one: the bus picks it up
+                    processes[0].process.send_signal(signal.SIGKILL)
+                    await processes[0].process.wait()
+                    await bus.wait_gone(bus.keys.alive("describer"), timeout=30)
+                    processes.append(await start_service("describer", env))
+        finally:
+            await stop_services(processes)
+    assert processes[0].process.returncode == -signal.SIGKILL
+    assert processes[1].process.returncode == 0
+    await asyncio.sleep(0)

@@ -1,0 +1,133 @@
+"""The pipeline's services: garbage on every key they subscribe to is counted and skipped, and
+each service still does its job afterwards."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+
+import msgspec
+import pytest
+from busutil_net import private_config
+
+import schemas as s
+from cognition.gestures import synthesize_continuous
+from runtime.bus import Bus
+from services.registry import SERVICES, service_class
+
+GARBAGE = [b"", b"\x00\x01\x02", msgspec.msgpack.encode({"type": "Nope", "header": 3})]
+
+
+@pytest.fixture
+async def bus() -> AsyncIterator[Bus]:
+    b = Bus.open(private_config())
+    yield b
+    b.close()
+
+
+def _header(seq: int, stamp: int) -> s.Header:
+    return s.Header(version=1, source="test", seq=seq, stamp=stamp, correlation=f"test/{seq}")
+
+
+async def _start(name: str, bus: Bus, **options: object) -> object:
+    service = service_class(name)(bus=bus, health_period=0.05, **options)
+    task = asyncio.create_task(service.run(install_signals=False))
+    await asyncio.wait_for(service.started.wait(), 20)
+    service._test_task = task  # type: ignore[attr-defined]
+    return service
+
+
+async def _stop(service: object) -> None:
+    service.stop()  # type: ignore[attr-defined]
+    await asyncio.wait_for(service._test_task, 10)  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("name", [n for n in SERVICES if n != "ingest"])
+async def test_garbage_on_every_input_is_counted_and_skipped(name: str, bus: Bus) -> None:
+    service = await _start(name, bus)
+    inputs = service.health().inputs  # type: ignore[attr-defined]
+    assert inputs, f"{name} subscribes to nothing"
+    for key in inputs:
+        pub = bus.publisher(key, s.SkeletonFrame)
+        await pub.wait_matching(timeout=10)
+        for payload in GARBAGE:
+            pub.put_bytes(payload)
+    expected = len(inputs) * len(GARBAGE)
+    for _ in range(200):
+        if service.health().malformed >= expected:  # type: ignore[attr-defined]
+            break
+        await asyncio.sleep(0.02)
+    health = service.health()  # type: ignore[attr-defined]
+    assert health.malformed == expected
+    assert not service._test_task.done()  # type: ignore[attr-defined]
+    await _stop(service)
+
+
+async def test_describer_still_describes_after_garbage(bus: Bus) -> None:
+    service = await _start("describer", bus)
+    out = bus.subscribe(bus.keys.description, s.Description)
+    pub = bus.publisher(bus.keys.words, s.WordProbabilities)
+    await pub.wait_matching(timeout=10)
+    pub.put_bytes(b"garbage")
+    from cognition.grammar import DEFAULT_GRAMMAR
+
+    words = {w: 0.5 for w in DEFAULT_GRAMMAR.vocabulary}
+    words.update({"taps": 0.99, "he": 0.99, "the": 0.99, "ball": 0.99, "rolls": 0.99, "and": 0.99})
+    pub.put(s.WordProbabilities(header=_header(1, 10), segment_id=7, words=words))
+    got = (await out.recv(timeout=10)).message
+    assert got.segment_id == 7 and got.final
+    assert got.sentences[0].text == "he taps the ball and the ball rolls"
+    assert service.health().malformed == 1  # type: ignore[attr-defined]
+    await _stop(service)
+
+
+async def test_gesture_streamer_segments_and_recognises_a_synthetic_stream(bus: Bus) -> None:
+    service = await _start("gestures", bus)
+    posteriors = bus.subscribe(bus.keys.gesture_posterior, s.ActionPosterior)
+    segments = bus.subscribe(bus.keys.gesture_segment, s.GestureSegment)
+    pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
+    await pub.wait_matching(timeout=10)
+    stream = synthesize_continuous(["tap", "grasp"], seed=5)
+    for i in range(stream.n_frames):
+        joints = {
+            n: s.Joint(position=(float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
+            for n, p in stream.joints.items()
+        }
+        pub.put(
+            s.SkeletonFrame(header=_header(i, 10**18 + i * 33_333_333), frame=i + 1, joints=joints)
+        )
+    events = [(await segments.recv(timeout=20)).message for _ in range(4)]
+    assert [(e.event, e.segment_id) for e in events] == [
+        ("start", 1),
+        ("end", 1),
+        ("start", 2),
+        ("end", 2),
+    ]
+    for e, truth in zip(events[::2], stream.gestures, strict=True):  # start near the true start
+        assert abs(e.frame - (truth.start + 1)) <= 10
+    finals = []
+    while len(finals) < 2:
+        p = (await posteriors.recv(timeout=20)).message
+        if p.final:
+            finals.append(p.actions[max(range(3), key=p.posterior.__getitem__)])
+    assert finals == ["tap", "grasp"]
+    await _stop(service)
+
+
+async def test_reasoner_answers_ad_hoc_queries_and_rejects_bad_ones(bus: Bus) -> None:
+    service = await _start("reasoner", bus)
+    q = s.AffordanceQuery(
+        header=_header(0, 0), query=["ObjVel"], evidence={"Shape": "circle"},
+        gesture={"grasp": 0.0, "tap": 1.0, "touch": 0.0},
+    )  # fmt: skip
+    replies = await bus.query(bus.keys.ask, s.AffordanceAnswer, payload=q, timeout=5)
+    dist = {r.assignment["ObjVel"]: r.p for r in replies[0].message.rows}
+    model = service.model  # type: ignore[attr-defined]
+    direct = model.query("ObjVel", {"Shape": "circle", "Action": "tap"}).marginal("ObjVel")
+    assert dist == pytest.approx(direct, abs=1e-12)
+    bad = s.AffordanceQuery(header=_header(1, 0), query=["Nope"])
+    from cognition.errors import InputError
+
+    with pytest.raises(InputError, match="valid: Action"):
+        await bus.query(bus.keys.ask, s.AffordanceAnswer, payload=bad, timeout=5)
+    await _stop(service)
