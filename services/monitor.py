@@ -30,17 +30,37 @@ from schemas import (
 ANTICIPATION_THRESHOLD = 0.6  # an effect value this probable counts as anticipated
 
 
+# order of event kinds within one frame of a gesture's block
+STARTED, LOOKS, ANTICIPATES, ENDED, RECOGNISED, DESCRIBED = range(6)
+
+
 @dataclass
 class GestureState:
     started: int = 0
     best: str = ""
-    ended: bool = False
+    end_frame: int | None = None
     anticipated: dict[str, str] = field(default_factory=dict)
     recognised: str = ""
     description: str = ""
+    events: list[tuple[int, int, str]] = field(default_factory=list)  # (frame, kind, text)
+    printed: bool = False
+
+    @property
+    def ended(self) -> bool:
+        return self.end_frame is not None
+
+    def block(self) -> list[str]:
+        """The gesture's lines in frame order; anticipations count only before the end."""
+        end = self.end_frame if self.end_frame is not None else 1 << 62
+        kept = [e for e in self.events if e[1] != ANTICIPATES or e[0] <= end]
+        return [text for _, _, text in sorted(kept, key=lambda e: (e[0], e[1]))]
 
 
 class PipelineMonitor:
+    """Collects each gesture's events and prints them as one block, in frame order, once the
+    gesture has its final description: services run concurrently and their messages interleave
+    differently from run to run, but the printed lines do not."""
+
     def __init__(self, bus: Bus, emit: Callable[[str], None]) -> None:
         self.bus = bus
         self.emit = emit
@@ -83,16 +103,29 @@ class PipelineMonitor:
     def _gesture(self, segment_id: int) -> GestureState:
         return self.gestures.setdefault(segment_id, GestureState())
 
+    def _flush(self) -> None:
+        """Print every complete gesture whose predecessors are printed."""
+        for segment_id in sorted(self.gestures):
+            g = self.gestures[segment_id]
+            if g.printed:
+                continue
+            if not (g.ended and g.description):
+                return
+            for line in g.block():
+                self.emit(f"gesture {segment_id}: {line}")
+            g.printed = True
+
     # -- handlers ------------------------------------------------------------------------
 
     def on_segment(self, msg: GestureSegment) -> None:
         g = self._gesture(msg.segment_id)
         if msg.event == "start":
             g.started = msg.frame
-            self.emit(f"gesture {msg.segment_id}: started at frame {msg.frame}")
+            g.events.append((msg.frame, STARTED, f"started at frame {msg.frame}"))
         else:
-            g.ended = True
-            self.emit(f"gesture {msg.segment_id}: ended at frame {msg.frame}")
+            g.end_frame = msg.frame
+            g.events.append((msg.frame, ENDED, f"ended at frame {msg.frame}"))
+            self._flush()
 
     def on_posterior(self, msg: ActionPosterior) -> None:
         self.posterior = msg
@@ -102,10 +135,8 @@ class PipelineMonitor:
         i = max(range(len(msg.posterior)), key=msg.posterior.__getitem__)
         if msg.actions[i] != g.best:
             g.best = msg.actions[i]
-            self.emit(
-                f"gesture {msg.segment_id}: frame {msg.frame}, looks like {g.best} "
-                f"(P_HMM {msg.posterior[i]:.2f})"
-            )
+            text = f"frame {msg.frame}, looks like {g.best} (P_HMM {msg.posterior[i]:.2f})"
+            g.events.append((msg.frame, LOOKS, text))
 
     def on_prediction(self, msg: AffordancePrediction) -> None:
         self.prediction = msg
@@ -114,12 +145,12 @@ class PipelineMonitor:
             action = max(msg.action_belief, key=msg.action_belief.__getitem__)
             g.recognised = action
             evidence = ", ".join(f"{k}={v}" for k, v in msg.evidence.items())
-            self.emit(
-                f"gesture {msg.segment_id}: recognised {action} "
-                f"(P {msg.action_belief[action]:.2f}) given {evidence or 'nothing'}"
+            text = (
+                f"recognised {action} (P {msg.action_belief[action]:.2f}) "
+                f"given {evidence or 'nothing'}"
             )
-            return
-        if g.ended:
+            g.events.append((1 << 62, RECOGNISED, text))
+            self._flush()
             return
         for var in ("ObjVel",):
             dist = msg.effects.get(var)
@@ -128,10 +159,11 @@ class PipelineMonitor:
             value = max(dist, key=dist.__getitem__)
             if dist[value] >= ANTICIPATION_THRESHOLD and g.anticipated.get(var) != value:
                 g.anticipated[var] = value
-                self.emit(
-                    f"gesture {msg.segment_id}: anticipates {var}={value} (P {dist[value]:.2f}) "
-                    f"at frame {msg.frame}, before the gesture ends"
+                text = (
+                    f"anticipates {var}={value} (P {dist[value]:.2f}) at frame {msg.frame}, "
+                    "before the gesture ends"
                 )
+                g.events.append((msg.frame, ANTICIPATES, text))
 
     def on_description(self, msg: Description) -> None:
         self.description = msg
@@ -139,11 +171,11 @@ class PipelineMonitor:
             return
         g = self._gesture(msg.segment_id)
         g.description = msg.sentences[0].text
-        self.emit(f'gesture {msg.segment_id}: "{g.description}"')
+        g.events.append((1 << 62, DESCRIBED, f'"{g.description}"'))
+        self._flush()
 
     def on_end(self, msg: StreamEnd) -> None:
         self.stream_end = msg
-        self.emit(f"source finished after {msg.messages} messages ({msg.dropped} dropped)")
 
     def on_health(self, msg: ServiceHealth) -> None:
         self.health[msg.service] = msg
@@ -155,6 +187,16 @@ class PipelineMonitor:
         description, and nothing has moved for `quiet_s` (the services have caught up)."""
         if self.stream_end is None:
             return False
-        if not all(g.ended and g.description for g in self.gestures.values()):
+        if not all(g.printed for g in self.gestures.values()):
             return False
         return time.monotonic() - self.last_message >= quiet_s
+
+    def summary(self) -> str:
+        end = self.stream_end
+        source = (
+            f"source finished after {end.messages} messages ({end.dropped} dropped); "
+            if end
+            else ""
+        )
+        described = sum(1 for g in self.gestures.values() if g.description)
+        return f"{source}{described} of {len(self.gestures)} gesture(s) described"

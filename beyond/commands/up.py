@@ -140,8 +140,9 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             token()
             monitor.stop()
             codes = await stop_services(processes)
-    described = sum(1 for g in monitor.gestures.values() if g.description)
-    emit(f"stopped: {described} gesture(s) described; exit codes {codes}")
+    emit(monitor.summary())
+    err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
+    print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)
     failed = {n: c for n, c in codes.items() if c not in (0, -signal.SIGTERM)}
     if failed:
         emit(f"services that did not stop cleanly: {failed}")
