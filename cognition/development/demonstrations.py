@@ -19,6 +19,11 @@ the generator makes every source imperfect in its own way, so that comparing the
   and object, seen from further away) before binning it into labels, so some perceived labels
   differ from what happened; each effect is missed altogether (occlusion by the person's hand or
   arm) with probability `p_effect_missed`.
+  With real robot data (salvi2012) the simulator does not apply: its effect values are cluster
+  labels whose meaning differs from the simulator's (there, a grasp has HandVel "fast"). Then
+  `RecordedEffects` draws what happens from the robot's own experiments with the same action
+  and object (same shape and size when there are any, else same shape, else same action), and the
+  robot misperceives each effect as another value with probability `p_misperceived` (0.1).
 - words: with probability `p_words` a narrator describes the demonstration with the narrator of
   the robot's own training data (`cognition.bn.synthetic.Narrator`: same grammar, same verb
   habits, occasional wrong verbs and dropped words); otherwise nobody speaks. The narrator sees
@@ -38,10 +43,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from cognition.bn.bag import Dataset
 from cognition.bn.synthetic import Narrator
 from cognition.errors import InputError, unknown
 from cognition.gestures.evaluation import LabelledGesture
@@ -69,6 +76,7 @@ class ObservationConfig:
     action_noise: float = 0.3
     perception_noise: float = 0.45
     p_effect_missed: float = 0.25
+    p_misperceived: float = 0.1  # RecordedEffects only
     p_words: float = 0.5
     gestures: SynthesisConfig = HUMAN_GESTURES
 
@@ -77,7 +85,7 @@ class ObservationConfig:
             sigma = getattr(self, name)
             if not (math.isfinite(sigma) and sigma >= 0):
                 raise InputError(f"{name} {sigma}; valid: a finite number >= 0")
-        for name in ("p_effect_missed", "p_words"):
+        for name in ("p_effect_missed", "p_misperceived", "p_words"):
             p = getattr(self, name)
             if not 0.0 <= p <= 1.0:
                 raise InputError(f"{name} {p}; valid: a probability in [0, 1]")
@@ -89,6 +97,7 @@ class ObservationConfig:
             "perception_noise": self.perception_noise,
             "robot_effect_noise": ROBOT_EFFECT_NOISE,
             "p_effect_missed": self.p_effect_missed,
+            "p_misperceived": self.p_misperceived,
             "p_words": self.p_words,
             "gestures": {k: getattr(g, k) for k in g.__dataclass_fields__},
         }
@@ -121,24 +130,105 @@ def _pick(rng: np.random.Generator, values: Sequence[str]) -> str:
     return values[int(rng.integers(len(values)))]
 
 
+class EffectModel(Protocol):
+    """What happens when a person does `action` on `objects`, and what the robot perceives."""
+
+    @property
+    def name(self) -> str: ...
+
+    def draw(
+        self, action: str, objects: Mapping[str, str], rng: np.random.Generator
+    ) -> tuple[dict[str, str], dict[str, str]]:
+        """(what happened, what the robot perceived), both as effect labels."""
+        ...
+
+
+@dataclass(frozen=True)
+class SimulatedEffects:
+    """The simulated world (`cognition.world`) with the person's and the perception's noise."""
+
+    action_noise: float
+    perception_noise: float
+    name: str = "simulated (cognition.world)"
+
+    def draw(
+        self, action: str, objects: Mapping[str, str], rng: np.random.Generator
+    ) -> tuple[dict[str, str], dict[str, str]]:
+        happened = simulate_effects(
+            action, objects["Shape"], objects["Size"], rng, noise=self.action_noise
+        )
+        error = np.exp(rng.normal(0.0, self.perception_noise, 4))
+        measured = Effects(
+            object_speed=happened.object_speed * float(error[0]),
+            hand_speed=happened.hand_speed * float(error[1]),
+            relative_speed=happened.relative_speed * float(error[2]),
+            contact_s=happened.contact_s * float(error[3]),
+        )
+        return happened.labels(), measured.labels()
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedEffects:
+    """Effects of the robot's own experiments (a bag table), misperceived now and then."""
+
+    dataset: Dataset
+    p_misperceived: float
+    name: str = "recorded (the robot's own experiments)"
+
+    def __post_init__(self) -> None:
+        names = self.dataset.definition.names
+        missing = [v for v in ("Action", *OBJECT_FEATURES, *EFFECTS) if v not in names]
+        if missing:
+            raise InputError(
+                f"robot data lacks {', '.join(missing)}; effects are drawn from its experiments"
+            )
+
+    def _column(self, name: str) -> NDArray[np.int64]:
+        return np.asarray(self.dataset.data[:, self.dataset.definition.index(name)])
+
+    def draw(
+        self, action: str, objects: Mapping[str, str], rng: np.random.Generator
+    ) -> tuple[dict[str, str], dict[str, str]]:
+        d = self.dataset.definition
+        rows = self._column("Action") == d["Action"].index(action)
+        if not rows.any():
+            raise InputError(f"the robot never did {action} in its data; cannot simulate it")
+        for relax in (("Shape", "Size"), ("Shape",)):
+            match = rows.copy()
+            for name in relax:
+                match &= self._column(name) == d[name].index(objects[name])
+            if match.any():
+                rows = match
+                break
+        row = self.dataset.data[int(rng.choice(np.flatnonzero(rows)))]
+        truth = {e: d[e].values[int(row[d.index(e)])] for e in EFFECTS}
+        perceived = {}
+        for e in EFFECTS:
+            values = d[e].values
+            value = truth[e]
+            if rng.random() < self.p_misperceived:
+                others = [v for v in values if v != value]
+                value = others[int(rng.integers(len(others)))]
+            perceived[e] = value
+        return truth, perceived
+
+
+def effect_model(config: ObservationConfig, robot_data: Dataset | None = None) -> EffectModel:
+    """The simulator for synthetic robot data (None); the robot's own experiments otherwise."""
+    if robot_data is None:
+        return SimulatedEffects(config.action_noise, config.perception_noise)
+    return RecordedEffects(robot_data, config.p_misperceived)
+
+
 def _scene(
     action: str,
     rng: np.random.Generator,
     config: ObservationConfig,
     narrator: Narrator,
+    effects_model: EffectModel,
 ) -> tuple[dict[str, str], dict[str, str], dict[str, str], tuple[str, ...] | None]:
     objects = {name: _pick(rng, AFFORDANCE_VARIABLES[name]) for name in OBJECT_FEATURES}
-    happened = simulate_effects(
-        action, objects["Shape"], objects["Size"], rng, noise=config.action_noise
-    )
-    error = np.exp(rng.normal(0.0, config.perception_noise, 4))
-    measured = Effects(
-        object_speed=happened.object_speed * float(error[0]),
-        hand_speed=happened.hand_speed * float(error[1]),
-        relative_speed=happened.relative_speed * float(error[2]),
-        contact_s=happened.contact_s * float(error[3]),
-    ).labels()
-    truth = happened.labels()
+    truth, measured = effects_model.draw(action, objects, rng)
     seen = rng.random(len(EFFECTS)) >= config.p_effect_missed
     effects = {e: measured[e] for e, s in zip(EFFECTS, seen, strict=True) if s}
     words: tuple[str, ...] | None = None
@@ -157,11 +247,16 @@ def synthesize_demonstrations(
     seed: int,
     config: ObservationConfig | None = None,
     actions: Sequence[str] = ACTIONS,
+    effects: EffectModel | None = None,
 ) -> list[Demonstration]:
-    """n_per_action demonstrations of each action, actions interleaved (grasp, tap, touch, ...)."""
+    """n_per_action demonstrations of each action, actions interleaved (grasp, tap, touch, ...).
+
+    `effects` defaults to the simulated world with the config's noise.
+    """
     if n_per_action < 1:
         raise InputError(f"demonstrations per action {n_per_action}; valid: at least 1")
     cfg = config or ObservationConfig()
+    world = effects or effect_model(cfg)
     narrator = Narrator()
     for a in actions:
         if a not in ACTIONS:
@@ -171,13 +266,13 @@ def synthesize_demonstrations(
         for a in actions:
             rng = _rng(seed, a, i)
             gesture_seed = int(rng.integers(2**31 - 1))
-            objects, effects, truth, words = _scene(a, rng, cfg, narrator)
+            objects, seen, truth, words = _scene(a, rng, cfg, narrator, world)
             features = synthesize_gesture(a, gesture_seed, cfg.gestures).gesture_features()
             out.append(
                 Demonstration(
                     action=a,
                     objects=objects,
-                    effects=effects,
+                    effects=seen,
                     true_effects=truth,
                     words=words,
                     features=features,
@@ -188,7 +283,10 @@ def synthesize_demonstrations(
 
 
 def demonstrations_from_gestures(
-    gestures: Sequence[LabelledGesture], seed: int, config: ObservationConfig | None = None
+    gestures: Sequence[LabelledGesture],
+    seed: int,
+    config: ObservationConfig | None = None,
+    effects: EffectModel | None = None,
 ) -> list[Demonstration]:
     """Recorded gestures (e.g. the article's human_data) with a simulated scene for each.
 
@@ -198,6 +296,7 @@ def demonstrations_from_gestures(
     if not gestures:
         raise InputError("no recorded gestures to turn into demonstrations")
     cfg = config or ObservationConfig()
+    world = effects or effect_model(cfg)
     narrator = Narrator()
     out = []
     counts: dict[str, int] = {}
@@ -206,12 +305,13 @@ def demonstrations_from_gestures(
             raise unknown("action of a recorded gesture", g.action, ACTIONS)
         i = counts.get(g.action, 0)
         counts[g.action] = i + 1
-        objects, effects, truth, words = _scene(g.action, _rng(seed, g.action, i), cfg, narrator)
+        rng = _rng(seed, g.action, i)
+        objects, seen, truth, words = _scene(g.action, rng, cfg, narrator, world)
         out.append(
             Demonstration(
                 action=g.action,
                 objects=objects,
-                effects=effects,
+                effects=seen,
                 true_effects=truth,
                 words=words,
                 features=np.asarray(g.features, dtype=np.float64),

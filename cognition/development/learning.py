@@ -54,8 +54,10 @@ from cognition.bn.bag import Dataset
 from cognition.bn.model import BayesNet, learn_network
 from cognition.development.demonstrations import (
     Demonstration,
+    EffectModel,
     ObservationConfig,
     demonstrations_from_gestures,
+    effect_model,
     split_demonstrations,
     synthesize_demonstrations,
 )
@@ -425,6 +427,7 @@ class LearningResults:
     ablation: tuple[Condition, ...]
     seconds: float
     observed_noise: dict[str, float]
+    effects: str = ""
 
     def acceptance(self) -> dict[str, Any]:
         acc = {s: self.main.accuracy(s) for s in SOURCES}
@@ -450,6 +453,7 @@ class LearningResults:
             "actions": list(self.actions),
             "demonstrations_watched": {str(k): v for k, v in self.n_watched.items()},
             "held_out": self.n_test,
+            "effects": self.effects,
             "observed_noise": self.observed_noise,
             "main": self.main.to_dict(),
             "acceptance": self.acceptance(),
@@ -506,7 +510,8 @@ def run_learning(
     model = self_phase(dataset)
     actions = model.values[ACTION]
 
-    watched, test = _human_demonstrations(cfg, human_data, tick)
+    world = effect_model(cfg.observation, None if str(robot_data) == SYNTHETIC else dataset)
+    watched, test = _human_demonstrations(cfg, human_data, world, tick)
     truth_test = [d.action for d in test]
     per_action = {a: sum(d.action == a for d in watched) for a in actions}
     available = min(per_action.values())
@@ -571,25 +576,31 @@ def run_learning(
         ablation=ablation,
         seconds=time.perf_counter() - start,
         observed_noise=noise,
+        effects=world.name,
     )
 
 
 def _human_demonstrations(
-    cfg: LearningConfig, human_data: str | Path, tick: Callable[[str, int], None]
+    cfg: LearningConfig,
+    human_data: str | Path,
+    world: EffectModel,
+    tick: Callable[[str, int], None],
 ) -> tuple[list[Demonstration], list[Demonstration]]:
     if str(human_data) == SYNTHETIC:
         n_watch = max(cfg.all_sizes)
         tick(f"synthesising {3 * n_watch} watched demonstrations", 0)
-        watched = synthesize_demonstrations(n_watch, cfg.seed, cfg.observation)
+        watched = synthesize_demonstrations(n_watch, cfg.seed, cfg.observation, effects=world)
         tick("watched demonstrations made", len(watched))
-        test = synthesize_demonstrations(cfg.test_per_action, cfg.seed + 1, cfg.observation)
+        test = synthesize_demonstrations(
+            cfg.test_per_action, cfg.seed + 1, cfg.observation, effects=world
+        )
         tick("held-out demonstrations made", len(test))
         return watched, test
     from cognition.gestures.datasets import load_gestures
 
     tick(f"reading recorded gestures from {human_data}", 0)
     gestures = load_gestures(Path(human_data))
-    demos = demonstrations_from_gestures(gestures, cfg.seed, cfg.observation)
+    demos = demonstrations_from_gestures(gestures, cfg.seed, cfg.observation, world)
     watched, test = split_demonstrations(demos, cfg.test_fraction, cfg.seed)
     tick("recorded demonstrations read", 3 * (max(cfg.all_sizes) + cfg.test_per_action))
     return watched, test
