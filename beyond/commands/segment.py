@@ -151,6 +151,7 @@ def _print_table(report: dict[str, Any]) -> None:
 
 def camera_frames(path: Path) -> Iterator[tuple[int, np.ndarray]]:
     """(stamp ns, RGB frame) of every camera message (raw or compressed) in a recording."""
+    from runtime.images import image_from_message
     from runtime.recording import read_recording
     from schemas.messages import CameraFrame, CompressedCameraFrame
 
@@ -158,48 +159,8 @@ def camera_frames(path: Path) -> Iterator[tuple[int, np.ndarray]]:
         if item.cls not in (CameraFrame, CompressedCameraFrame):
             continue
         msg = item.message()
-        if isinstance(msg, CameraFrame):
-            yield item.publish_time, decode_raw(msg)
-        elif isinstance(msg, CompressedCameraFrame):
-            yield item.publish_time, decode_compressed(msg)
-
-
-def decode_raw(msg: Any) -> np.ndarray:
-    """A foxglove.RawImage-like message -> uint8 RGB."""
-    from schemas.messages import RAW_ENCODINGS
-
-    bpp = RAW_ENCODINGS[msg.encoding]
-    if msg.encoding in ("mono16", "16UC1", "32FC1"):
-        raise InputError(
-            f"camera encoding {msg.encoding} is not a colour image; valid: rgb8, "
-            "bgr8, rgba8, bgra8, mono8"
-        )
-    rows = np.frombuffer(msg.data, dtype=np.uint8).reshape(msg.height, msg.step)
-    px = rows[:, : msg.width * bpp].reshape(msg.height, msg.width, bpp)
-    if msg.encoding in ("bgr8", "bgra8"):
-        px = px[:, :, [2, 1, 0]]
-    elif msg.encoding == "rgba8":
-        px = px[:, :, :3]
-    elif msg.encoding == "mono8":
-        px = np.repeat(px, 3, axis=2)
-    return np.ascontiguousarray(px)
-
-
-def decode_compressed(msg: Any) -> np.ndarray:
-    """A foxglove.CompressedImage-like message -> uint8 RGB (PNG only: no JPEG decoder here)."""
-    import io
-
-    from cognition.vision.images import as_frame
-
-    if msg.format != "png":
-        raise InputError(f"compressed camera format {msg.format!r} cannot be decoded; valid: png")
-    import matplotlib.image as mpimg
-
-    try:
-        arr = mpimg.imread(io.BytesIO(msg.data), format="png")
-    except (OSError, ValueError, SyntaxError) as exc:
-        raise InputError(f"compressed camera frame is not a readable PNG: {exc}") from None
-    return as_frame(arr)
+        assert isinstance(msg, CameraFrame | CompressedCameraFrame)
+        yield item.publish_time, image_from_message(msg)
 
 
 def _segment_mcap(
