@@ -12,9 +12,9 @@ Labelling rule (step 2): **keep a demonstration when its network posterior is at
 not weight: hmmlearn's EM has no per-sequence weights, and faking them by repeating sequences
 turns a continuous weight into a crude integer and multiplies training time. Why drop rather than
 keep everything: a wrong label does double damage (it pulls the wrong action's model towards the
-gesture and leaves the right one without it), while a dropped demonstration only costs data; on
-the default demonstrations the network is right ~95% of the time and ~97% on those it is at
-least 90% sure of, losing ~6% of them. A floor (`min_per_action`) keeps every action trainable:
+gesture and leaves the right one without it), while a dropped demonstration only costs data. In
+the default run (20 per action, seed 0) the network labels 95% of the watched demonstrations
+right; the rule keeps 52 of 60, all of them right (98.5–100% across the ablation). A floor (`min_per_action`) keeps every action trainable:
 when fewer demonstrations of one inferred action pass the threshold, the most confident ones
 labelled with it are kept anyway. The report gives label accuracy before and after the rule.
 
