@@ -1,0 +1,481 @@
+"""A seeded synthetic scene: a person acting on objects on a table, seen by a body tracker and an
+overhead camera at once. The library behind `beyond simulate` (which only adds the bus messages
+and the MCAP file).
+
+Why it exists: the services (gesture streamer, object segmenter, reasoner) need recordings whose
+truth is known and whose two sensor streams agree, so that a replay exercises the whole pipeline
+the way a real session would. Both streams come from the generators the models were built on:
+the skeleton from `cognition.gestures.synthetic` (what the default gesture HMMs were trained on),
+the object's physics from `cognition.vision.tabletop.simulate_experiment` with the effects of
+`cognition.world` (what the clusters and the network were learned from).
+
+How the two streams are tied (times in seconds from the start of the recording; skeleton frame i
+at i / 30, camera frame n at n / camera_fps, one clock):
+- one continuous skeleton stream holds every gesture of the scene, with rests between them;
+- for gesture k the camera shows object k (scene item k's colour, shape and size). The hand
+  approaches it along the skeleton's own track: the right hand from the gesture's first frame to
+  its contact frame, resampled at the camera rate, is the experiment's `hand_track` (so contact in
+  the image happens at the skeleton's contact instant). Contact, the object's motion and the
+  hand leaving it follow the world's rules for that action and object;
+- the camera runs for the whole recording over one table and light. While the skeleton rests the
+  hand is off the table (not drawn): the camera shows the table and the object alone, which is
+  what a segmenter learns the table from. After the experiment the hand lingers, then withdraws
+  the way it came and leaves the view. Between gestures the object is swapped for the next one
+  `SWITCH_LEAD_S` before that gesture starts (or half-way through a shorter rest), so a window
+  from a little before a gesture's start to a little after its end sees one object only.
+The hand is a flat skin-coloured blob in the image; what the depth sensor sees of the person
+(`SkeletonStream`) and the camera's geometry are tied only through the approach track, which is
+re-axed and translated so its last point touches the camera's object (see `kinect_to_table`).
+
+`check_scene` runs what the services run (segmenter, recogniser, `analyse_frames` on each
+gesture's camera window) on the two streams and compares with the truth; the tests and
+`beyond simulate --check` use it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cognition.errors import InputError, unknown
+from cognition.gestures.synthetic import GestureBounds, SkeletonStream, synthesize_continuous
+from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+from cognition.vision.tabletop import (
+    SKIN_RGB,
+    Camera,
+    Experiment,
+    ObjectSpec,
+    make_table,
+    render_frame,
+    simulate_experiment,
+)
+
+# Every recording starts at this instant (2019-01-01T00:00:00Z), so files are deterministic.
+EPOCH_NS = 1_546_300_800 * 1_000_000_000
+CAMERA_FPS_RANGE = (5.0, 30.0)
+SWITCH_LEAD_S = 0.5  # the next object is on the table this long before its gesture starts
+LINGER_S = 0.6  # the hand keeps its last velocity this long after the experiment, then withdraws
+WITHDRAW_S = 0.9  # duration of the withdrawal (minimum jerk)
+WITHDRAW_BEYOND_M = 0.25  # it ends this far beyond where the approach began (out of view)
+# simulate_experiment renders frames we do not use (the scene renders its own, over one table):
+# its physics do not depend on the camera, so it gets the smallest one to stay cheap.
+_PHYSICS_CAMERA = Camera(width=32, height=24)
+
+SPEC_HELP = "action:color:shape:size[,action:color:shape:size...]"
+
+
+@dataclass(frozen=True)
+class SceneItem:
+    """One action on one object, named as in the network (`cognition.variables`)."""
+
+    action: str
+    color: str
+    shape: str
+    size: str
+
+    def __post_init__(self) -> None:
+        if self.action not in ACTIONS:
+            raise unknown("action", self.action, ACTIONS)
+        for variable, value in (("Color", self.color), ("Shape", self.shape), ("Size", self.size)):
+            if value not in AFFORDANCE_VARIABLES[variable]:
+                raise unknown(f"{variable.lower()}", value, AFFORDANCE_VARIABLES[variable])
+
+    @property
+    def spec(self) -> str:
+        return f"{self.action}:{self.color}:{self.shape}:{self.size}"
+
+    @property
+    def object_labels(self) -> dict[str, str]:
+        return {"Color": self.color, "Shape": self.shape, "Size": self.size}
+
+
+def _items(*specs: str) -> tuple[SceneItem, ...]:
+    return tuple(SceneItem(*s.split(":")) for s in specs)
+
+
+PRESETS: dict[str, tuple[SceneItem, ...]] = {
+    # the bundled demo (`make demo`): a small yellow ball tapped (it rolls away fast), then a big
+    # blue box grasped (lifted, carried, put down)
+    "tap-ball-grasp-box": _items("tap:yellow:circle:small", "grasp:blue:box:big"),
+    "touch-box": _items("touch:green2:box:medium"),
+    "three-actions": _items(
+        "grasp:green1:circle:big", "tap:blue:box:medium", "touch:yellow:circle:small"
+    ),
+}
+
+
+def parse_scene(text: str) -> tuple[SceneItem, ...]:
+    """A preset name or a spec `action:color:shape:size[,...]` -> the scene's items."""
+    name = text.strip()
+    if name in PRESETS:
+        return PRESETS[name]
+    if ":" not in name:
+        raise InputError(
+            f"unknown scene {text!r}; valid: a preset ({', '.join(PRESETS)}) or {SPEC_HELP}"
+        )
+    items = []
+    for part in name.split(","):
+        fields = [f.strip() for f in part.split(":")]
+        if len(fields) != 4 or not all(fields):
+            raise InputError(f"scene item {part.strip()!r} is not {SPEC_HELP.split('[')[0]}")
+        items.append(SceneItem(*fields))
+    return tuple(items)
+
+
+@dataclass(frozen=True)
+class SceneGesture:
+    """One gesture of the scene and everything true about it.
+
+    `bounds`: skeleton frames (`GestureBounds`, 0-based, stop exclusive). `block`: camera frames
+    [first, stop) showing this gesture's object. `experiment`: camera frames [first, stop) the
+    simulated experiment covers (approach, contact, what follows); `contact`: its contact frames
+    [start, stop) on the camera's numbering. `labels`: Color, Shape, Size and the effects, as the
+    world made them (HandVel follows the skeleton's approach speed)."""
+
+    item: SceneItem
+    bounds: GestureBounds
+    block: tuple[int, int]
+    experiment: tuple[int, int]
+    contact: tuple[int, int]
+    labels: dict[str, str]
+    effects: dict[str, float]
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A simulated scene: the skeleton stream, the camera plan and the truth.
+
+    Camera frames are rendered lazily by `frames()` (a few MB each as arrays); `hand_xyz` (NaN
+    rows: hand off the table), `object_xyz` and `object_index` give, per camera frame, what is
+    drawn (table frame, metres; see `cognition.vision.tabletop`)."""
+
+    items: tuple[SceneItem, ...]
+    seed: int
+    camera_fps: float
+    skeleton: SkeletonStream
+    gestures: tuple[SceneGesture, ...]
+    camera: Camera
+    object_index: np.ndarray  # (N,) which item's object is on the table
+    object_xyz: np.ndarray  # (N, 3)
+    hand_xyz: np.ndarray  # (N, 3), NaN when the hand is not in the scene
+    hand_direction: np.ndarray  # (N, 2) approach direction in the table plane
+    objects: tuple[ObjectSpec, ...]
+    render_seed: int
+
+    @property
+    def n_skeleton_frames(self) -> int:
+        return self.skeleton.n_frames
+
+    @property
+    def n_camera_frames(self) -> int:
+        return len(self.object_index)
+
+    def skeleton_stamps(self, t0_ns: int = EPOCH_NS) -> np.ndarray:
+        """Nanosecond stamps of the skeleton frames (frame i at t0 + i / 30 s)."""
+        return t0_ns + _stamps(self.n_skeleton_frames, self.skeleton.fps)
+
+    def camera_stamps(self, t0_ns: int = EPOCH_NS) -> np.ndarray:
+        """Nanosecond stamps of the camera frames (frame n at t0 + n / camera_fps s)."""
+        return t0_ns + _stamps(self.n_camera_frames, self.camera_fps)
+
+    def frames(self) -> Iterator[np.ndarray]:
+        """The camera frames in order, uint8 (H, W, 3) RGB; the same every time."""
+        rng = np.random.default_rng(self.render_seed)
+        gain = float(rng.uniform(0.92, 1.06))
+        table = make_table(self.camera, rng, gain=gain)
+        skin = np.asarray(SKIN_RGB, dtype=np.float32) * np.float32(gain * rng.uniform(0.95, 1.05))
+        lit = [dataclasses.replace(o, rgb=_brighter(o.rgb, gain)) for o in self.objects]
+        for n in range(self.n_camera_frames):
+            hand = None
+            if np.all(np.isfinite(self.hand_xyz[n])):
+                hand = (self.hand_xyz[n], self.hand_direction[n])
+            obj = lit[int(self.object_index[n])]
+            yield render_frame(
+                self.camera, table, [(obj, self.object_xyz[n])], rng, hand=hand, hand_rgb=skin
+            )
+
+    def truth(self) -> list[dict[str, object]]:
+        """Per gesture: the item, its skeleton and camera frames, and its true labels (JSON)."""
+        return [
+            {
+                "item": g.item.spec,
+                "skeleton_frames": [g.bounds.start, g.bounds.stop],
+                "skeleton_contact": [g.bounds.contact_start, g.bounds.contact_stop],
+                "camera_frames": list(g.experiment),
+                "camera_contact": list(g.contact),
+                "labels": dict(g.labels),
+                "effects": {k: round(v, 4) for k, v in g.effects.items()},
+            }
+            for g in self.gestures
+        ]
+
+    def gesture_truth(self) -> list[GestureTruth]:
+        return [
+            GestureTruth(g.item.action, (g.bounds.start, g.bounds.stop), g.labels)
+            for g in self.gestures
+        ]
+
+
+def _brighter(rgb: tuple[float, float, float], gain: float) -> tuple[float, float, float]:
+    r, g, b = (float(min(c * gain, 255.0)) for c in rgb)
+    return r, g, b
+
+
+def _stamps(n: int, fps: float) -> np.ndarray:
+    return np.rint(np.arange(n) * (1e9 / fps)).astype(np.int64)
+
+
+def _child_seeds(seed: int, n: int) -> list[int]:
+    return [int(s) for s in np.random.SeedSequence([seed, 5]).generate_state(n)]
+
+
+def _min_jerk(tau: np.ndarray) -> np.ndarray:
+    t = np.clip(tau, 0.0, 1.0)
+    return t**3 * (10.0 - 15.0 * t + 6.0 * t**2)
+
+
+def _resample(track: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray:
+    """Positions (T, 3) sampled at `fps` from time 0, linearly interpolated at `times` (s)."""
+    t = np.arange(len(track)) / fps
+    return np.stack([np.interp(times, t, track[:, i]) for i in range(3)], axis=1)
+
+
+def simulate_scene(
+    items: Sequence[SceneItem], seed: int, camera_fps: float = 15.0, camera: Camera | None = None
+) -> Scene:
+    """Simulate the scene (see the module docstring); the same arguments give the same scene."""
+    if not items:
+        raise InputError(f"the scene has no items; valid: a preset or {SPEC_HELP}")
+    lo, hi = CAMERA_FPS_RANGE
+    if not lo <= camera_fps <= hi:
+        raise InputError(f"camera fps {camera_fps:g} out of range; valid: {lo:g}..{hi:g}")
+    if seed < 0:
+        raise InputError(f"seed {seed} is negative; valid: an integer >= 0")
+    cam = camera or Camera()
+    seeds = _child_seeds(seed, 2 + len(items))
+    skel = synthesize_continuous([it.action for it in items], seed=seeds[0])
+    hand = skel.joints["right_hand"]
+    fps_s = skel.fps
+    duration = (skel.n_frames - 1) / fps_s
+    n_cam = int(np.floor(duration * camera_fps + 1e-9)) + 1
+    cam_t = np.arange(n_cam) / camera_fps
+
+    # blocks: the camera frames showing each object
+    starts = [g.start / fps_s for g in skel.gestures]
+    stops = [g.stop / fps_s for g in skel.gestures]
+    switch = [0.0]
+    for k in range(1, len(items)):
+        gap = starts[k] - stops[k - 1]
+        switch.append(starts[k] - min(SWITCH_LEAD_S, gap / 2.0))
+    first = [int(np.searchsorted(cam_t, s - 1e-9)) for s in switch]
+    blocks = list(zip(first, [*first[1:], n_cam], strict=True))
+
+    object_index = np.zeros(n_cam, dtype=np.int64)
+    object_xyz = np.zeros((n_cam, 3))
+    hand_xyz = np.full((n_cam, 3), np.nan)
+    hand_dir = np.zeros((n_cam, 2))
+    gestures = []
+    objects = []
+    for k, (item, g) in enumerate(zip(items, skel.gestures, strict=True)):
+        # the approach at the camera's rate: from the first camera frame at or after the
+        # gesture's start to the one nearest its contact (the track's last point is contact)
+        n_contact = int(np.floor(g.contact_start * camera_fps / fps_s + 0.5))
+        n_start = int(np.ceil(g.start * camera_fps / fps_s - 1e-9))
+        n_start = min(n_start, n_contact - 1)
+        track = _resample(hand, fps_s, cam_t[n_start : n_contact + 1])
+        rng = np.random.default_rng(seeds[2 + k])
+        exp = simulate_experiment(
+            item.action,
+            item.color,
+            item.shape,
+            item.size,
+            rng,
+            fps=camera_fps,
+            hand_track=track,
+            camera=_PHYSICS_CAMERA,
+        )
+        objects.append(exp.obj)
+        j_contact = exp.contact[0] - 1  # the experiment's frame of the track's last point
+        j_first = j_contact - (n_contact - n_start)  # ... and of its first one
+        offset = n_contact - j_contact  # camera frame = experiment frame + offset
+        b0, b1 = blocks[k]
+        object_index[b0:b1] = k
+        u = exp.hand_xyz[j_contact, :2] - exp.hand_xyz[j_first, :2]
+        u = u / max(float(np.linalg.norm(u)), 1e-9)
+        hand_dir[b0:b1] = u
+        withdraw = _withdrawal(exp, j_first, camera_fps)
+        for n in range(b0, b1):
+            j = n - offset
+            if j < len(exp.frames):
+                object_xyz[n] = exp.object_xyz[max(j, 0)]
+                if j >= j_first:
+                    hand_xyz[n] = exp.hand_xyz[j]
+            else:
+                object_xyz[n] = exp.object_xyz[-1]
+                hand_xyz[n] = withdraw(j - len(exp.frames) + 1)
+        eff = exp.effects
+        gestures.append(
+            SceneGesture(
+                item=item,
+                bounds=g,
+                block=(b0, b1),
+                experiment=(n_start, min(offset + len(exp.frames), b1)),
+                contact=(exp.contact[0] + offset, exp.contact[1] + offset),
+                labels=dict(exp.labels),
+                effects={
+                    "object_speed": eff.object_speed,
+                    "hand_speed": eff.hand_speed,
+                    "relative_speed": eff.relative_speed,
+                    "contact_s": eff.contact_s,
+                },
+            )
+        )
+    return Scene(
+        items=tuple(items),
+        seed=seed,
+        camera_fps=camera_fps,
+        skeleton=skel,
+        gestures=tuple(gestures),
+        camera=cam,
+        object_index=object_index,
+        object_xyz=object_xyz,
+        hand_xyz=hand_xyz,
+        hand_direction=hand_dir,
+        objects=tuple(objects),
+        render_seed=seeds[1],
+    )
+
+
+def _withdrawal(exp: Experiment, j_first: int, fps: float) -> Callable[[int], np.ndarray]:
+    """The hand after the experiment's last frame: frame m >= 1 after it -> position (NaN once
+    it has left). For `LINGER_S` it keeps the velocity it ended with (a grasping hand is still
+    leaving the object at the world's slow relative speed: a faster exit within the 0.3 s the
+    segmenter measures after contact would make it look fast), then it goes back the way it came,
+    past its starting point, with a minimum-jerk profile."""
+    end = exp.hand_xyz[-1]
+    velocity = exp.hand_xyz[-1] - exp.hand_xyz[-2]  # per frame
+    origin = exp.hand_xyz[j_first]
+    back = origin[:2] - exp.hand_xyz[exp.contact[0] - 1, :2]
+    back = back / max(float(np.linalg.norm(back)), 1e-9)
+    linger = round(LINGER_S * fps)
+    leave = end + velocity * linger
+    target = origin.copy()
+    target[:2] += back * WITHDRAW_BEYOND_M
+    steps = max(round(WITHDRAW_S * fps), 1)
+
+    def at(m: int) -> np.ndarray:
+        if m <= linger:
+            return end + velocity * m
+        if m - linger > steps:
+            return np.full(3, np.nan)
+        s = float(_min_jerk(np.asarray((m - linger) / steps)))
+        return leave + (target - leave) * s
+
+    return at
+
+
+# ---------------------------------------------------------------- checking a scene end to end
+
+
+@dataclass(frozen=True)
+class GestureTruth:
+    """What is true of one gesture: its action, skeleton frames [start, stop) and labels."""
+
+    action: str
+    frames: tuple[int, int]
+    labels: dict[str, str]
+
+    @classmethod
+    def from_json(cls, d: dict[str, object]) -> GestureTruth:
+        """From one entry of `Scene.truth()` (as stored in a recording's metadata)."""
+        try:
+            item = str(d["item"])
+            frames = d["skeleton_frames"]
+            labels_in = d["labels"]
+            if not isinstance(frames, list | tuple) or len(frames) != 2:
+                raise ValueError("skeleton_frames is not [start, stop]")
+            if not isinstance(labels_in, dict):
+                raise ValueError("labels is not an object")
+            a, b = int(frames[0]), int(frames[1])
+            labels = {str(k): str(v) for k, v in labels_in.items()}
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(
+                f"scene truth entry is malformed ({exc}); valid: Scene.truth()"
+            ) from None
+        return cls(item.split(":")[0], (a, b), labels)
+
+
+@dataclass(frozen=True)
+class GestureCheck:
+    """What the pipeline made of one gesture it found, next to the truth of the item it matches."""
+
+    index: int  # scene item, or -1 for a segment that overlaps none
+    segment: tuple[int, int]  # skeleton frames [start, stop) found by the segmenter
+    action: str  # recognised
+    labels: dict[str, str]  # measured on the camera window (Color, Shape, Size, effects)
+    truth: dict[str, str]  # Action and the true labels
+    camera_frames: int  # in the window
+
+    def agrees(self, variable: str) -> bool:
+        got = self.action if variable == "Action" else self.labels.get(variable)
+        return got is not None and got == self.truth.get(variable)
+
+
+def check_scene(
+    skeleton: dict[str, np.ndarray],
+    skeleton_stamps: np.ndarray,
+    camera_stamps: np.ndarray,
+    images: Sequence[np.ndarray],
+    truth: Sequence[GestureTruth],
+    lead_s: float = 0.3,
+) -> list[GestureCheck]:
+    """Run what the services run on a recording's two streams and compare with the truth.
+
+    `skeleton`: joint -> (T, 3) metres (needs right_hand and torso); `images`: the camera frames
+    in stamp order. Gestures are found by the default segmenter and recognised by the default
+    models over exactly their frames (what the gesture streamer publishes as final); each one's
+    camera window is the frames stamped from `lead_s` before its first frame to its last frame,
+    analysed by `analyse_frames` with the shipped clusters at the frame rate measured from the
+    stamps (what the object segmenter does). A found gesture is matched to the item whose true
+    frames it overlaps most."""
+    from cognition.gestures import GestureSegmenter, extract_features, recognize_sequence
+    from cognition.gestures.default_models import default_models
+    from cognition.vision.clusters import ClusterModel
+    from cognition.vision.pipeline import analyse_frames
+
+    for joint in ("right_hand", "torso"):
+        if joint not in skeleton:
+            raise InputError(f"skeleton has no joint {joint!r}; joints: {', '.join(skeleton)}")
+    features = extract_features(skeleton["right_hand"], skeleton["torso"])
+    seg = GestureSegmenter()
+    found = [s for s in (seg.push(x) for x in features) if s is not None]
+    last = seg.finish()
+    if last is not None:
+        found.append(last)
+    models = default_models()
+    clusters = ClusterModel.load()
+    cam_s = np.asarray(camera_stamps, dtype=np.int64)
+    checks: list[GestureCheck] = []
+    for s in found:
+        result = recognize_sequence(models, features[s.start : s.stop]).final
+        action = str(models.actions[int(np.argmax(result.posterior))])
+        lo = int(skeleton_stamps[s.start]) - round(lead_s * 1e9)
+        hi = int(skeleton_stamps[s.stop - 1])
+        sel = np.flatnonzero((cam_s >= lo) & (cam_s <= hi))
+        labels: dict[str, str] = {}
+        if len(sel) >= 3:
+            fps = float(1e9 / np.median(np.diff(cam_s[sel])))
+            try:
+                labels = analyse_frames([images[int(i)] for i in sel], fps, clusters).labels
+            except InputError:
+                labels = {}
+        overlaps = [max(0, min(s.stop, t.frames[1]) - max(s.start, t.frames[0])) for t in truth]
+        index = int(np.argmax(overlaps)) if overlaps and max(overlaps) > 0 else -1
+        truth_k = {"Action": truth[index].action, **truth[index].labels} if index >= 0 else {}
+        checks.append(
+            GestureCheck(index, (s.start, s.stop), action, dict(labels), truth_k, len(sel))
+        )
+    return checks

@@ -1,0 +1,303 @@
+"""`beyond simulate` and `cognition.scene`: the scene's two streams agree, the file is
+deterministic and self-describing, and the pipeline recovers the scene's truth from it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from beyond.cli import main
+from beyond.commands.simulate import check_recording, checks_pass, encode_jpeg
+from cognition.errors import InputError
+from cognition.gestures.synthetic import synthesize_continuous
+from cognition.scene import (
+    EPOCH_NS,
+    PRESETS,
+    Scene,
+    SceneItem,
+    check_scene,
+    parse_scene,
+    simulate_scene,
+)
+from cognition.vision.tabletop import kinect_to_table
+from runtime.images import image_from_message
+from runtime.recording import inspect_recording, read_recording
+from schemas import CompressedCameraFrame, Header, SkeletonFrame, Time
+from schemas.keys import Keys
+
+
+@pytest.fixture(scope="module")
+def demo_scene() -> Scene:
+    return simulate_scene(parse_scene("tap-ball-grasp-box"), seed=3)
+
+
+@pytest.fixture(scope="module")
+def touch_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("sim") / "touch.mcap"
+    assert main(["simulate", "touch:blue:circle:medium", "-o", str(path), "--seed", "4"]) == 0
+    return path
+
+
+# ---------------------------------------------------------------- scene specs
+
+
+def test_presets_and_specs_parse() -> None:
+    assert [it.action for it in parse_scene("tap-ball-grasp-box")] == ["tap", "grasp"]
+    demo = parse_scene("tap-ball-grasp-box")
+    assert demo[0].shape == "circle" and demo[1].shape == "box"
+    assert {it.action for it in parse_scene("three-actions")} == {"grasp", "tap", "touch"}
+    assert len({(it.color, it.shape, it.size) for it in parse_scene("three-actions")}) == 3
+    assert parse_scene("touch-box")[0].shape == "box"
+    items = parse_scene("tap:yellow:circle:small, grasp:blue:box:big")
+    assert items == (
+        SceneItem("tap", "yellow", "circle", "small"),
+        SceneItem("grasp", "blue", "box", "big"),
+    )
+    assert set(PRESETS) >= {"tap-ball-grasp-box", "touch-box", "three-actions"}
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("juggle-balls", "valid: a preset"),
+        ("push:blue:box:big", "unknown action 'push'"),
+        ("tap:red:box:big", "unknown color 'red'; valid: green1, green2, yellow, blue"),
+        ("tap:blue:cone:big", "unknown shape 'cone'"),
+        ("tap:blue:box:huge", "unknown size 'huge'"),
+        ("tap:blue:box", "is not action:color:shape:size"),
+        ("tap:blue:box:big,", "is not action:color:shape:size"),
+    ],
+)
+def test_bad_scenes_say_what_is_valid(spec: str, message: str) -> None:
+    with pytest.raises(InputError, match=message):
+        parse_scene(spec)
+
+
+def test_bad_arguments_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = str(tmp_path / "x.mcap")
+    assert main(["simulate", "tap:red:box:big", "-o", out]) == 2
+    assert "unknown color 'red'" in capsys.readouterr().err
+    assert main(["simulate", "touch-box", "-o", out, "--camera-fps", "60"]) == 2
+    assert "camera fps 60 out of range" in capsys.readouterr().err
+    assert main(["simulate", "touch-box", "-o", str(tmp_path / "no" / "x.mcap")]) == 2
+    assert main(["simulate", "touch-box", "-o", out, "--robot", "a/b"]) == 2
+    assert not (tmp_path / "x.mcap").exists()
+
+
+# ---------------------------------------------------------------- the scene
+
+
+def test_skeleton_is_the_gesture_generators(demo_scene: Scene) -> None:
+    sk = demo_scene.skeleton
+    assert sk.fps == 30.0
+    assert [g.action for g in sk.gestures] == ["tap", "grasp"]
+    assert {"right_hand", "torso", "head", "left_hand"} <= set(sk.joints)
+    # rests between gestures and around them
+    first, second = sk.gestures
+    assert first.start >= 30 and second.start - first.stop >= 30 and sk.n_frames - second.stop > 0
+    assert sk.seed is not None
+    again = synthesize_continuous(["tap", "grasp"], seed=sk.seed)
+    np.testing.assert_array_equal(again.joints["right_hand"], sk.joints["right_hand"])
+
+
+def test_camera_covers_each_gesture_with_its_object(demo_scene: Scene) -> None:
+    sc = demo_scene
+    fps = sc.camera_fps
+    t = np.arange(sc.n_camera_frames) / fps
+    assert sc.n_camera_frames == int((sc.n_skeleton_frames - 1) / 30 * fps) + 1
+    for k, g in enumerate(sc.gestures):
+        start, stop = g.bounds.start / 30, g.bounds.stop / 30
+        # the object segmenter's window: from 0.3 s before the start (the segmenter may place it
+        # a little later) to a little after the end: one object, this one
+        window = (t >= start - 0.4) & (t <= stop + 0.4)
+        assert np.all(sc.object_index[window] == k)
+        # before the hand moves: the object alone on the table (what the table is learned from)
+        before = (t >= start - 0.4) & (t < start)
+        assert before.sum() >= 5
+        assert np.all(np.isnan(sc.hand_xyz[before]))
+        # the object sits still until the contact, and moves after it only for tap and grasp
+        c0 = g.contact[0]
+        b0 = g.block[0]
+        assert np.abs(sc.object_xyz[b0:c0] - sc.object_xyz[b0]).max() < 1e-12
+        moved = np.linalg.norm(sc.object_xyz[g.block[1] - 1, :2] - sc.object_xyz[b0, :2])
+        assert moved > 0.05  # tap pushes the ball away, grasp carries the box off
+
+
+def test_hand_approaches_along_the_skeletons_own_track(demo_scene: Scene) -> None:
+    sc = demo_scene
+    hand = sc.skeleton.joints["right_hand"]
+    for g in sc.gestures:
+        assert sc.camera_fps == 15  # camera frame n is skeleton frame 2n
+        n_contact = (g.bounds.contact_start + 1) // 2
+        # the contact in the image is at the skeleton's contact instant (within half a frame)
+        assert g.contact[0] - 1 == n_contact
+        n_start = (g.bounds.start + 1) // 2
+        frames = np.arange(n_start, n_contact + 1)
+        # skeleton frames at the camera's instants (15 fps: every other skeleton frame)
+        skel = kinect_to_table(hand[frames * 2])
+        cam = sc.hand_xyz[frames]
+        assert np.all(np.isfinite(cam))
+        # the same path, translated so that its end touches the camera's object
+        np.testing.assert_allclose(cam - cam[-1], skel - skel[-1], atol=1e-9)
+        # and the hand is drawn from the gesture's start on
+        assert np.isnan(sc.hand_xyz[n_start - 1]).all()
+
+
+def test_same_seed_same_scene_other_seed_other_scene() -> None:
+    items = parse_scene("touch-box")
+    a, b = simulate_scene(items, 7), simulate_scene(items, 7)
+    fa, fb = list(a.frames()), list(b.frames())
+    assert len(fa) == a.n_camera_frames
+    assert all(np.array_equal(x, y) for x, y in zip(fa, fb, strict=True))
+    np.testing.assert_array_equal(a.hand_xyz, b.hand_xyz)
+    c = simulate_scene(items, 8)
+    assert c.n_skeleton_frames != a.n_skeleton_frames or not np.array_equal(
+        c.skeleton.joints["torso"], a.skeleton.joints["torso"]
+    )
+    with pytest.raises(InputError, match="camera fps"):
+        simulate_scene(items, 7, camera_fps=2)
+    with pytest.raises(InputError, match="no items"):
+        simulate_scene((), 7)
+
+
+# ---------------------------------------------------------------- the file
+
+
+def test_same_arguments_same_bytes(touch_file: Path, tmp_path: Path) -> None:
+    again = tmp_path / "again.mcap"
+    assert main(["simulate", "touch:blue:circle:medium", "-o", str(again), "--seed", "4"]) == 0
+    assert again.read_bytes() == touch_file.read_bytes()
+    other = tmp_path / "other.mcap"
+    assert main(["simulate", "touch:blue:circle:medium", "-o", str(other), "--seed", "5"]) == 0
+    assert other.read_bytes() != touch_file.read_bytes()
+
+
+def test_file_layout_stamps_and_metadata(touch_file: Path) -> None:
+    keys = Keys("robot")
+    info = inspect_recording(touch_file)
+    assert info.complete and not info.error
+    channels = {c.topic: c for c in info.channels}
+    assert set(channels) == {keys.skeleton, keys.camera_compressed}
+    meta = info.metadata["beyond"]
+    assert meta["items"] == "touch:blue:circle:medium" and meta["seed"] == "4"
+    truth = json.loads(meta["truth"])
+    assert truth[0]["labels"]["Color"] == "blue" and truth[0]["labels"]["ObjVel"] == "slow"
+    sk_stamps, cam_stamps, frames_seen = [], [], []
+    for item in read_recording(touch_file):
+        msg = item.message()
+        if isinstance(msg, SkeletonFrame):
+            sk_stamps.append(msg.header.stamp)
+            frames_seen.append(msg.frame)
+            assert len(msg.joints) == 9 and msg.header.source == "simulator"
+        else:
+            assert isinstance(msg, CompressedCameraFrame) and msg.format == "jpeg"
+            cam_stamps.append(msg.header.stamp)
+    sk, cam = np.asarray(sk_stamps), np.asarray(cam_stamps)
+    # frame i at 2019-01-01T00:00:00Z + i/30 s; camera frame n at + n/15 s, same clock
+    assert sk[0] == cam[0] == 1_546_300_800_000_000_000 == EPOCH_NS
+    np.testing.assert_array_equal(sk - sk[0], np.rint(np.arange(len(sk)) * 1e9 / 30))
+    np.testing.assert_array_equal(cam - cam[0], np.rint(np.arange(len(cam)) * 1e9 / 15))
+    assert frames_seen == list(range(1, len(sk) + 1))
+    assert abs((sk[-1] - cam[-1]) / 1e9) < 1 / 15
+
+
+def test_a_standard_mcap_reader_decodes_it(touch_file: Path) -> None:
+    with touch_file.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        schemas = {s.name for s in summary.schemas.values()}
+        assert {"beyond.SkeletonFrame", "foxglove.CompressedImage"} <= schemas
+        for schema, _channel, message in reader.iter_messages():
+            if schema is not None and schema.name == "foxglove.CompressedImage":
+                doc = json.loads(message.data)
+                assert doc["format"] == "jpeg" and doc["frame_id"] == "camera"
+                assert (
+                    message.publish_time
+                    == doc["timestamp"]["sec"] * 10**9 + doc["timestamp"]["nsec"]
+                )
+                break
+        else:
+            pytest.fail("no camera frame")
+
+
+def test_jpeg_frames_decode_close_to_the_rendered_ones() -> None:
+    sc = simulate_scene(parse_scene("touch-box"), 1)
+    frames = sc.frames()
+    for _ in range(30):
+        img = next(frames)
+    header = Header(version=CompressedCameraFrame.VERSION, source="t", seq=0, stamp=5)
+    msg = CompressedCameraFrame(
+        header=header,
+        timestamp=Time.from_ns(5),
+        frame_id="camera",
+        format="jpeg",
+        data=encode_jpeg(img, 80),
+        width=320,
+        height=240,
+    )
+    back = image_from_message(msg)
+    assert back.shape == img.shape == (240, 320, 3)
+    err = np.abs(back.astype(int) - img.astype(int))
+    assert err.mean() < 3.5 and np.percentile(err, 99) < 12
+    assert len(msg.data) < 12_000  # what keeps the shipped recordings small
+
+
+# ---------------------------------------------------------------- end to end, without the bus
+
+
+def test_the_pipeline_recovers_the_scene_from_the_file(touch_file: Path) -> None:
+    checks = check_recording(touch_file)
+    assert len(checks) == 1 and checks[0].index == 0
+    c = checks[0]
+    assert c.action == "touch"
+    assert c.labels["Color"] == "blue" and c.labels["Shape"] == "circle"
+    assert c.labels["Size"] == "medium" and c.labels["ObjVel"] == "slow"
+    assert checks_pass(checks, 1)
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_every_gesture_is_found_recognised_and_its_object_read(seed: int) -> None:
+    """Random scenes of three items: one segment per item, the action recognised, the object's
+    colour, shape and size and the true ObjVel measured on the gesture's camera window (JPEG
+    frames, as shipped)."""
+    from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+
+    rng = np.random.default_rng(seed)
+    items = [
+        SceneItem(
+            ACTIONS[k],
+            str(rng.choice(AFFORDANCE_VARIABLES["Color"])),
+            str(rng.choice(AFFORDANCE_VARIABLES["Shape"])),
+            str(rng.choice(AFFORDANCE_VARIABLES["Size"])),
+        )
+        for k in rng.permutation(3)
+    ]
+    sc = simulate_scene(items, seed)
+    images = [image_from_message(_jpeg(img)) for img in sc.frames()]
+    checks = check_scene(
+        sc.skeleton.joints, sc.skeleton_stamps(), sc.camera_stamps(), images, sc.gesture_truth()
+    )
+    assert sorted(c.index for c in checks) == [0, 1, 2]
+    for c in checks:
+        item = items[c.index]
+        assert c.action == item.action
+        assert c.labels["Color"] == item.color
+        assert c.labels["Shape"] == item.shape
+        assert c.labels["Size"] == item.size
+        assert c.labels["ObjVel"] == sc.gestures[c.index].labels["ObjVel"]
+
+
+def _jpeg(img: np.ndarray) -> CompressedCameraFrame:
+    header = Header(version=CompressedCameraFrame.VERSION, source="t", seq=0, stamp=0)
+    return CompressedCameraFrame(
+        header=header,
+        timestamp=Time.from_ns(0),
+        frame_id="camera",
+        format="jpeg",
+        data=encode_jpeg(img, 80),
+    )
