@@ -21,8 +21,10 @@ at i / 30, camera frame n at n / camera_fps, one clock):
   hand is off the table (not drawn): the camera shows the table and the object alone, which is
   what a segmenter learns the table from. After the experiment the hand lingers, then withdraws
   the way it came and leaves the view. Between gestures the object is swapped for the next one
-  `SWITCH_LEAD_S` before that gesture starts (or half-way through a shorter rest), so a window
-  from a little before a gesture's start to a little after its end sees one object only.
+  `SWITCH_LEAD_S` before that gesture starts (or half-way through a shorter rest), or earlier
+  if the default gesture segmenter would start that gesture earlier (a hand that never settles
+  during a short rest): the object segmenter's window for a gesture, from `WINDOW_LEAD_S` before
+  the reported start to the reported end, opens on that gesture's object alone (`_blocks`).
 The hand is a flat skin-coloured blob in the image; what the depth sensor sees of the person
 (`SkeletonStream`) and the camera's geometry are tied only through the approach track, which is
 re-axed and translated so its last point touches the camera's object (see `kinect_to_table`).
@@ -57,6 +59,7 @@ from cognition.vision.tabletop import (
 EPOCH_NS = 1_546_300_800 * 1_000_000_000
 CAMERA_FPS_RANGE = (5.0, 30.0)
 SWITCH_LEAD_S = 0.5  # the next object is on the table this long before its gesture starts
+WINDOW_LEAD_S = 0.3  # the object segmenter's window opens this long before a gesture's start
 LINGER_S = 0.6  # the hand keeps its last velocity this long after the experiment, then withdraws
 WITHDRAW_S = 0.9  # duration of the withdrawal (minimum jerk)
 WITHDRAW_BEYOND_M = 0.25  # it ends this far beyond where the approach began (out of view)
@@ -158,7 +161,7 @@ class Scene:
     skeleton: SkeletonStream
     gestures: tuple[SceneGesture, ...]
     camera: Camera
-    object_index: np.ndarray  # (N,) which item's object is on the table
+    object_index: np.ndarray  # (N,) which item's object is on the table (-1: none)
     object_xyz: np.ndarray  # (N, 3)
     hand_xyz: np.ndarray  # (N, 3), NaN when the hand is not in the scene
     hand_direction: np.ndarray  # (N, 2) approach direction in the table plane
@@ -192,10 +195,9 @@ class Scene:
             hand = None
             if np.all(np.isfinite(self.hand_xyz[n])):
                 hand = (self.hand_xyz[n], self.hand_direction[n])
-            obj = lit[int(self.object_index[n])]
-            yield render_frame(
-                self.camera, table, [(obj, self.object_xyz[n])], rng, hand=hand, hand_rgb=skin
-            )
+            k = int(self.object_index[n])
+            placed = [(lit[k], self.object_xyz[n])] if k >= 0 else []
+            yield render_frame(self.camera, table, placed, rng, hand=hand, hand_rgb=skin)
 
     def truth(self) -> list[dict[str, object]]:
         """Per gesture: the item, its skeleton and camera frames, and its true labels (JSON)."""
@@ -263,17 +265,8 @@ def simulate_scene(
     n_cam = int(np.floor(duration * camera_fps + 1e-9)) + 1
     cam_t = np.arange(n_cam) / camera_fps
 
-    # blocks: the camera frames showing each object
-    starts = [g.start / fps_s for g in skel.gestures]
-    stops = [g.stop / fps_s for g in skel.gestures]
-    switch = [0.0]
-    for k in range(1, len(items)):
-        gap = starts[k] - stops[k - 1]
-        switch.append(starts[k] - min(SWITCH_LEAD_S, gap / 2.0))
-    first = [int(np.searchsorted(cam_t, s - 1e-9)) for s in switch]
-    blocks = list(zip(first, [*first[1:], n_cam], strict=True))
-
-    object_index = np.zeros(n_cam, dtype=np.int64)
+    blocks = _blocks(skel, cam_t, camera_fps, _default_segments(skel))
+    object_index = np.full(n_cam, -1, dtype=np.int64)
     object_xyz = np.zeros((n_cam, 3))
     hand_xyz = np.full((n_cam, 3), np.nan)
     hand_dir = np.zeros((n_cam, 2))
@@ -347,6 +340,61 @@ def simulate_scene(
         objects=tuple(objects),
         render_seed=seeds[1],
     )
+
+
+def _blocks(
+    skel: SkeletonStream,
+    cam_t: np.ndarray,
+    fps: float,
+    detected: Sequence[tuple[int, int] | None],
+) -> list[tuple[int, int]]:
+    """Camera frames [first, stop) showing each item's object (frames between blocks: an empty
+    table).
+
+    The object segmenter analyses, per gesture, the camera frames from `WINDOW_LEAD_S` before the
+    start the gesture segmenter reports to its reported end, and learns the table from the first
+    one. So object k must be on the table, alone, before that window opens. Where the person
+    rests long enough, the swap happens `SWITCH_LEAD_S` before the gesture starts. When the
+    rest is short the segmenter may start a gesture well before the hand moves (up to where it
+    ended the previous one), and the two windows may overlap: the swap then happens before the
+    new window opens, with an empty table for a few frames first, so the object tracker of the
+    previous window retires the old object's track instead of jumping to the new object."""
+    n_cam = len(cam_t)
+    fps_s = skel.fps
+    margin = 1.0 / fps
+    empty = (int(fps // 3) + 2) / fps  # longer than the tracker keeps a lost object
+    first, last = [0], []
+    for k in range(1, len(skel.gestures)):
+        prev, this = skel.gestures[k - 1], skel.gestures[k]
+        start, gap = this.start / fps_s, (this.start - prev.stop) / fps_s
+        place = start - min(SWITCH_LEAD_S, gap / 2.0)
+        found, found_prev = detected[k], detected[k - 1]
+        if found is not None:
+            place = min(place, found[0] / fps_s - WINDOW_LEAD_S - margin)
+        prev_end = (
+            (found_prev[1] - 1) / fps_s
+            if found_prev is not None
+            else prev.stop / fps_s + WINDOW_LEAD_S
+        )
+        remove = place if place > prev_end + margin else place - empty
+        last.append(max(int(np.searchsorted(cam_t, remove - 1e-9)), first[-1]))
+        first.append(max(int(np.searchsorted(cam_t, place - 1e-9)), last[-1]))
+    last.append(n_cam)
+    return list(zip(first, last, strict=True))
+
+
+def _default_segments(skel: SkeletonStream) -> list[tuple[int, int] | None]:
+    """Per gesture, the frames [start, stop) the default gesture segmenter reports for it (the
+    found segment overlapping it most), or None."""
+    from cognition.gestures.segmentation import segment_gestures
+
+    found = segment_gestures(skel.features())
+    out: list[tuple[int, int] | None] = []
+    for g in skel.gestures:
+        overlap = [max(0, min(s.stop, g.stop) - max(s.start, g.start)) for s in found]
+        best = int(np.argmax(overlap)) if overlap else -1
+        out.append((found[best].start, found[best].stop) if best >= 0 and overlap[best] else None)
+    return out
 
 
 def _withdrawal(exp: Experiment, j_first: int, fps: float) -> Callable[[int], np.ndarray]:

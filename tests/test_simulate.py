@@ -13,6 +13,7 @@ from mcap.reader import make_reader
 from beyond.cli import main
 from beyond.commands.simulate import check_recording, checks_pass, encode_jpeg
 from cognition.errors import InputError
+from cognition.gestures.segmentation import segment_gestures
 from cognition.gestures.synthetic import synthesize_continuous
 from cognition.scene import (
     EPOCH_NS,
@@ -25,8 +26,8 @@ from cognition.scene import (
 )
 from cognition.vision.tabletop import kinect_to_table
 from runtime.images import image_from_message
-from runtime.recording import inspect_recording, read_recording
-from schemas import CompressedCameraFrame, Header, SkeletonFrame, Time
+from runtime.recording import RecordingWriter, inspect_recording, read_recording
+from schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame, Time
 from schemas.keys import Keys
 
 
@@ -104,27 +105,94 @@ def test_skeleton_is_the_gesture_generators(demo_scene: Scene) -> None:
     np.testing.assert_array_equal(again.joints["right_hand"], sk.joints["right_hand"])
 
 
-def test_camera_covers_each_gesture_with_its_object(demo_scene: Scene) -> None:
+def _windows(sc: Scene) -> list[tuple[int, np.ndarray]]:
+    """Per gesture found by the default segmenter: (item, camera frames of the object
+    segmenter's window: from 0.3 s before the found start to the found end)."""
+    found = segment_gestures(sc.skeleton.features())
+    t = np.arange(sc.n_camera_frames) / sc.camera_fps
+    out = []
+    for f in found:
+        k = int(
+            np.argmax(
+                [min(f.stop, g.bounds.stop) - max(f.start, g.bounds.start) for g in sc.gestures]
+            )
+        )
+        window = np.flatnonzero((t >= f.start / 30 - 0.3 - 1e-9) & (t <= (f.stop - 1) / 30 + 1e-9))
+        out.append((k, window))
+    return out
+
+
+def _check_windows(sc: Scene) -> None:
+    windows = _windows(sc)
+    assert sorted(k for k, _ in windows) == list(range(len(sc.gestures)))
+    for k, w in windows:
+        g = sc.gestures[k]
+        # the first frame: this object alone on the table (what the table is learned from)
+        assert sc.object_index[w[0]] == k and np.isnan(sc.hand_xyz[w[0]]).all()
+        # this object throughout the approach, the contact and what follows
+        during = w[w < g.experiment[1]]
+        assert np.all(sc.object_index[during] == k)
+        assert g.experiment[0] > w[0] and g.contact[1] <= w[-1]
+        # a window running into the next gesture's sees the table empty before the next object
+        later = sc.object_index[w[w >= g.experiment[1]]]
+        assert set(later.tolist()) <= {k, -1, k + 1}
+        if k + 1 in later:
+            assert -1 in later and np.argmax(later == -1) < np.argmax(later == k + 1)
+
+
+def test_each_gesture_window_starts_on_its_object_alone(demo_scene: Scene) -> None:
     sc = demo_scene
-    fps = sc.camera_fps
-    t = np.arange(sc.n_camera_frames) / fps
-    assert sc.n_camera_frames == int((sc.n_skeleton_frames - 1) / 30 * fps) + 1
+    _check_windows(sc)
+    t = np.arange(sc.n_camera_frames) / sc.camera_fps
     for k, g in enumerate(sc.gestures):
-        start, stop = g.bounds.start / 30, g.bounds.stop / 30
-        # the object segmenter's window: from 0.3 s before the start (the segmenter may place it
-        # a little later) to a little after the end: one object, this one
-        window = (t >= start - 0.4) & (t <= stop + 0.4)
-        assert np.all(sc.object_index[window] == k)
-        # before the hand moves: the object alone on the table (what the table is learned from)
+        start = g.bounds.start / 30
+        # before the hand moves, for at least the window's lead: the object, no hand
         before = (t >= start - 0.4) & (t < start)
         assert before.sum() >= 5
-        assert np.all(np.isnan(sc.hand_xyz[before]))
-        # the object sits still until the contact, and moves after it only for tap and grasp
-        c0 = g.contact[0]
-        b0 = g.block[0]
+        assert np.all(sc.object_index[before] == k) and np.all(np.isnan(sc.hand_xyz[before]))
+        # the object sits still until the contact, and moves after it (tap pushes the ball
+        # away, grasp carries the box off)
+        b0, c0 = g.block[0], g.contact[0]
         assert np.abs(sc.object_xyz[b0:c0] - sc.object_xyz[b0]).max() < 1e-12
         moved = np.linalg.norm(sc.object_xyz[g.block[1] - 1, :2] - sc.object_xyz[b0, :2])
-        assert moved > 0.05  # tap pushes the ball away, grasp carries the box off
+        assert moved > 0.05
+
+
+def test_gestures_chained_after_a_short_rest_still_get_their_object() -> None:
+    """Here the hand does not settle between gestures: the segmenter starts the next gestures
+    up to 1.5 s before the hand moves, before the switch a long rest would get."""
+    sc = simulate_scene(
+        parse_scene("touch:yellow:box:big,tap:yellow:box:small,tap:green2:box:big"), 1008
+    )
+    windows = dict(_windows(sc))
+    early = [
+        k
+        for k in range(1, 3)
+        if windows[k][0] / sc.camera_fps < sc.gestures[k].bounds.start / 30 - 0.5
+    ]
+    assert early, "the scene no longer has a gesture found early; pick another"
+    _check_windows(sc)
+
+
+def test_overlapping_windows_get_an_empty_table_between_objects() -> None:
+    """If the segmenter ends one gesture after the next one's window opens, the old object goes
+    first, the table stays empty longer than the tracker keeps a lost object, and the new one is
+    on the table before that window opens."""
+    from cognition.scene import _blocks
+
+    sk = synthesize_continuous(["tap", "touch"], seed=3)
+    (a, b) = sk.gestures
+    cam_t = np.arange(int((sk.n_frames - 1) / 2) + 1) / 15
+    # as the segmenter might report them: the second starts where the first ends
+    detected = [(a.start, a.stop + 20), (a.stop + 20, b.stop)]
+    (f0, l0), (f1, l1) = _blocks(sk, cam_t, 15.0, detected)
+    assert f0 == 0 and l1 == len(cam_t)
+    opens = (a.stop + 20) / 30 - 0.3  # the second window
+    assert cam_t[f1] <= opens  # the new object is there when it opens
+    assert f1 - l0 >= 15 // 3 + 1  # empty for longer than the tracker's 5 missed frames
+    # without the overlap the swap is a plain switch, 0.5 s before the gesture (long rests)
+    (_, l0), (f1, _) = _blocks(sk, cam_t, 15.0, [(a.start, a.stop), (b.start, b.stop)])
+    assert l0 == f1 and abs(cam_t[f1] - (b.start / 30 - 0.5)) <= 1 / 15
 
 
 def test_hand_approaches_along_the_skeletons_own_track(demo_scene: Scene) -> None:
@@ -203,6 +271,36 @@ def test_file_layout_stamps_and_metadata(touch_file: Path) -> None:
     np.testing.assert_array_equal(cam - cam[0], np.rint(np.arange(len(cam)) * 1e9 / 15))
     assert frames_seen == list(range(1, len(sk) + 1))
     assert abs((sk[-1] - cam[-1]) / 1e9) < 1 / 15
+
+
+def test_robot_name_raw_frames_and_camera_rate(tmp_path: Path) -> None:
+    out = tmp_path / "raw.mcap"
+    spec = "touch:yellow:box:small"
+    args = ["simulate", spec, "-o", str(out), "--seed", "2", "--robot", "r2"]
+    assert main([*args, "--format", "raw", "--camera-fps", "10"]) == 0
+    keys = Keys("r2")
+    scene = simulate_scene(parse_scene(spec), 2, camera_fps=10)
+    rendered = scene.frames()
+    n = 0
+    for item in read_recording(out):
+        assert item.key in (keys.skeleton, keys.camera)
+        if item.key == keys.camera:
+            msg = item.message()
+            assert isinstance(msg, CameraFrame) and msg.encoding == "rgb8"
+            assert msg.header.stamp == EPOCH_NS + round(n * 1e9 / 10)
+            # raw frames are the rendered ones, bit for bit
+            assert np.array_equal(image_from_message(msg), next(rendered))
+            n += 1
+    assert n == scene.n_camera_frames == int((scene.n_skeleton_frames - 1) / 3) + 1
+
+
+def test_check_needs_a_simulated_recording(tmp_path: Path) -> None:
+    path = tmp_path / "plain.mcap"
+    header = Header(version=SkeletonFrame.VERSION, source="t", seq=0, stamp=1)
+    with RecordingWriter(path) as writer:
+        writer.write(Keys().skeleton, SkeletonFrame(header=header, frame=1, joints={}))
+    with pytest.raises(InputError, match="no scene truth"):
+        check_recording(path)
 
 
 def test_a_standard_mcap_reader_decodes_it(touch_file: Path) -> None:
