@@ -11,7 +11,7 @@ import pytest
 from mcap.reader import make_reader
 
 from beyond.cli import main
-from beyond.commands.simulate import check_recording, checks_pass, encode_jpeg
+from beyond.commands.simulate import check_recording, checks_pass
 from cognition.errors import InputError
 from cognition.gestures.segmentation import segment_gestures
 from cognition.gestures.synthetic import synthesize_continuous
@@ -25,9 +25,9 @@ from cognition.scene import (
     simulate_scene,
 )
 from cognition.vision.tabletop import kinect_to_table
-from runtime.images import image_from_message
+from runtime.images import image_from_message, message_from_image
 from runtime.recording import RecordingWriter, inspect_recording, read_recording
-from schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame, Time
+from schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame
 from schemas.keys import Keys
 
 
@@ -329,15 +329,7 @@ def test_jpeg_frames_decode_close_to_the_rendered_ones() -> None:
     for _ in range(30):
         img = next(frames)
     header = Header(version=CompressedCameraFrame.VERSION, source="t", seq=0, stamp=5)
-    msg = CompressedCameraFrame(
-        header=header,
-        timestamp=Time.from_ns(5),
-        frame_id="camera",
-        format="jpeg",
-        data=encode_jpeg(img, 80),
-        width=320,
-        height=240,
-    )
+    msg = message_from_image(header, img, fmt="jpeg", quality=80)
     back = image_from_message(msg)
     assert back.shape == img.shape == (240, 320, 3)
     err = np.abs(back.astype(int) - img.astype(int))
@@ -392,10 +384,6 @@ def test_every_gesture_is_found_recognised_and_its_object_read(seed: int) -> Non
 
 def _jpeg(img: np.ndarray) -> CompressedCameraFrame:
     header = Header(version=CompressedCameraFrame.VERSION, source="t", seq=0, stamp=0)
-    return CompressedCameraFrame(
-        header=header,
-        timestamp=Time.from_ns(0),
-        frame_id="camera",
-        format="jpeg",
-        data=encode_jpeg(img, 80),
-    )
+    msg = message_from_image(header, img, fmt="jpeg", quality=80)
+    assert isinstance(msg, CompressedCameraFrame)
+    return msg

@@ -14,7 +14,6 @@ each gesture's camera window), printing one line per gesture against the truth.
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import sys
 from collections.abc import Iterator
@@ -40,7 +39,7 @@ from cognition.scene import (
 )
 from runtime.images import image_from_message, message_from_image
 from runtime.recording import RecordingWriter, inspect_recording, read_recording
-from schemas import CameraFrame, CompressedCameraFrame, Header, Joint, SkeletonFrame, Time
+from schemas import CameraFrame, CompressedCameraFrame, Header, Joint, SkeletonFrame
 from schemas.keys import DEFAULT_ROBOT, Keys
 
 HELP = "write a seeded synthetic recording (skeleton + tabletop camera) of a scene to MCAP"
@@ -191,31 +190,7 @@ def _camera(
     header = Header(
         version=cls.VERSION, source=SOURCE, seq=n, stamp=stamp, correlation=f"{SOURCE}/camera/{n}"
     )
-    if fmt != "jpeg":
-        return message_from_image(header, image, fmt=fmt)
-    return CompressedCameraFrame(
-        header=header,
-        timestamp=Time.from_ns(stamp),
-        frame_id=FRAME_ID,
-        format="jpeg",
-        data=encode_jpeg(image, quality),
-        width=int(image.shape[1]),
-        height=int(image.shape[0]),
-    )
-
-
-def encode_jpeg(image: np.ndarray, quality: int) -> bytes:
-    """JPEG with full-resolution colour (4:4:4). The usual 4:2:0 chroma subsampling (what
-    `runtime.images.message_from_image` writes) smears the colour edges of a 14 px object enough
-    that the segmenter reads about a quarter of small boxes as circles; 4:4:4 at quality 80 is
-    about as small as 4:2:0 at 85 and reads them all right."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8), "RGB").save(
-        buf, format="JPEG", quality=quality, subsampling=0, optimize=False
-    )
-    return buf.getvalue()
+    return message_from_image(header, image, fmt=fmt, quality=quality, frame_id=FRAME_ID)
 
 
 # ---------------------------------------------------------------- --check
