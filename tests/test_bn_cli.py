@@ -129,7 +129,7 @@ def test_demo_runs_offline(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("BEYOND_DATA", "/nonexistent")
-    assert main(["demo"]) == 0
+    assert main(["demo", "--network"]) == 0
     out = " ".join(capsys.readouterr().out.split())  # undo rich's line wrapping
     assert "P(Action | effects)" in out
     assert "P(ObjVel | Shape, Action=tap)" in out

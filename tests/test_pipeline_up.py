@@ -100,3 +100,25 @@ async def test_a_killed_service_restarts_and_is_picked_up() -> None:
     assert processes[0].process.returncode == -signal.SIGKILL
     assert processes[1].process.returncode == 0
     await asyncio.sleep(0)
+
+
+@pytest.mark.slow
+def test_demo_watches_the_bundled_recording_and_describes_it(tmp_path: Path) -> None:
+    """`make demo`'s job, on a private bus: the tapped ball and the grasped box, in words."""
+    env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}
+    cmd = [sys.executable, "-m", "beyond", "demo", "--no-live"]
+    done = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150)
+    assert done.returncode == 0, done.stdout + done.stderr[-3000:]
+    described = dict(re.findall(r'^gesture (\d+): "(.*)"$', done.stdout, re.M))
+    assert set(described) == {"1", "2"}, done.stdout
+    assert re.search(VERBS["tap"], described["1"]) and re.search(
+        r"\b(ball|sphere)\b", described["1"]
+    )
+    assert re.search(VERBS["grasp"], described["2"])
+    assert re.search(r"\b(box|cube|square)\b", described["2"])
+    # the effect of the tap is anticipated while the gesture unfolds
+    anticipated = re.findall(
+        r"^gesture 1: anticipates ObjVel=(\w+) .* at frame (\d+)", done.stdout, re.M
+    )
+    ended = int(re.findall(r"^gesture 1: ended at frame (\d+)", done.stdout, re.M)[0])
+    assert anticipated and anticipated[-1][0] == "fast" and int(anticipated[-1][1]) < ended

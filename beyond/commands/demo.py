@@ -1,6 +1,10 @@
-"""`beyond demo`: the most complete thing the project does so far, end to end and offline.
+"""`beyond demo`: the main job. By default the full pipeline: every service in its own process,
+Zenoh peers on loopback, replaying the bundled recording of a human tapping a ball and grasping a
+box, printing the recognised actions, the anticipated effects and the descriptions (this is
+`beyond up` on `recordings/tap-ball-grasp-box.mcap`).
 
-It learns the Affordance–Words network from the bundled synthetic robot-exploration data set
+With --network it instead takes a tour of the science alone, with no bus: it learns the
+Affordance–Words network from the bundled synthetic robot-exploration data set
 (structure by K2/BIC, parameters by counting) and asks it the article's kinds of questions: which
 action explains the observed effects, what an action will do to an object, how a gesture
 recogniser's uncertain opinion (soft evidence) changes that, and which words describe a scene.
@@ -19,11 +23,26 @@ from rich.table import Table
 from cognition.bn.model import BayesNet, learn_network
 from cognition.bn.synthetic import synthetic_dataset
 
-HELP = "learn the affordance–words network from the bundled data and answer a few questions"
+HELP = "the full pipeline on the bundled recording (--network: a tour of the network alone)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--top", type=int, default=8, help="how many words to list (default 8)")
+    parser.add_argument(
+        "--network", action="store_true", help="tour the affordance–words network, no bus"
+    )
+    parser.add_argument("--top", type=int, default=8, help="with --network: words to list")
+    parser.add_argument("--no-live", action="store_true", help="event lines only, no live view")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.network:
+        return network_tour(args)
+    from beyond.commands import up
+
+    parser = argparse.ArgumentParser(prog="beyond demo")
+    up.add_arguments(parser)
+    argv = ["--recording", str(up.DEMO_RECORDING), *(["--no-live"] if args.no_live else [])]
+    return up.run(parser.parse_args(argv))
 
 
 def _given(evidence: Mapping[str, str], soft: Mapping[str, Sequence[float]] | None = None) -> str:
@@ -49,7 +68,7 @@ def _distribution_table(
     return table
 
 
-def run(args: argparse.Namespace) -> int:
+def network_tour(args: argparse.Namespace) -> int:
     console = Console()
     start = time.perf_counter()
     dataset = synthetic_dataset()
