@@ -19,10 +19,10 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from beyond.commands.evidence_args import add_evidence_arguments, resolve_evidence
+from beyond.commands.terminal import progress_bar
 from cognition.bn.bag import load_bag
 from cognition.bn.definition import load_definition
 from cognition.bn.model import BayesNet, learn_network, load_model, save_model
@@ -98,14 +98,7 @@ def _learn(args: argparse.Namespace) -> int:
     if args.max_parents < 0:
         raise InputError(f"--max-parents must be >= 0; got {args.max_parents}")
     start = time.perf_counter()
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=False,
-    ) as progress:
+    with progress_bar(console, transient=False) as progress:
         reading = progress.add_task("reading data", total=2)
         definition = load_definition(network)
         progress.advance(reading)

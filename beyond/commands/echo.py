@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import signal
 import sys
 
+from beyond.commands.terminal import stop_on_signals
 from runtime.bus import Bus, decode_any
 from runtime.cliargs import add_bus_arguments, config_from_args
 from schemas.codec import SchemaError, to_json
@@ -26,10 +26,8 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
 
     async def go() -> int:
-        stop = asyncio.Event()
+        stop = stop_on_signals()
         loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
         shown = 0
         deadline = None if args.duration is None else loop.time() + args.duration
         with Bus.open(config) as bus:

@@ -25,9 +25,10 @@ from typing import Any
 
 import numpy as np
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import Progress
 from rich.table import Table
 
+from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 from cognition.gestures.datasets import (
     SYNTHETIC,
@@ -47,14 +48,7 @@ EVAL_SEED = 1  # evaluate's synthetic default: held-out gestures, never seen by 
 
 
 def _progress(console: Console) -> Progress:
-    return Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    )
+    return progress_bar(console)
 
 
 def _training_args(p: argparse.ArgumentParser) -> None:

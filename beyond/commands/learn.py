@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 
 HELP = "learn gesture models from human demonstrations labelled by the affordance network"
@@ -99,14 +99,7 @@ def run(args: argparse.Namespace) -> int:
     )
     console = Console(stderr=True)
     start = time.perf_counter()
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    ) as progress:
+    with progress_bar(console) as progress:
         task = progress.add_task("starting", total=plan_units(config))
 
         def report(what: str, units: int) -> None:

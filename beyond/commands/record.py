@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import signal
 import sys
 
+from beyond.commands.terminal import stop_on_signals
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.log import setup_logging
@@ -36,10 +36,7 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
 
     async def go() -> int:
-        stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
+        stop = stop_on_signals()
         with Bus.open(config) as bus:
             keys = args.keys or [bus.keys.everything]
             print(f"recording {', '.join(keys)} -> {args.output}", file=sys.stderr, flush=True)

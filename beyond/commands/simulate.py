@@ -22,8 +22,8 @@ from typing import TextIO
 
 import numpy as np
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 from cognition.scene import (
     CAMERA_FPS_RANGE,
@@ -90,14 +90,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"output folder {out.parent} does not exist")
     scene = simulate_scene(items, seed=args.seed, camera_fps=args.camera_fps)
     console = Console(stderr=True)
-    progress = Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    )
+    progress = progress_bar(console)
     metadata = {
         "generator": "beyond simulate",
         "scene": args.scene,
