@@ -142,6 +142,109 @@ class RecordingAnalysis:
     n_objects: int
 
 
+class RecordingAnalyser:
+    """`analyse_frames` one frame at a time, for a service that sees frames as they arrive: the
+    per-frame work (segmentation, tracking, contact) happens in `push`, so `finish` at the end of
+    a gesture only summarises. The table model comes from the first frame pushed unless given."""
+
+    def __init__(
+        self,
+        fps: float,
+        clusters: ClusterModel | None = None,
+        camera: Camera | None = None,
+        background: BackgroundModel | None = None,
+        params: SegmentParams | None = None,
+        gate_px: float | None = None,
+    ) -> None:
+        if fps <= 0:
+            raise InputError(f"fps {fps} must be positive")
+        self.fps = fps
+        self.clusters = clusters
+        self.camera = camera
+        self.background = background
+        self.params = params
+        self.gate_px = gate_px
+        self.frames = 0
+        self._shape: tuple[int, ...] | None = None
+        self._tracker: Tracker | None = None
+        self._hand_frames: list[int] = []
+        self._hand_pos: list[tuple[float, float]] = []
+        self._hand_heights: list[float] = []
+        self._touching: dict[int, list[int]] = {}
+        self._first_blobs: dict[int, ObjectFeatures] = {}
+
+    def push(
+        self,
+        frame: np.ndarray,
+        hand_px: tuple[float, float] | None = None,
+        hand_height_m: float = ASSUMED_HAND_HEIGHT_M,
+    ) -> None:
+        """Add the next frame; `hand_px` from the skeleton if known, else the hand blob is used."""
+        k = self.frames
+        img = as_frame(frame, name=f"frame {k}")
+        if self._shape is None:
+            self._shape = img.shape
+            self.camera = self.camera or Camera(width=img.shape[1], height=img.shape[0])
+            self.background = self.background or BackgroundModel.from_frame(img)
+            gate = self.gate_px or 0.08 * self.camera.width
+            self._tracker = Tracker(gate_px=gate, max_missed=int(self.fps // 3))
+        elif img.shape != self._shape:
+            raise InputError(
+                f"frame {k} is {img.shape[1]}x{img.shape[0]}, "
+                f"frame 0 {self._shape[1]}x{self._shape[0]}"
+            )
+        if not np.isfinite(hand_height_m):
+            raise InputError(f"hand height of frame {k} is not finite")
+        assert self._tracker is not None and self.camera is not None
+        seg = segment(img, self.background, self.params, hand_px=hand_px)
+        cents = [b.centroid() for b in seg.objects]
+        ids = self._tracker.update(k, cents, [b.area for b in seg.objects])
+        for tid, blob in zip(ids, seg.objects, strict=True):
+            if k == 0:
+                self._first_blobs[tid] = measure_blob(img, blob, self.camera)
+            if seg.touching(blob):
+                self._touching.setdefault(tid, []).append(k)
+        hand = hand_px if hand_px is not None else (seg.hand.centroid() if seg.hand else None)
+        if hand is not None:
+            self._hand_frames.append(k)
+            self._hand_pos.append(hand)
+            self._hand_heights.append(hand_height_m)
+        self.frames += 1
+
+    def finish(self) -> RecordingAnalysis:
+        """Which object was acted on, its features, the effects."""
+        if self.frames == 0:
+            raise InputError("the recording has no frames; valid: one or more camera frames")
+        if not self._first_blobs:
+            raise InputError("no objects found in the first frame of the recording")
+        assert self._tracker is not None and self.camera is not None
+        first, touching = self._first_blobs, self._touching
+        # the acted-on object: the first-frame object touched longest, else the biggest
+        target = max(first, key=lambda t: (len(touching.get(t, [])), first[t].area))
+        of, op = self._tracker.track(target).as_arrays()
+        flags = np.zeros(self.frames, dtype=bool)
+        flags[touching.get(target, [])] = True
+        hf = np.asarray(self._hand_frames, dtype=np.int64)
+        hpos = np.asarray(self._hand_pos, dtype=np.float64).reshape(-1, 2)
+        obj_m = self.camera.table_point(op, 0.0)
+        heights = np.asarray(self._hand_heights, dtype=np.float64)
+        hand_m = self.camera.table_point(hpos, heights) if len(hf) else hpos
+        eff = measure_effects(of, obj_m, self.fps, hf, hand_m, flags)
+        labels: dict[str, str] = {}
+        if self.clusters is not None:
+            labels.update(label_object(first[target], self.clusters)[0])
+            labels.update(eff.labels(self.clusters))
+        return RecordingAnalysis(
+            features=first[target],
+            effects=eff,
+            labels=labels,
+            object_track=(of, op),
+            hand_track=(hf, hpos),
+            contact_flags=flags,
+            n_objects=len(first),
+        )
+
+
 def analyse_frames(
     frames: Sequence[np.ndarray] | np.ndarray,
     fps: float,
@@ -161,12 +264,6 @@ def analyse_frames(
     its pixels into metres."""
     if len(frames) == 0:
         raise InputError("the recording has no frames; valid: one or more camera frames")
-    if fps <= 0:
-        raise InputError(f"fps {fps} must be positive")
-    first = as_frame(frames[0], name="frame 0")
-    shape = first.shape
-    cam = camera or Camera(width=shape[1], height=shape[0])
-    bg = background or BackgroundModel.from_frame(first)
     if hand_px is not None and len(hand_px) != len(frames):
         raise InputError(f"hand_px has {len(hand_px)} rows for {len(frames)} frames")
     heights = np.asarray(hand_height_m, dtype=np.float64)
@@ -174,60 +271,13 @@ def analyse_frames(
         heights = np.full(len(frames), float(heights))
     if heights.shape != (len(frames),) or not np.all(np.isfinite(heights)):
         raise InputError(f"hand_height_m must be one number or {len(frames)} finite values")
-    tracker = Tracker(gate_px=gate_px or 0.08 * cam.width, max_missed=int(fps // 3))
-    hand_frames: list[int] = []
-    hand_pos: list[tuple[float, float]] = []
-    touching: dict[int, list[int]] = {}
-    first_blobs: dict[int, ObjectFeatures] = {}
+    analyser = RecordingAnalyser(fps, clusters, camera, background, params, gate_px)
     for k, frame in enumerate(frames):
-        img = as_frame(frame, name=f"frame {k}")
-        if img.shape != shape:
-            raise InputError(
-                f"frame {k} is {img.shape[1]}x{img.shape[0]}, frame 0 {shape[1]}x{shape[0]}"
-            )
         hp = None
         if hand_px is not None and np.all(np.isfinite(hand_px[k])):
             hp = (float(hand_px[k][0]), float(hand_px[k][1]))
-        seg = segment(img, bg, params, hand_px=hp)
-        cents = [b.centroid() for b in seg.objects]
-        ids = tracker.update(k, cents, [b.area for b in seg.objects])
-        for tid, blob in zip(ids, seg.objects, strict=True):
-            if k == 0:
-                first_blobs[tid] = measure_blob(img, blob, cam)
-            if seg.touching(blob):
-                touching.setdefault(tid, []).append(k)
-        if hp is not None:
-            hand_frames.append(k)
-            hand_pos.append(hp)
-        elif seg.hand is not None:
-            hand_frames.append(k)
-            hand_pos.append(seg.hand.centroid())
-    if not first_blobs:
-        raise InputError("no objects found in the first frame of the recording")
-    # the acted-on object: the first-frame object touched longest, else the biggest
-    target = max(first_blobs, key=lambda t: (len(touching.get(t, [])), first_blobs[t].area))
-    track = tracker.track(target)
-    of, op = track.as_arrays()
-    flags = np.zeros(len(frames), dtype=bool)
-    flags[touching.get(target, [])] = True
-    hf = np.asarray(hand_frames, dtype=np.int64)
-    hpos = np.asarray(hand_pos, dtype=np.float64).reshape(-1, 2)
-    obj_m = cam.table_point(op, 0.0)
-    hand_m = cam.table_point(hpos, heights[hf]) if len(hf) else hpos
-    eff = measure_effects(of, obj_m, fps, hf, hand_m, flags)
-    labels: dict[str, str] = {}
-    if clusters is not None:
-        labels.update(label_object(first_blobs[target], clusters)[0])
-        labels.update(eff.labels(clusters))
-    return RecordingAnalysis(
-        features=first_blobs[target],
-        effects=eff,
-        labels=labels,
-        object_track=(of, op),
-        hand_track=(hf, hpos),
-        contact_flags=flags,
-        n_objects=len(first_blobs),
-    )
+        analyser.push(frame, hp, float(heights[k]))
+    return analyser.finish()
 
 
 def analyse_experiment(
