@@ -211,23 +211,30 @@ class RecordingAnalyser:
             self._hand_heights.append(hand_height_m)
         self.frames += 1
 
-    def finish(self) -> RecordingAnalysis:
-        """Which object was acted on, its features, the effects."""
-        if self.frames == 0:
+    def finish(self, frames: int | None = None) -> RecordingAnalysis:
+        """Which object was acted on, its features, the effects, over the first `frames` frames
+        pushed (all by default): everything per frame is causal, so analysing a prefix gives what
+        `analyse_frames` on those frames alone gives, whatever was pushed after them."""
+        n = self.frames if frames is None else min(frames, self.frames)
+        if n <= 0:
             raise InputError("the recording has no frames; valid: one or more camera frames")
         if not self._first_blobs:
             raise InputError("no objects found in the first frame of the recording")
         assert self._tracker is not None and self.camera is not None
-        first, touching = self._first_blobs, self._touching
+        first = self._first_blobs
+        touching = {t: [k for k in ks if k < n] for t, ks in self._touching.items()}
         # the acted-on object: the first-frame object touched longest, else the biggest
         target = max(first, key=lambda t: (len(touching.get(t, [])), first[t].area))
         of, op = self._tracker.track(target).as_arrays()
-        flags = np.zeros(self.frames, dtype=bool)
+        op = op[of < n]
+        of = of[of < n]
+        flags = np.zeros(n, dtype=bool)
         flags[touching.get(target, [])] = True
-        hf = np.asarray(self._hand_frames, dtype=np.int64)
-        hpos = np.asarray(self._hand_pos, dtype=np.float64).reshape(-1, 2)
+        hand_kept = [i for i, k in enumerate(self._hand_frames) if k < n]
+        hf = np.asarray([self._hand_frames[i] for i in hand_kept], dtype=np.int64)
+        hpos = np.asarray([self._hand_pos[i] for i in hand_kept], dtype=np.float64).reshape(-1, 2)
         obj_m = self.camera.table_point(op, 0.0)
-        heights = np.asarray(self._hand_heights, dtype=np.float64)
+        heights = np.asarray([self._hand_heights[i] for i in hand_kept], dtype=np.float64)
         hand_m = self.camera.table_point(hpos, heights) if len(hf) else hpos
         eff = measure_effects(of, obj_m, self.fps, hf, hand_m, flags)
         labels: dict[str, str] = {}
