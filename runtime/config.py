@@ -9,6 +9,9 @@ holding the rendezvous port exits, another one takes it over and newcomers still
 
 Multi-host: run `beyond router` on one machine and set BEYOND_ZENOH_MODE=client (or peer) with
 BEYOND_ZENOH_CONNECT=tcp/<router-host>:7447 on the others, or pass a full Zenoh JSON5 config file.
+BEYOND_ZENOH_ROUTER=tcp/<router-host>:7447 instead *adds* the router to the endpoints the mode or
+the config file connects to, so a machine's processes stay one local peer group (their traffic
+stays local) that is also linked to the router (deploy/ uses this).
 
 Precedence: built-in defaults < config file (BEYOND_ZENOH_CONFIG) < environment < arguments.
 """
@@ -28,6 +31,7 @@ from schemas.keys import DEFAULT_ROBOT, check_name
 MODES = ("peer", "client", "router")
 DEFAULT_PORT = 7448  # rendezvous port of the default local group (7447 is Zenoh's router port)
 ROUTER_LISTEN = "tcp/[::]:7447"
+OPEN_WAIT_MS = 100  # open() waits this long to connect, then keeps retrying in the background
 
 ENV_VARS: dict[str, str] = {
     "BEYOND_ROBOT": "robot name, the second chunk of every key (default 'robot')",
@@ -36,6 +40,8 @@ ENV_VARS: dict[str, str] = {
     "BEYOND_ZENOH_CONNECT": "comma-separated endpoints to connect to, e.g. tcp/10.0.0.2:7447",
     "BEYOND_ZENOH_LISTEN": "comma-separated endpoints to listen on, e.g. tcp/0.0.0.0:7447",
     "BEYOND_ZENOH_PORT": f"rendezvous port of the default local group (default {DEFAULT_PORT})",
+    "BEYOND_ZENOH_ROUTER": "comma-separated router endpoints connected to in addition to the "
+    "mode's or config file's, e.g. tcp/10.0.0.2:7447",
 }
 
 
@@ -50,6 +56,7 @@ class BusConfig:
     port: int = DEFAULT_PORT
     config_file: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict)  # zenoh config path -> JSON value
+    routers: tuple[str, ...] = ()  # connected to in addition to the mode's or file's endpoints
 
     def __post_init__(self) -> None:
         check_name("robot", self.robot)
@@ -73,9 +80,12 @@ class BusConfig:
             listen, connect = [ROUTER_LISTEN], []
         if self.config_file is not None:  # the file decides unless overridden explicitly
             listen, connect = [], []
+        connect = list(self.connect) if self.connect is not None else connect
+        if self.mode == "client" and self.routers and self.connect is None:
+            connect = []  # a client's default is a router on this machine: the routers replace it
         return (
             list(self.listen) if self.listen is not None else listen,
-            list(self.connect) if self.connect is not None else connect,
+            connect + [r for r in self.routers if r not in connect],
         )
 
 
@@ -92,6 +102,7 @@ def load_config(
     listen: list[str] | None = None,
     config_file: str | Path | None = None,
     port: int | None = None,
+    routers: list[str] | None = None,
 ) -> BusConfig:
     """The bus configuration from the environment, overridden by the given arguments."""
     env = os.environ if env is None else env
@@ -104,6 +115,7 @@ def load_config(
             raise InputError(f"BEYOND_ZENOH_PORT={port_text!r} is not a port number") from None
     env_connect = env.get("BEYOND_ZENOH_CONNECT")
     env_listen = env.get("BEYOND_ZENOH_LISTEN")
+    env_routers = env.get("BEYOND_ZENOH_ROUTER")
     path = Path(file) if file else None
     if path is not None and not path.is_file():
         raise InputError(f"Zenoh config file {path} does not exist")
@@ -114,6 +126,7 @@ def load_config(
         listen=tuple(listen) if listen else (_split(env_listen) if env_listen else None),
         port=port or DEFAULT_PORT,
         config_file=path,
+        routers=tuple(routers) if routers else (_split(env_routers) if env_routers else ()),
     )
 
 
@@ -129,9 +142,12 @@ def zenoh_config(config: BusConfig) -> Any:
     if config.config_file is None:
         sets["scouting/multicast/enabled"] = False
         # Do not block open() on endpoints; retry quickly so a restarted rendezvous peer or
-        # router is found again within about a second.
+        # router is found again within about a second. The connect timeout must not be 0:
+        # zenoh 1.10 then never retries an endpoint that failed at open() (a router started
+        # later would never be reached). The listen timeout stays 0: a listen retry still
+        # pending makes session.close() hang until its own timeout.
         retry = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
-        sets["connect/timeout_ms"] = 0
+        sets["connect/timeout_ms"] = OPEN_WAIT_MS
         sets["connect/retry"] = retry
         sets["connect/exit_on_failure"] = False
         if config.mode == "peer":
@@ -140,6 +156,9 @@ def zenoh_config(config: BusConfig) -> Any:
             sets["listen/exit_on_failure"] = False
     if listen or config.listen is not None:
         sets["listen/endpoints"] = listen
+    if config.config_file is not None and config.connect is None and config.routers:
+        listed = _file_endpoints(zc, "connect/endpoints")
+        connect = listed + [r for r in config.routers if r not in listed]
     if connect or config.connect is not None:
         sets["connect/endpoints"] = connect
     sets.update(config.extra)
@@ -149,6 +168,18 @@ def zenoh_config(config: BusConfig) -> Any:
         except Exception as exc:  # zenoh raises its own ZError
             raise InputError(f"bad Zenoh setting {key}={value!r}: {exc}") from None
     return zc
+
+
+def _file_endpoints(zc: Any, path: str) -> list[str]:
+    """The endpoints a config file lists at `path` (a list, or a per-mode mapping)."""
+    try:
+        value = json.loads(zc.get_json(path))
+        mode = json.loads(zc.get_json("mode")) or "peer"
+    except Exception:
+        return []
+    if isinstance(value, dict):
+        value = value.get(mode) or []
+    return [str(v) for v in value] if isinstance(value, list) else []
 
 
 def describe(config: BusConfig) -> str:

@@ -20,13 +20,20 @@ import logging
 import signal
 import time
 from collections.abc import Awaitable, Callable
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar, overload
 
 from cognition.errors import InputError
 from runtime.bus import Bus, Publisher, Subscription
 from runtime.clock import Clock
 from runtime.config import BusConfig, load_config
 from runtime.log import event, setup_logging
+from runtime.reliable import (
+    RecoveryPolicy,
+    ReliablePublisher,
+    ReliableSubscription,
+    reliable_publisher,
+    reliable_subscription,
+)
 from schemas.base import Header, Message
 from schemas.codec import SchemaError
 from schemas.keys import check_name
@@ -62,8 +69,11 @@ class Service:
         self.log = logging.getLogger(f"beyond.{self.name}")
         self.started = asyncio.Event()
         self._stop = asyncio.Event()
-        self._subscriptions: list[tuple[Subscription[Any], Handler[Any]]] = []
-        self._publishers: list[Publisher[Any]] = []
+        self._subscriptions: list[
+            tuple[Subscription[Any] | ReliableSubscription[Any], Handler[Any]]
+        ] = []
+        self._publishers: list[Publisher[Any] | ReliablePublisher[Any]] = []
+        self._recovery_reported: tuple[int, int] = (0, 0)
         self._tasks: list[asyncio.Task[None]] = []
         self._seen_reasons: set[tuple[str, str]] = set()
         self._seq = 0
@@ -87,18 +97,73 @@ class Service:
             raise RuntimeError("the bus is open only while the service runs")
         return self._bus
 
+    @overload
     def subscribe(
-        self, key: str, cls: type[M], handler: Handler[M], *, maxsize: int = 1024
-    ) -> Subscription[M]:
-        """Call `handler(message)` for every well-formed `cls` message on `key`."""
-        sub = self.bus.subscribe(key, cls, maxsize=maxsize, on_malformed=self._malformed)
+        self,
+        key: str,
+        cls: type[M],
+        handler: Handler[M],
+        *,
+        maxsize: int = ...,
+        recover: Literal[False] = ...,
+    ) -> Subscription[M]: ...
+
+    @overload
+    def subscribe(
+        self,
+        key: str,
+        cls: type[M],
+        handler: Handler[M],
+        *,
+        maxsize: int = ...,
+        recover: Literal[True] | RecoveryPolicy,
+    ) -> ReliableSubscription[M]: ...
+
+    def subscribe(
+        self,
+        key: str,
+        cls: type[M],
+        handler: Handler[M],
+        *,
+        maxsize: int = 1024,
+        recover: bool | RecoveryPolicy = False,
+    ) -> Subscription[M] | ReliableSubscription[M]:
+        """Call `handler(message)` for every well-formed `cls` message on `key`. With `recover`,
+        messages lost while a link was down come back from the publishers' caches (in order,
+        once each; see runtime.reliable)."""
+        sub: Subscription[M] | ReliableSubscription[M]
+        if recover:
+            policy = recover if isinstance(recover, RecoveryPolicy) else None
+            sub = reliable_subscription(
+                self.bus, key, cls, maxsize=maxsize, on_malformed=self._malformed, policy=policy
+            )
+        else:
+            sub = self.bus.subscribe(key, cls, maxsize=maxsize, on_malformed=self._malformed)
         self._subscriptions.append((sub, handler))
         if self.started.is_set():
             self._tasks.append(asyncio.get_running_loop().create_task(self._consume(sub, handler)))
         return sub
 
-    def publisher(self, key: str, cls: type[M], *, reliable: bool = True) -> Publisher[M]:
-        pub = self.bus.publisher(key, cls, reliable=reliable)
+    @overload
+    def publisher(
+        self, key: str, cls: type[M], *, reliable: bool = ..., cache: None = ...
+    ) -> Publisher[M]: ...
+
+    @overload
+    def publisher(
+        self, key: str, cls: type[M], *, reliable: bool = ..., cache: int
+    ) -> ReliablePublisher[M]: ...
+
+    def publisher(
+        self, key: str, cls: type[M], *, reliable: bool = True, cache: int | None = None
+    ) -> Publisher[M] | ReliablePublisher[M]:
+        """A publisher; with `cache`, one that keeps its last `cache` messages for subscribers
+        that recover (`subscribe(..., recover=True)`) after a link failure or a late start."""
+        pub: Publisher[M] | ReliablePublisher[M]
+        if cache is not None:
+            pub = reliable_publisher(self.bus, key, cls, cache=cache, reliable=reliable)
+        else:
+            pub = self.bus.publisher(key, cls, reliable=reliable)
         self._publishers.append(pub)
         return pub
 
@@ -174,7 +239,9 @@ class Service:
                 "handler failed", exc_info=exc, extra={"fields": {"key": key, "service": self.name}}
             )
 
-    async def _consume(self, sub: Subscription[Any], handler: Handler[Any]) -> None:
+    async def _consume(
+        self, sub: Subscription[Any] | ReliableSubscription[Any], handler: Handler[Any]
+    ) -> None:
         async for received in sub:
             self.clock.observe(received.message.header.stamp)
             try:
@@ -190,7 +257,27 @@ class Service:
         pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, reliable=False)
         while True:
             pub.put(self.health())
+            self._report_recovery()
             await asyncio.sleep(self.health_period)
+
+    def recovery(self) -> tuple[int, int]:
+        """(recovered, missed): messages of recovering subscriptions that came from publisher
+        caches after a link failure or a late start, and those no cache held any more."""
+        subs = [s for s, _ in self._subscriptions if isinstance(s, ReliableSubscription)]
+        return sum(s.recovered for s in subs), sum(s.missed for s in subs)
+
+    def _report_recovery(self) -> None:
+        now = self.recovery()
+        if now != self._recovery_reported:
+            self._recovery_reported = now
+            event(
+                self.log,
+                logging.INFO,
+                "recovered messages from publisher caches",
+                service=self.name,
+                recovered=now[0],
+                missed=now[1],
+            )
 
     # --- lifecycle ------------------------------------------------------------------------
 
@@ -244,6 +331,7 @@ class Service:
             with contextlib.suppress(Exception):
                 await self.teardown()
             health = self.health()
+            recovered, missed = self.recovery()
             event(
                 self.log,
                 logging.INFO,
@@ -254,6 +342,8 @@ class Service:
                 malformed=health.malformed,
                 dropped=health.dropped,
                 errors=health.errors,
+                recovered=recovered,
+                missed=missed,
             )
             if self._owns_bus and self._bus is not None:
                 self._bus.close()
