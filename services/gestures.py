@@ -28,6 +28,7 @@ from cognition.gestures import (
     recognize_sequence,
 )
 from cognition.gestures.default_models import default_models
+from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
 from schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame
 
@@ -61,8 +62,8 @@ class GestureStreamer(Service):
         self.recognizer = StreamingRecognizer(self.gesture_models)
         self.segmenter = GestureSegmenter()
         keys = self.bus.keys
-        self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior)
-        self.segments = self.publisher(keys.gesture_segment, GestureSegment)
+        self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, cache=FRAME_CACHE)
+        self.segments = self.publisher(keys.gesture_segment, GestureSegment, cache=EVENT_CACHE)
         self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame)
 
     def features(self, frame: SkeletonFrame) -> np.ndarray:

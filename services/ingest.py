@@ -28,6 +28,7 @@ from cognition.gestures.logs import read_hand_log
 from runtime.bus import Publisher
 from runtime.images import message_from_image
 from runtime.recording import read_recording
+from runtime.reliable import EVENT_CACHE
 from runtime.service import Service
 from schemas import CameraFrame, CompressedCameraFrame, Joint, SkeletonFrame, StreamEnd
 from schemas.keys import with_robot
@@ -79,7 +80,7 @@ class SensorIngest(Service):
         self.skeleton = self.publisher(keys.skeleton, SkeletonFrame)
         self.camera = self.publisher(keys.camera, CameraFrame)
         self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame)
-        self.end = self.publisher(keys.stream_end, StreamEnd)
+        self.end = self.publisher(keys.stream_end, StreamEnd, cache=EVENT_CACHE)
         self._tasks.append(asyncio.get_running_loop().create_task(self._play()))
 
     async def _play(self) -> None:

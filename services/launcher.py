@@ -35,7 +35,7 @@ class ServiceProcess:
 def service_env(config: BusConfig, extra: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment that makes a child join `config`'s group."""
     env = dict(os.environ)
-    listen, connect = config.endpoints()
+    listen, _ = config.endpoints()
     env.update(
         BEYOND_ROBOT=config.robot,
         BEYOND_ZENOH_MODE=config.mode,
@@ -43,12 +43,18 @@ def service_env(config: BusConfig, extra: Mapping[str, str] | None = None) -> di
         BEYOND_LOG_FORMAT=env.get("BEYOND_LOG_FORMAT", "text"),
         PYTHONUNBUFFERED="1",
     )
+    # `config` is authoritative: what it leaves unset must not leak in from our own environment
+    for name in ("BEYOND_ZENOH_CONNECT", "BEYOND_ZENOH_LISTEN", "BEYOND_ZENOH_CONFIG"):
+        env.pop(name, None)
+    env.pop("BEYOND_ZENOH_ROUTER", None)
     if config.connect is not None:
-        env["BEYOND_ZENOH_CONNECT"] = ",".join(connect)
+        env["BEYOND_ZENOH_CONNECT"] = ",".join(config.connect)
     if config.listen is not None:
         env["BEYOND_ZENOH_LISTEN"] = ",".join(listen)
     if config.config_file is not None:
         env["BEYOND_ZENOH_CONFIG"] = str(config.config_file)
+    if config.routers:
+        env["BEYOND_ZENOH_ROUTER"] = ",".join(config.routers)
     env.update(extra or {})
     return env
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from runtime.bus import Bus, Subscription
+from runtime.reliable import ReliableSubscription, reliable_subscription
 from schemas import (
     ActionPosterior,
     AffordancePrediction,
@@ -86,10 +87,17 @@ class PipelineMonitor:
             (keys.health(), ServiceHealth, self.on_health),
         ]
         for key, cls, handler in subscriptions:
-            sub: Subscription[Any] = self.bus.subscribe(key, cls)
+            # derived streams may cross a link (robot <-> workstation): recover what it loses
+            sub: Subscription[Any] | ReliableSubscription[Any] = (
+                self.bus.subscribe(key, cls)
+                if cls is ServiceHealth
+                else reliable_subscription(self.bus, key, cls)
+            )
             self._tasks.append(loop.create_task(self._pump(sub, handler)))
 
-    async def _pump(self, sub: Subscription[Any], handler: Callable[[Any], None]) -> None:
+    async def _pump(
+        self, sub: Subscription[Any] | ReliableSubscription[Any], handler: Callable[[Any], None]
+    ) -> None:
         async for received in sub:
             handler(received.message)
             if not isinstance(received.message, ServiceHealth):

@@ -21,6 +21,7 @@ from cognition.errors import InputError
 from cognition.vision.clusters import ClusterModel
 from cognition.vision.pipeline import analyse_frames, describe_frame
 from runtime.images import CameraMessage, image_from_message
+from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
 from schemas import (
     CameraFrame,
@@ -68,11 +69,11 @@ class ObjectSegmenter(Service):
     async def setup(self) -> None:
         self.clusters = ClusterModel.load(self.clusters_path)
         keys = self.bus.keys
-        self.objects_out = self.publisher(keys.objects, DetectedObjects)
-        self.effects_out = self.publisher(keys.effects, ObjectEffects)
+        self.objects_out = self.publisher(keys.objects, DetectedObjects, cache=FRAME_CACHE)
+        self.effects_out = self.publisher(keys.effects, ObjectEffects, cache=EVENT_CACHE)
         self.subscribe(keys.camera, CameraFrame, self.on_camera)
         self.subscribe(keys.camera_compressed, CompressedCameraFrame, self.on_camera)
-        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment)
+        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, recover=True)
 
     def on_camera(self, msg: CameraMessage) -> None:
         image = image_from_message(msg)

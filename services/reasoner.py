@@ -19,6 +19,7 @@ from cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
 from cognition.errors import InputError, unknown
 from cognition.fusion import ACTION, action_vector, fuse, fuse_words
 from cognition.variables import EFFECTS, OBJECT_FEATURES
+from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
 from schemas import (
     ActionPosterior,
@@ -64,12 +65,12 @@ class AffordanceReasoner(Service):
             else learn_network(synthetic_dataset())
         )
         keys = self.bus.keys
-        self.predictions = self.publisher(keys.affordance, AffordancePrediction)
-        self.words_out = self.publisher(keys.words, WordProbabilities)
-        self.subscribe(keys.objects, DetectedObjects, self.on_objects)
-        self.subscribe(keys.gesture_posterior, ActionPosterior, self.on_posterior)
-        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment)
-        self.subscribe(keys.effects, ObjectEffects, self.on_effects)
+        self.predictions = self.publisher(keys.affordance, AffordancePrediction, cache=FRAME_CACHE)
+        self.words_out = self.publisher(keys.words, WordProbabilities, cache=EVENT_CACHE)
+        self.subscribe(keys.objects, DetectedObjects, self.on_objects, recover=True)
+        self.subscribe(keys.gesture_posterior, ActionPosterior, self.on_posterior, recover=True)
+        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, recover=True)
+        self.subscribe(keys.effects, ObjectEffects, self.on_effects, recover=True)
         self.bus.queryable(keys.ask, self.on_ask)
 
     # -- inputs ---------------------------------------------------------------------------

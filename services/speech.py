@@ -44,7 +44,7 @@ class SpeechSynthesizer(Service):
         self.out_dir.mkdir(parents=True, exist_ok=True)
         if self.espeak is None:
             event(self.log, logging.WARNING, "espeak-ng not found: printing descriptions instead")
-        self.subscribe(self.bus.keys.description, Description, self.on_description)
+        self.subscribe(self.bus.keys.description, Description, self.on_description, recover=True)
 
     def on_description(self, msg: Description) -> None:
         if not msg.final or not msg.sentences:

@@ -2,12 +2,22 @@
 
     beyond up [--recording FILE | --log DIR | --live-source module:function] [--config FILE]
               [--profile all|robot|workstation] [--rate R] [--no-live] [--timeout S]
+              [--wait-for NAME,...] [--until-stream-end] [bus options]
 
 Starts the services of the profile on the configured bus (default: Zenoh peers on loopback),
 waits for their liveliness, then starts the source. Service logs go to stderr with the service
 name; pipeline events (recognised action, anticipated effect, description) to stdout, and a live
 view when stdout is a terminal. With a recording or log it exits once every gesture has its
 final description (status 0) or after --timeout (status 1); Ctrl-C stops everything cleanly.
+
+Two machines (see README, Deployment): `--profile robot` (ingest, gestures, objects) and
+`--profile workstation` (reasoner, describer, speech) start one side each, against a router
+given with `--connect tcp/HOST:7447`. In peer mode the processes `up` starts stay one local peer
+group (their traffic stays on the machine) and that group is linked to the router. Either side
+may start first: the source waits only for this machine's services (plus `--wait-for`), and the
+cross-link streams are recovered from publisher caches when the other side joins late or a link
+fails. The workstation side runs until stopped, or with `--until-stream-end` until the robot's
+source has ended and every gesture it showed is described.
 """
 
 from __future__ import annotations
@@ -28,6 +38,7 @@ from cognition.paths import REPO_ROOT
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig
+from schemas.keys import check_name
 from services.launcher import ServiceProcess, service_env, start_service, stop_services
 from services.live_view import render
 from services.monitor import PipelineMonitor
@@ -36,6 +47,7 @@ from services.registry import PROFILES, service_class
 
 HELP = "start the pipeline's services as separate processes and watch them"
 DEMO_RECORDING = REPO_ROOT / "recordings" / "tap-ball-grasp-box.mcap"
+DEFAULT_TIMEOUT = 120.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -46,19 +58,66 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="YAML/JSON file with per-service options")
     parser.add_argument("--profile", choices=list(PROFILES), default="all")
     parser.add_argument(
+        "--skip",
+        action="append",
+        default=[],
+        metavar="SERVICE",
+        help="do not start this service (e.g. speech, when your own synthesizer replaces it)",
+    )
+    parser.add_argument(
         "--rate", type=float, default=1.0, help="replay speed (0: as fast as possible)"
     )
     parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
-    parser.add_argument("--timeout", type=float, default=120.0, help="give up after S seconds")
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        help=f"give up after S seconds (default {DEFAULT_TIMEOUT:.0f} with a source or "
+        "--until-stream-end, else run until stopped)",
+    )
+    parser.add_argument(
+        "--wait-for",
+        action="append",
+        default=[],
+        metavar="NAME[,NAME...]",
+        help="services elsewhere (e.g. the workstation's reasoner) the source waits for too",
+    )
+    parser.add_argument(
+        "--until-stream-end",
+        action="store_true",
+        help="exit once the (remote) source has ended and every gesture is described",
+    )
     add_bus_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    return asyncio.run(up(args, config_from_args(args)))
+    return asyncio.run(up(args, local_group(config_from_args(args))))
+
+
+def local_group(config: BusConfig) -> BusConfig:
+    """In peer mode, endpoints given to connect to are routers linked to this machine's group,
+    not a replacement of it: the services `up` starts keep meeting on loopback."""
+    if config.mode == "peer" and config.connect is not None:
+        return config.with_(connect=None, routers=config.routers + config.connect)
+    return config
+
+
+def monitor_name(profile: str) -> str:
+    """Liveliness name of `up`'s own monitor: one per side, so two sides never mistake each
+    other's monitor for their own."""
+    return "monitor" if profile == "all" else f"monitor-{profile}"
+
+
+def wait_list(values: list[str]) -> list[str]:
+    names = [n.strip() for v in values for n in v.split(",") if n.strip()]
+    for name in names:
+        check_name("service", name)
+    return names
 
 
 async def up(args: argparse.Namespace, config: BusConfig) -> int:
-    names = list(PROFILES[args.profile])
+    names = [n for n in PROFILES[args.profile] if n not in args.skip]
+    monitor = monitor_name(args.profile)
     file_options = load_options(args.config)
     options: dict[str, dict[str, Any]] = {n: dict(file_options.get(n, {})) for n in names}
     source = _source(args)
@@ -69,11 +128,17 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             finite = True
         options["ingest"].update(source)
         options["ingest"].setdefault("rate", args.rate)
-        options["ingest"]["wait_for"] = [n for n in names if n != "ingest"] + ["monitor"]
+        local = [n for n in names if n != "ingest"] + [monitor]
+        options["ingest"]["wait_for"] = local + wait_list(args.wait_for)
+    replayed = finite  # services follow the recording's clock
+    finite = finite or args.until_stream_end
+    timeout = args.timeout
+    if timeout is None and ("ingest" in names or finite):
+        timeout = DEFAULT_TIMEOUT
     for name in names:
         check_options(name, service_class(name), options[name])
     out = Console()
-    extra = {"BEYOND_CLOCK": "recording"} if finite else {}
+    extra = {"BEYOND_CLOCK": "recording"} if replayed else {}
     env = service_env(config, extra)
     processes: list[ServiceProcess] = []
     stop = asyncio.Event()
@@ -94,17 +159,18 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
 
     status = 1
     with Bus.open(config) as bus:
-        monitor = PipelineMonitor(bus, emit)
-        monitor.start()
-        token = bus.declare_token(bus.keys.alive("monitor"))
+        pipeline = PipelineMonitor(bus, emit)
+        pipeline.start()
+        token = bus.declare_token(bus.keys.alive(monitor))
         try:
             for name in names:  # the source last, once its consumers are up
                 if name != "ingest":
                     processes.append(
                         await start_service(name, env, options=options[name], sink=log_line)
                     )
-            others = [n for n in names if n != "ingest"]
-            await bus.wait_alive(bus.keys.alive("*"), count=len(others) + 1, timeout=60)
+            # by name: on a shared bus the other machine's services are alive too
+            for name in [n for n in names if n != "ingest"] + [monitor]:
+                await bus.wait_alive(bus.keys.alive(name), timeout=60)
             if "ingest" in names:
                 processes.append(
                     await start_service("ingest", env, options=options["ingest"], sink=log_line)
@@ -112,35 +178,35 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             emit(f"pipeline up: {', '.join(names)} on robot {config.robot!r}")
             use_live = out.is_terminal and not args.no_live
             if use_live:
-                live = Live(render(monitor, names), console=out, refresh_per_second=8)
+                live = Live(render(pipeline, names), console=out, refresh_per_second=8)
                 live.start()
-            deadline = loop.time() + args.timeout
+            deadline = None if timeout is None else loop.time() + timeout
             while not stop.is_set():
-                if finite and monitor.done():
+                if finite and pipeline.done():
                     status = 0
                     break
                 crashed = [p.name for p in processes if not p.running]
                 if crashed:
                     emit(f"service(s) exited early: {', '.join(crashed)}")
                     break
-                if loop.time() > deadline:
-                    emit(f"timed out after {args.timeout:.0f} s")
+                if deadline is not None and loop.time() > deadline:
+                    emit(f"timed out after {timeout:.0f} s")
                     break
-                monitor.changed.clear()
+                pipeline.changed.clear()
                 with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(monitor.changed.wait(), 0.25)
+                    await asyncio.wait_for(pipeline.changed.wait(), 0.25)
                 if live is not None:
-                    live.update(render(monitor, names))
+                    live.update(render(pipeline, names))
             else:
                 status = 0  # stopped by the user
         finally:
             if live is not None:
-                live.update(render(monitor, names))
+                live.update(render(pipeline, names))
                 live.stop()
             token()
-            monitor.stop()
+            pipeline.stop()
             codes = await stop_services(processes)
-    emit(monitor.summary())
+    emit(pipeline.summary())
     err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
     print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)
     failed = {n: c for n, c in codes.items() if c not in (0, -signal.SIGTERM)}
