@@ -19,7 +19,12 @@ import numpy as np
 
 from cognition.errors import InputError
 from cognition.vision.clusters import ClusterModel
-from cognition.vision.pipeline import analyse_frames, describe_frame
+from cognition.vision.pipeline import (
+    RecordingAnalyser,
+    RecordingAnalysis,
+    analyse_frames,
+    describe_frame,
+)
 from runtime.images import CameraMessage, image_from_message
 from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
@@ -64,6 +69,8 @@ class ObjectSegmenter(Service):
         self.fps = fps
         self.frames: deque[tuple[int, np.ndarray]] = deque(maxlen=buffer_frames)
         self.pending: dict[int, _Pending] = {}
+        # gestures under way: their analyser and the stamps of the frames pushed to it
+        self.analysers: dict[int, tuple[RecordingAnalyser, list[int]]] = {}
         self.frame_no = 0
 
     async def setup(self) -> None:
@@ -101,12 +108,34 @@ class ObjectSegmenter(Service):
         ]
         header = self.derive(msg.header, DetectedObjects)
         self.objects_out.put(DetectedObjects(header=header, frame=self.frame_no, objects=objects))
+        stamp = msg.header.stamp
+        for analyser, pushed in self.analysers.values():
+            if not pushed or stamp > pushed[-1]:
+                analyser.push(image)
+                pushed.append(stamp)
         for pending in list(self.pending.values()):
             if msg.header.stamp >= pending.end_stamp:
                 self.finish(pending)
 
+    def _fps(self) -> float:
+        if self.fps:
+            return self.fps
+        stamps = np.array([s for s, _ in self.frames][-16:], dtype=np.float64)
+        return float(1e9 / np.median(np.diff(stamps))) if len(stamps) > 2 else 15.0
+
     def on_segment(self, event: GestureSegment) -> None:
-        if event.event != "end" or event.end_stamp is None:
+        if event.event == "start":
+            # analyse frames as they come (from a little before the start), so that the end of
+            # the gesture only has to summarise: the description does not wait for vision
+            analyser = RecordingAnalyser(self._fps(), self.clusters)
+            pushed: list[int] = []
+            for stamp, image in self.frames:
+                if stamp >= event.start_stamp - self.lead_ns:
+                    analyser.push(image)
+                    pushed.append(stamp)
+            self.analysers[event.segment_id] = (analyser, pushed)
+            return
+        if event.end_stamp is None:
             return
         pending = _Pending(
             event.segment_id, event.start_stamp, event.end_stamp, event.header, event.frame
@@ -128,6 +157,13 @@ class ObjectSegmenter(Service):
 
     def finish(self, pending: _Pending) -> None:
         self.pending.pop(pending.segment_id, None)
+        running = self.analysers.pop(pending.segment_id, None)
+        if running is not None:
+            analyser, pushed = running
+            within = sum(1 for stamp in pushed if stamp <= pending.end_stamp)
+            if within >= 3:  # frames pushed after the end are left out: same as the batch form
+                self._publish_analysis(pending, analyser.finish(within))
+                return
         lo = pending.start_stamp - self.lead_ns
         window = [(s, img) for s, img in self.frames if lo <= s <= pending.end_stamp]
         if len(window) < 3:
@@ -139,7 +175,11 @@ class ObjectSegmenter(Service):
             )
         stamps = np.array([s for s, _ in window], dtype=np.float64)
         fps = self.fps or float(1e9 / np.median(np.diff(stamps)))
-        analysis = analyse_frames([img for _, img in window], fps, self.clusters)
+        self._publish_analysis(
+            pending, analyse_frames([img for _, img in window], fps, self.clusters)
+        )
+
+    def _publish_analysis(self, pending: _Pending, analysis: RecordingAnalysis) -> None:
         eff = analysis.effects
         contact_frames = int(analysis.contact_flags.sum())
         effect = ObjectEffect(
