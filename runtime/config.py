@@ -32,6 +32,8 @@ MODES = ("peer", "client", "router")
 DEFAULT_PORT = 7448  # rendezvous port of the default local group (7447 is Zenoh's router port)
 ROUTER_LISTEN = "tcp/[::]:7447"
 OPEN_WAIT_MS = 100  # open() waits this long to connect, then keeps retrying in the background
+CLIENT_WAIT_MS = 30_000  # a client's open() waits this long for a router, then fails
+LEASE_MS = 4000  # Zenoh's default is 10 s: too long for a robot on Wi-Fi (deploy/zenoh agrees)
 
 ENV_VARS: dict[str, str] = {
     "BEYOND_ROBOT": "robot name, the second chunk of every key (default 'robot')",
@@ -147,9 +149,15 @@ def zenoh_config(config: BusConfig) -> Any:
         # later would never be reached). The listen timeout stays 0: a listen retry still
         # pending makes session.close() hang until its own timeout.
         retry = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
-        sets["connect/timeout_ms"] = OPEN_WAIT_MS
+        # A client is nothing without its router: it waits for one (started later on the same
+        # machine, typically) rather than failing at once.
+        sets["connect/timeout_ms"] = CLIENT_WAIT_MS if config.mode == "client" else OPEN_WAIT_MS
         sets["connect/retry"] = retry
         sets["connect/exit_on_failure"] = False
+        # A link silent for 4 s is dead (keep-alive every second): sessions across a broken
+        # network close and reconnect quickly, and the recovering streams refill the gap.
+        sets["transport/link/tx/lease"] = LEASE_MS
+        sets["transport/link/tx/keep_alive"] = 4
         if config.mode == "peer":
             sets["listen/timeout_ms"] = 0
             sets["listen/retry"] = retry

@@ -80,7 +80,13 @@ def _handler(fn: Callable[[Any], None]) -> Any:
 
 class ReliablePublisher(Generic[M]):
     """Publishes messages of one type on one key, with a cache subscribers recover from.
-    Same interface as `runtime.bus.Publisher` (`put`, `put_bytes`, `sent`, `close`)."""
+    Same interface as `runtime.bus.Publisher` (`put`, `put_bytes`, `sent`, `close`).
+
+    It never blocks (congestion control DROP) unless `block`: the cache is what makes the stream
+    reliable. A dead link that Zenoh has not given up on yet fills its queue within seconds; a
+    blocking put would then stall the robot's own pipeline (the gesture streamer stops reading
+    skeleton frames) until the lease runs out. Dropped samples leave a gap in the sequence
+    numbers that subscribers fill from the cache."""
 
     def __init__(
         self,
@@ -89,7 +95,7 @@ class ReliablePublisher(Generic[M]):
         cls: type[M],
         *,
         cache: int = DEFAULT_CACHE,
-        reliable: bool = True,
+        block: bool = False,
         heartbeat_s: float = HEARTBEAT_S,
     ) -> None:
         if cache < 1:
@@ -100,15 +106,14 @@ class ReliablePublisher(Generic[M]):
         self.cls = cls
         self.cache = cache
         self.sent = 0
-        congestion = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+        congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self._pub = ext.declare_advanced_publisher(
             session,
             key,
             encoding=zenoh.Encoding(wire_encoding(cls)),
             congestion_control=congestion,
-            cache=ext.CacheConfig(
-                cache, replies_config=ext.RepliesConfig(congestion_control=congestion)
-            ),
+            # replies (recovery) keep zenoh's default: blocking, they are what must get through
+            cache=ext.CacheConfig(cache),
             sample_miss_detection=ext.MissDetectionConfig(
                 heartbeat=None, sporadic_heartbeat=heartbeat_s
             ),
@@ -261,10 +266,10 @@ class ReliableSubscription(Generic[M]):
 
 
 def reliable_publisher(
-    bus: Any, key: str, cls: type[M], *, cache: int = DEFAULT_CACHE, reliable: bool = True
+    bus: Any, key: str, cls: type[M], *, cache: int = DEFAULT_CACHE, block: bool = False
 ) -> ReliablePublisher[M]:
     """A cached publisher on `bus`'s session, closed with the bus."""
-    pub = ReliablePublisher(bus.session, key, cls, cache=cache, reliable=reliable)
+    pub = ReliablePublisher(bus.session, key, cls, cache=cache, block=block)
     _on_close(bus, pub.close)
     return pub
 

@@ -158,10 +158,12 @@ class Service:
         self, key: str, cls: type[M], *, reliable: bool = True, cache: int | None = None
     ) -> Publisher[M] | ReliablePublisher[M]:
         """A publisher; with `cache`, one that keeps its last `cache` messages for subscribers
-        that recover (`subscribe(..., recover=True)`) after a link failure or a late start."""
+        that recover (`subscribe(..., recover=True)`) after a link failure or a late start.
+        A cached publisher never blocks (`reliable` is ignored): what a congested or dead link
+        drops comes back from the cache (runtime.reliable.ReliablePublisher)."""
         pub: Publisher[M] | ReliablePublisher[M]
         if cache is not None:
-            pub = reliable_publisher(self.bus, key, cls, cache=cache, reliable=reliable)
+            pub = reliable_publisher(self.bus, key, cls, cache=cache)
         else:
             pub = self.bus.publisher(key, cls, reliable=reliable)
         self._publishers.append(pub)

@@ -13,7 +13,10 @@ final description (status 0) or after --timeout (status 1); Ctrl-C stops everyth
 Two machines (see README, Deployment): `--profile robot` (ingest, gestures, objects) and
 `--profile workstation` (reasoner, describer, speech) start one side each, against a router
 given with `--connect tcp/HOST:7447`. In peer mode the processes `up` starts stay one local peer
-group (their traffic stays on the machine) and that group is linked to the router. Either side
+group (their traffic stays on the machine) and that group is linked to the router. The
+workstation side joins as clients of its router unless a mode or config file says otherwise:
+zenoh 1.10 routers assume the peers connected to them reach each other directly, which peers on
+two machines' loopbacks cannot, so peers on both sides of one router would never meet. Either side
 may start first: the source waits only for this machine's services (plus `--wait-for`), and the
 cross-link streams are recovered from publisher caches when the other side joins late or a link
 fails. The workstation side runs until stopped, or with `--until-stream-end` until the robot's
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import os
 import signal
 import sys
 from pathlib import Path
@@ -91,7 +95,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return asyncio.run(up(args, local_group(config_from_args(args))))
+    config = config_from_args(args)
+    if args.profile == "workstation" and _mode_unset(args, config):
+        config = config.with_(mode="client")
+    return asyncio.run(up(args, local_group(config)))
+
+
+def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:
+    return (
+        getattr(args, "mode", None) is None
+        and not os.environ.get("BEYOND_ZENOH_MODE")
+        and config.config_file is None
+    )
 
 
 def local_group(config: BusConfig) -> BusConfig:
