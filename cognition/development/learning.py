@@ -14,9 +14,10 @@ turns a continuous weight into a crude integer and multiplies training time. Why
 keep everything: a wrong label does double damage (it pulls the wrong action's model towards the
 gesture and leaves the right one without it), while a dropped demonstration only costs data. In
 the default run (20 per action, seed 0) the network labels 95% of the watched demonstrations
-right; the rule keeps 52 of 60, all of them right (98.5–100% across the ablation). A floor (`min_per_action`) keeps every action trainable:
-when fewer demonstrations of one inferred action pass the threshold, the most confident ones
-labelled with it are kept anyway. The report gives label accuracy before and after the rule.
+right; the rule keeps 52 of 60, all of them right (98.5–100% across the ablation). A floor
+(`min_per_action`) keeps every action trainable: when fewer demonstrations of one inferred
+action pass the threshold, the most confident ones labelled with it are kept anyway. The report
+gives label accuracy before and after the rule.
 
 Word evidence: a heard sentence is a bag of words; every word node of the network gets soft
 evidence [P(heard | absent), P(heard | present)] = [ε, 1−ε] if the word was heard and
