@@ -17,6 +17,7 @@ from typing import Any
 from cognition.errors import InputError
 from runtime.bus import Bus
 from runtime.recording import RecordedMessage, RecordingInfo, read_recording
+from schemas.codec import encode_into, wire_encoding
 from schemas.keys import with_robot
 
 log = logging.getLogger("beyond.replay")
@@ -59,6 +60,7 @@ async def replay(
     event_loop = asyncio.get_running_loop()
     publishers: dict[tuple[str, str], Any] = {}
     stats = ReplayStats()
+    buffer = bytearray()
     topic_list = list(topics) if topics else None
     began = event_loop.time()
 
@@ -86,8 +88,15 @@ async def replay(
                     await asyncio.sleep(delay)
             elif stats.messages % 64 == 0:
                 await asyncio.sleep(0)  # let the loop breathe
-            payload, encoding = item.wire()
             key = with_robot(item.key, robot) if robot else item.key
+            if item.cls is not None:
+                # = item.wire(), encoded into one reused buffer (Zenoh copies it in `put`):
+                # a fresh 230 kB block per camera frame costs more than the encoding.
+                encoding = wire_encoding(item.cls)
+                encode_into(item.message(), buffer)
+                payload: bytes | bytearray = buffer
+            else:
+                payload, encoding = item.wire()
             pub = publishers.get((key, encoding))
             if pub is None:
                 pub = publishers[(key, encoding)] = bus.raw_publisher(key, encoding)

@@ -68,6 +68,15 @@ def encode(message: Message) -> bytes:
     return _encoder.encode(message)
 
 
+def encode_into(message: Message, buffer: bytearray) -> None:
+    """msgpack of a message written into `buffer` (resized to fit; same bytes as `encode`).
+
+    For publishers that send many large messages: reusing one buffer avoids allocating (and,
+    with glibc, page-faulting in) a fresh block for every camera frame, which costs more than
+    the encoding itself."""
+    _encoder.encode_into(message, buffer)
+
+
 def to_json(message: Message) -> bytes:
     """JSON bytes of a message (bytes fields as base64, as JSON Schema / Foxglove expect)."""
     return _json_encoder.encode(message)

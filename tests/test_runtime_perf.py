@@ -1,0 +1,200 @@
+"""The fast paths of the bus, checked for behaviour (no timing): subscriptions fed by a Zenoh
+channel and a drain thread, eventfd wake-ups, batched hand-off, publishers and replay encoding
+into a reused buffer. Speed itself is measured by bench/bus.py."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import threading
+from pathlib import Path
+
+import pytest
+from busutil_net import private_config, skeleton_frames
+
+import schemas as s
+from runtime.bus import Bus, Inbox
+from runtime.recording import RecordingWriter
+from runtime.replay import replay
+from schemas.codec import encode, encode_into, wire_encoding
+
+
+def camera_frame(seq: int, width: int = 32, height: int = 24) -> s.CameraFrame:
+    header = s.Header(version=1, source="cam", seq=seq, stamp=1_700_000_000_000_000_000 + seq)
+    data = bytes((seq + i) % 256 for i in range(width * height * 3))
+    return s.CameraFrame.build(header, width, height, data)
+
+
+async def wait_until(condition, timeout: float = 10.0) -> None:  # type: ignore[no-untyped-def]
+    """Poll `condition` on the event loop until it holds (no fixed sleep: returns at once)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while not condition():
+        if loop.time() > deadline:
+            raise TimeoutError("condition not met")
+        await asyncio.sleep(0.005)
+
+
+@pytest.fixture
+async def buses():
+    config = private_config()
+    a, b = Bus.open(config), Bus.open(config)
+    yield a, b
+    a.close()
+    b.close()
+
+
+async def test_extend_from_a_thread_drops_oldest_and_counts_them() -> None:
+    inbox: Inbox[int] = Inbox(asyncio.get_running_loop(), maxsize=5, wakeup_fd=True)
+    pusher = threading.Thread(target=inbox.extend, args=(range(12),))
+    pusher.start()
+    pusher.join()
+    assert inbox.dropped == 7
+    assert [await inbox.get(1) for _ in range(5)] == [7, 8, 9, 10, 11]
+    inbox.close()
+
+
+@pytest.mark.parametrize("wakeup_fd", [True, False])
+async def test_a_parked_consumer_is_woken_by_a_push_from_another_thread(wakeup_fd: bool) -> None:
+    inbox: Inbox[str] = Inbox(asyncio.get_running_loop(), maxsize=4, wakeup_fd=wakeup_fd)
+    assert (inbox._fd_read >= 0) == wakeup_fd
+    consumer = asyncio.ensure_future(inbox.get(timeout=10))
+    await wait_until(lambda: inbox._waiter is not None)  # parked on its future
+    threading.Thread(target=inbox.push, args=("hello",)).start()
+    assert await consumer == "hello"
+    # and again after the wake-up was consumed: the eventfd was reset, not left readable
+    consumer = asyncio.ensure_future(inbox.get(timeout=10))
+    await wait_until(lambda: inbox._waiter is not None)
+    threading.Thread(target=inbox.extend, args=(["a", "b"],)).start()
+    assert await consumer == "a"
+    assert await inbox.get(1) == "b"
+    inbox.close()
+
+
+async def test_close_releases_the_wakeup_descriptor_and_later_pushes_are_harmless() -> None:
+    inbox: Inbox[int] = Inbox(asyncio.get_running_loop(), maxsize=4, wakeup_fd=True)
+    fd = inbox._fd_read
+    os.fstat(fd)
+    inbox.close()
+    with pytest.raises(OSError):
+        os.fstat(fd)
+    inbox.push(1)  # a late sample from a drain thread: kept, no write to a closed descriptor
+    assert await inbox.get(1) == 1
+    with pytest.raises(EOFError):
+        await inbox.get(1)
+
+
+async def test_channel_subscription_keeps_order_and_counts_malformed(buses) -> None:
+    a, b = buses
+    bad: list[str] = []
+    sub = a.subscribe(a.keys.skeleton, s.SkeletonFrame, on_malformed=lambda k, e: bad.append(k))
+    pub = b.publisher(b.keys.skeleton, s.SkeletonFrame)
+    await pub.wait_matching(timeout=10)
+    frames = skeleton_frames(600)
+    for i, frame in enumerate(frames):
+        pub.put(frame)
+        if i % 200 == 0:
+            pub.put_bytes(b"\x93garbage")  # skipped and counted, wherever it falls in a burst
+    got = [await sub.recv(timeout=10) for _ in frames]
+    assert [r.message for r in got] == frames
+    assert sub.received == 600
+    assert sub.malformed == 3 and bad == [a.keys.skeleton] * 3
+    assert sub.dropped == 0
+
+
+async def test_a_full_subscription_drops_the_oldest_and_counts_them(buses) -> None:
+    a, b = buses
+    sub = a.subscribe(a.keys.skeleton, s.SkeletonFrame, maxsize=4)
+    pub = b.publisher(b.keys.skeleton, s.SkeletonFrame)
+    await pub.wait_matching(timeout=10)
+    frames = skeleton_frames(40)
+    for frame in frames:  # nobody consumes meanwhile
+        pub.put(frame)
+    await wait_until(lambda: len(sub._inbox) + sub.dropped == 40)
+    assert sub.dropped == 36
+    assert [(await sub.recv(timeout=5)).message for _ in range(4)] == frames[-4:]
+
+
+async def test_closing_a_subscription_ends_its_drain_thread(buses) -> None:
+    a, _ = buses
+    sub = a.subscribe(a.keys.skeleton, s.SkeletonFrame)
+    raw = a.subscribe_raw([a.keys.camera, a.keys.objects])
+
+    def drains() -> list[threading.Thread]:
+        return [
+            t for t in threading.enumerate() if t.name.startswith(f"zenoh-drain {a.keys.root}/")
+        ]
+
+    assert len(drains()) == 3
+    sub.close()
+    raw.close()
+    await wait_until(lambda: not drains())
+    with pytest.raises(EOFError):
+        await sub.recv(timeout=1)
+
+
+async def test_raw_subscription_delivers_bytes_encoding_and_order(buses) -> None:
+    a, b = buses
+    raw = a.subscribe_raw(a.keys.camera)
+    pub = b.publisher(b.keys.camera, s.CameraFrame)
+    await pub.wait_matching(timeout=10)
+    frames = [camera_frame(i) for i in range(30)]
+    for frame in frames:
+        pub.put(frame)
+    got = [await raw.recv(timeout=5) for _ in frames]
+    assert [g.payload for g in got] == [encode(f) for f in frames]
+    assert {g.encoding for g in got} == {wire_encoding(s.CameraFrame)}
+    assert all(g.received_ns > 0 for g in got)
+
+
+async def test_put_from_the_owner_and_from_another_thread_sends_the_same_bytes(buses) -> None:
+    a, b = buses
+    raw = a.subscribe_raw(a.keys.camera)
+    pub = b.publisher(b.keys.camera, s.CameraFrame)
+    await pub.wait_matching(timeout=10)
+    big, small = camera_frame(1, 64, 48), camera_frame(2, 8, 6)
+    pub.put(big)
+    pub.put(small)  # the reused buffer shrinks: no stale tail from the bigger frame
+    await asyncio.to_thread(pub.put, big)  # not the owner thread: its own buffer
+    got = [(await raw.recv(timeout=5)).payload for _ in range(3)]
+    assert got == [encode(big), encode(small), encode(big)]
+    assert pub.sent == 3
+
+
+def test_encode_into_writes_what_encode_returns() -> None:
+    buffer = bytearray(b"stale bytes that must go" * 100)
+    for message in (camera_frame(3, 40, 30), skeleton_frames(1)[0], camera_frame(4, 4, 3)):
+        encode_into(message, buffer)
+        assert bytes(buffer) == encode(message)
+
+
+async def test_replay_sends_each_recorded_message_as_its_wire_bytes(tmp_path: Path) -> None:
+    config = private_config()
+    keys = s.Keys(config.robot)
+    frames = skeleton_frames(20)
+    cams = [camera_frame(i) for i in range(20)]
+    path = tmp_path / "mixed.mcap"
+    foreign = f"{keys.root}/other/raw"
+    with RecordingWriter(path) as writer:
+        for frame, cam in zip(frames, cams, strict=True):
+            writer.write(keys.skeleton, frame)
+            writer.write(keys.camera, cam)
+        # a key that is not ours, stored as it came
+        writer.write_wire(foreign, b"\x00opaque", "text/plain", frames[-1].header.stamp + 5)
+    with Bus.open(config) as bus, Bus.open(config) as listener:
+        raw = listener.subscribe_raw(keys.everything)
+        probe = bus.publisher(keys.skeleton, s.SkeletonFrame)
+        await probe.wait_matching(timeout=10)
+        probe.close()
+        stats = await replay(bus, path, rate=None)
+        got = [await raw.recv(timeout=5) for _ in range(41)]
+    assert stats.messages == 41
+    by_key: dict[str, list[bytes]] = {}
+    for sample in got:
+        by_key.setdefault(sample.key, []).append(sample.payload)
+    assert by_key[keys.skeleton] == [encode(f) for f in frames]
+    assert by_key[keys.camera] == [encode(c) for c in cams]
+    assert by_key[foreign] == [b"\x00opaque"]
+    encodings = {sample.key: sample.encoding for sample in got}
+    assert encodings[keys.camera] == wire_encoding(s.CameraFrame)
+    assert encodings[foreign] == "text/plain"
