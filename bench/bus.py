@@ -316,7 +316,8 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
 
         def consume() -> None:
             for _ in range(n):
-                lat.append(time.perf_counter_ns() - q.get())
+                sent = q.get()
+                lat.append(time.perf_counter_ns() - sent)
 
         consumer = threading.Thread(target=consume)
         consumer.start()
@@ -340,7 +341,8 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
         producer = threading.Thread(target=produce)
         producer.start()
         for _ in range(n):
-            lat.append(time.perf_counter_ns() - await inbox.get(10))
+            sent = await inbox.get(10)
+            lat.append(time.perf_counter_ns() - sent)
         producer.join()
         inbox.close()
         return statistics.median(lat) / 1e3
