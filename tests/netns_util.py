@@ -5,7 +5,9 @@ private addresses (10.x.y.1 and .2, which exist only inside these namespaces), r
 either with `ip netns exec`, and cuts and restores the link. `close()` kills every process it
 started (by process group, then anything still inside the namespaces, by pid) and deletes the
 namespaces (which deletes the veth pair). Namespaces left by a run that was killed outright are
-removed by the next run: their names carry the creating pid, and a dead pid means stale.
+removed: a reaper process outside the test's process tree cleans up as soon as the test process
+is gone, the processes started directly also get SIGKILL then (PR_SET_PDEATHSIG), and the next
+run removes anything still left (names carry the creating pid; a dead pid means stale).
 
 Run as a script, this module is the test's probe: `python tests/netns_util.py probe` joins the
 bus from the environment and prints one JSON line per event it sees (see `probe`).
@@ -64,12 +66,51 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _die_with_parent() -> None:
+    """In the child before exec: SIGKILL it if the test process dies without cleaning up."""
+    import ctypes
+
+    pr_set_pdeathsig = 1
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGKILL)
+
+
 def _kill_inside(ns: str) -> None:
     """SIGKILL every process still running inside namespace `ns` (they are ours: we made it)."""
     out = _ip("netns", "pids", ns, check=False).stdout.split()
     for pid in out:
         with contextlib.suppress(ProcessLookupError, ValueError):
             os.kill(int(pid), signal.SIGKILL)
+
+
+def _start_reaper(namespaces: list[str]) -> subprocess.Popen[bytes]:
+    """A watchdog outside the test's process tree: if the test process dies without cleaning
+    up (SIGKILL), it kills everything left inside our namespaces (including grandchildren such
+    as the services `beyond up` started) and deletes them; it exits once they are gone."""
+    code = (
+        "import os, subprocess, sys, time\n"
+        "sys.path.insert(0, sys.argv[1])\n"
+        "from netns_util import _alive, _ip, _kill_inside\n"
+        "owner, names = int(sys.argv[2]), sys.argv[3:]\n"
+        "while True:\n"
+        "    listed = _ip('netns', 'list', check=False).stdout\n"
+        "    if not any(n in listed.split() for n in names):\n"
+        "        break\n"
+        "    if not _alive(owner):\n"
+        "        for n in names:\n"
+        "            _kill_inside(n)\n"
+        "            _ip('netns', 'delete', n, check=False)\n"
+        "        break\n"
+        "    time.sleep(0.5)\n"
+    )
+    here = str(Path(__file__).resolve().parent)
+    return subprocess.Popen(
+        [sys.executable, "-c", code, here, str(os.getpid()), *namespaces],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
 
 
 def remove_stale() -> list[str]:
@@ -124,6 +165,7 @@ class TwoHosts:
             _ip("-n", self.robot, "addr", "add", f"{self.robot_ip}/30", "dev", self.veth_robot)
             _ip("-n", self.ws, "addr", "add", f"{self.ws_ip}/30", "dev", self.veth_ws)
             self.link(up=True)
+            self._reaper = _start_reaper(self._created)
         except BaseException:
             self.close()
             raise
@@ -154,6 +196,7 @@ class TwoHosts:
             text=True,
             bufsize=1,
             start_new_session=True,  # its own process group: killed as one in close()
+            preexec_fn=_die_with_parent,
         )
         proc = Proc(name, popen, on_line=on_line)
 
@@ -194,6 +237,13 @@ class TwoHosts:
             _kill_inside(ns)
             _ip("netns", "delete", ns, check=False)
         self._created.clear()
+        reaper = getattr(self, "_reaper", None)
+        if reaper is not None:  # it sees the namespaces gone and exits
+            try:
+                reaper.wait(5)
+            except subprocess.TimeoutExpired:
+                reaper.kill()
+                reaper.wait(5)
 
     def namespaces_left(self) -> list[str]:
         listing = _ip("netns", "list", check=False).stdout

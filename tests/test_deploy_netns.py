@@ -146,65 +146,120 @@ def hosts() -> Any:
         assert all(p.popen.poll() is not None for p in h.procs), "processes left behind"
 
 
+class Sides:
+    """The processes of one run: a router and `beyond up --profile workstation` in the
+    workstation namespace, `beyond up --profile robot` replaying a recording in the robot's,
+    and a probe on each side."""
+
+    def __init__(self, hosts: TwoHosts, tmp_path: Path, configs: str) -> None:
+        self.hosts = hosts
+        self.recording = tmp_path / "six.mcap"
+        skeleton_recording(self.recording, ACTIONS, seed=3, robot="robot")
+        env = {k: v for k, v in os.environ.items() if not k.startswith("BEYOND_")}
+        env.update(
+            BEYOND_ROBOT=f"netns{os.getpid()}",
+            BEYOND_LOG_FORMAT="text",
+            PYTHONPATH=str(REPO),
+            PYTHONUNBUFFERED="1",
+        )
+        self.env = env
+        self.router = f"tcp/{hosts.ws_ip}:7447"
+        self.ws_env, self.robot_env, self.router_args = dict(env), dict(env), []
+        self.ws_probe_env = {"BEYOND_ZENOH_MODE": "client"}  # as `up --profile workstation` joins
+        if configs == "deploy":
+            self.ws_probe_env = {}
+            self.ws_env["BEYOND_ZENOH_CONFIG"] = str(DEPLOY / "workstation.json5")
+            self.robot_env["BEYOND_ZENOH_CONFIG"] = str(DEPLOY / "robot.json5")
+            self.router_args = ["--zenoh-config", str(DEPLOY / "router.json5")]
+        self.lines = Lines()
+        self.ws_events, self.robot_events = Events(), Events()
+
+    def start_workstation(self, *, router: bool = True) -> Proc:
+        py, hosts = sys.executable, self.hosts
+        if router:
+            hosts.start(
+                hosts.ws, "router", [py, "-m", "beyond", "router", *self.router_args],
+                self.env, self.lines.feed,
+            )  # fmt: skip
+        hosts.start(
+            hosts.ws, "ws-probe", [py, str(REPO / "tests" / "netns_util.py"), "probe"],
+            {**self.ws_env, **self.ws_probe_env, "BEYOND_ZENOH_ROUTER": "tcp/127.0.0.1:7447"},
+            self.ws_events.add,
+        )  # fmt: skip
+        return hosts.start(
+            hosts.ws, "ws-up",
+            [py, "-m", "beyond", "up", "--profile", "workstation", "--connect",
+             "tcp/127.0.0.1:7447", "--until-stream-end", "--no-live", "--timeout", "120"],
+            self.ws_env, self.lines.feed,
+        )  # fmt: skip
+
+    def start_robot_probe(self) -> Proc:
+        py, hosts = sys.executable, self.hosts
+        return hosts.start(
+            hosts.robot, "robot-probe", [py, str(REPO / "tests" / "netns_util.py"), "probe"],
+            {**self.robot_env, "BEYOND_ZENOH_ROUTER": self.router}, self.robot_events.add,
+        )  # fmt: skip
+
+    def start_robot(self) -> Proc:
+        py, hosts = sys.executable, self.hosts
+        return hosts.start(
+            hosts.robot, "robot-up",
+            [py, "-m", "beyond", "up", "--profile", "robot", "--recording", str(self.recording),
+             "--rate", RATE, "--connect", self.router, "--no-live", "--timeout", "120"],
+            self.robot_env, self.lines.feed,
+        )  # fmt: skip
+
+    def ready(self, events: Events, what: str) -> None:
+        events.wait(what, lambda: events.where(event="probe-ready"), 60, self.hosts.procs)
+
+    def all_described(self, ws_up: Proc, robot_up: Proc) -> None:
+        """Every gesture described on the workstation; both `up`s exit 0 having printed every
+        gesture's description, in order, with the verb of its action."""
+        every = set(range(1, len(ACTIONS) + 1))
+        probes = [p for p in self.hosts.procs if p.name.endswith("probe")]
+        events = self.ws_events
+        try:
+            events.wait(
+                "every gesture described on the workstation",
+                lambda: {e["segment"] for _, e in events.where(event="described")} >= every,
+                60, probes,
+            )  # fmt: skip
+        except AssertionError:
+            got = {e["segment"] for _, e in events.where(event="described")}
+            raise AssertionError(
+                f"gestures never described on the workstation: {sorted(every - got)}\n"
+                f"{ws_up.text()[-3000:]}"
+            ) from None
+        codes = [ws_up.popen.wait(30), robot_up.popen.wait(30)]
+        for proc in (ws_up, robot_up):
+            assert proc.reader is not None
+            proc.reader.join(5)
+        assert codes[0] == 0, ws_up.text()[-4000:]
+        assert codes[1] == 0, robot_up.text()[-4000:]
+        for proc in (ws_up, robot_up):
+            described = re.findall(r'^gesture (\d+): "(.*)"$', proc.text(), re.M)
+            assert [int(g) for g, _ in described] == sorted(every), proc.text()
+            for (_, sentence), action in zip(described, ACTIONS, strict=True):
+                assert re.search(VERBS[action], sentence), (proc.name, action, sentence)
+        # nothing exited early or was restarted: the services reconnected on their own
+        assert "exited early" not in robot_up.text() + ws_up.text()
+
+
 @pytest.mark.parametrize("configs", ["deploy", "defaults"])
 def test_split_deployment_survives_a_cut_link(
     hosts: TwoHosts, tmp_path: Path, configs: str
 ) -> None:
     """`deploy`: the sides run with deploy/zenoh/*.json5; `defaults`: with the built-in bus
     settings and only `--connect` (the workstation side then joins as clients by itself)."""
-    robot = f"netns{os.getpid()}"
-    recording = tmp_path / "six.mcap"
-    skeleton_recording(recording, ACTIONS, seed=3, robot="robot")
-    env = {k: v for k, v in os.environ.items() if not k.startswith("BEYOND_")}
-    env.update(
-        BEYOND_ROBOT=robot, BEYOND_LOG_FORMAT="text", PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1"
-    )
-    py = sys.executable
-    router = f"tcp/{hosts.ws_ip}:7447"
-    ws_env, robot_env, router_args = dict(env), dict(env), []
-    ws_probe_env = {"BEYOND_ZENOH_MODE": "client"}  # as `up --profile workstation` joins
-    if configs == "deploy":
-        ws_probe_env = {}
-        ws_env["BEYOND_ZENOH_CONFIG"] = str(DEPLOY / "workstation.json5")
-        robot_env["BEYOND_ZENOH_CONFIG"] = str(DEPLOY / "robot.json5")
-        router_args = ["--zenoh-config", str(DEPLOY / "router.json5")]
-    lines = Lines()
-    ws_events, robot_events = Events(), Events()
-
-    # -- workstation: router, its services, a probe -------------------------------------------
-    hosts.start(
-        hosts.ws, "router",
-        [py, "-m", "beyond", "router", *router_args],
-        env, lines.feed,
-    )  # fmt: skip
-    hosts.start(
-        hosts.ws, "ws-probe", [py, str(REPO / "tests" / "netns_util.py"), "probe"],
-        {**ws_env, **ws_probe_env, "BEYOND_ZENOH_ROUTER": "tcp/127.0.0.1:7447"}, ws_events.add,
-    )  # fmt: skip
-    ws_up = hosts.start(
-        hosts.ws, "ws-up",
-        [py, "-m", "beyond", "up", "--profile", "workstation", "--connect", "tcp/127.0.0.1:7447",
-         "--until-stream-end", "--no-live", "--timeout", "120"],
-        ws_env, lines.feed,
-    )  # fmt: skip
-    # -- robot: its services replaying the recording, a probe ---------------------------------
-    hosts.start(
-        hosts.robot, "robot-probe", [py, str(REPO / "tests" / "netns_util.py"), "probe"],
-        {**robot_env, "BEYOND_ZENOH_ROUTER": router}, robot_events.add,
-    )  # fmt: skip
-    everything = [*hosts.procs]
-    ws_events.wait("the workstation probe", lambda: ws_events.where(event="probe-ready"), 60,
-                   everything)  # fmt: skip
-    robot_events.wait("the robot probe", lambda: robot_events.where(event="probe-ready"), 60,
-                      everything)  # fmt: skip
-    lines.wait(ws_up, r"^pipeline up: reasoner, describer, speech", 90)
-    robot_up = hosts.start(
-        hosts.robot, "robot-up",
-        [py, "-m", "beyond", "up", "--profile", "robot", "--recording", str(recording),
-         "--rate", RATE, "--connect", router, "--no-live", "--timeout", "120"],
-        robot_env, lines.feed,
-    )  # fmt: skip
-    everything.append(robot_up)
+    sides = Sides(hosts, tmp_path, configs)
+    ws_events, robot_events = sides.ws_events, sides.robot_events
+    ws_up = sides.start_workstation()
+    sides.start_robot_probe()
+    sides.ready(ws_events, "the workstation probe")
+    sides.ready(robot_events, "the robot probe")
+    sides.lines.wait(ws_up, r"^pipeline up: reasoner, describer, speech", 90)
+    robot_up = sides.start_robot()
+    everything = list(hosts.procs)
 
     # -- the first description crosses the link; then cut it ----------------------------------
     ws_events.wait("gesture 1 described on the workstation",
@@ -225,35 +280,7 @@ def test_split_deployment_survives_a_cut_link(
     hosts.link(up=True)
 
     # -- everything is described on both sides; both `up`s exit 0 -----------------------------
-    every = set(range(1, len(ACTIONS) + 1))
-    probes = [p for p in hosts.procs if p.name.endswith("probe")]
-    try:
-        ws_events.wait(
-            "every gesture described on the workstation",
-            lambda: {e["segment"] for _, e in ws_events.where(event="described")} >= every,
-            60, probes,
-        )  # fmt: skip
-    except AssertionError:
-        got = {e["segment"] for _, e in ws_events.where(event="described")}
-        raise AssertionError(
-            f"gestures never described on the workstation: {sorted(every - got)}\n"
-            f"{ws_up.text()[-3000:]}"
-        ) from None
-    ws_code = ws_up.popen.wait(30)
-    robot_code = robot_up.popen.wait(30)
-    ws_up.reader.join(5)  # type: ignore[union-attr]
-    robot_up.reader.join(5)  # type: ignore[union-attr]
-    assert ws_code == 0, ws_up.text()[-4000:]
-    assert robot_code == 0, robot_up.text()[-4000:]
-
-    for proc in (ws_up, robot_up):
-        described = re.findall(r'^gesture (\d+): "(.*)"$', proc.text(), re.M)
-        assert [int(g) for g, _ in described] == list(range(1, len(ACTIONS) + 1)), proc.text()
-        for (_, sentence), action in zip(described, ACTIONS, strict=True):
-            assert re.search(VERBS[action], sentence), (proc.name, action, sentence)
-
-    # the robot's processes reconnected on their own: none exited early or was restarted
-    assert "exited early" not in robot_up.text() + ws_up.text()
+    sides.all_described(ws_up, robot_up)
     for events, service in ((ws_events, "gestures"), (robot_events, "reasoner")):
         back = [
             e for t, e in events.where(event="alive")
@@ -267,6 +294,7 @@ def test_split_deployment_survives_a_cut_link(
     live = {e["segment"] for _, e in ws_events.where(event="end", via="live")}
     recovering = {e["segment"] for _, e in ws_events.where(event="end", via="recovering")}
     recovered = sorted(recovering - live)
+    every = set(range(1, len(ACTIONS) + 1))
     assert recovering == every
     assert len(during) >= 2 and set(during) <= set(recovered), (during, recovered, live)
 
@@ -299,3 +327,27 @@ def test_split_deployment_survives_a_cut_link(
     print("\n".join(f"  {t:+7.2f} s  {what}" for t, what in timeline))
     assert delay < RECONNECT_GOAL_S, f"first description {delay:.2f} s after the link came back"
     assert stats and int(stats[-1][0]) > 0 and int(stats[-1][1]) == 0, stats
+
+
+def test_the_robot_may_start_first(hosts: TwoHosts, tmp_path: Path) -> None:
+    """The robot replays before the workstation is there; the workstation, started once two
+    gestures have ended, still describes all six: what it missed comes from the caches."""
+    sides = Sides(hosts, tmp_path, "deploy")
+    hosts.start(
+        hosts.ws, "router", [sys.executable, "-m", "beyond", "router", *sides.router_args],
+        sides.env, sides.lines.feed,
+    )  # fmt: skip
+    sides.start_robot_probe()
+    sides.ready(sides.robot_events, "the robot probe")
+    robot_up = sides.start_robot()
+    sides.robot_events.wait(
+        "two gestures ending on the robot before the workstation starts",
+        lambda: len(sides.robot_events.where(event="end", via="live")) >= 2, 60, hosts.procs,
+    )  # fmt: skip
+    assert not sides.ws_events.items
+    ws_up = sides.start_workstation(router=False)
+    sides.all_described(ws_up, robot_up)
+    events = sides.ws_events
+    live = {e["segment"] for _, e in events.where(event="end", via="live")}
+    recovering = {e["segment"] for _, e in events.where(event="end", via="recovering")}
+    assert {1, 2} <= recovering - live  # ended before the workstation existed: from the cache

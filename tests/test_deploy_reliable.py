@@ -129,3 +129,15 @@ def test_each_side_has_its_own_monitor_and_wait_list() -> None:
     assert wait_list(["reasoner,describer", " speech "]) == ["reasoner", "describer", "speech"]
     with pytest.raises(InputError, match="invalid service name"):
         wait_list(["reasoner/x"])
+
+
+def test_the_namespace_test_skips_with_a_reason_without_root_or_ip(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import netns_util
+
+    monkeypatch.setattr(netns_util.os, "geteuid", lambda: 1000)
+    assert "needs root" in (netns_util.unavailable() or "")
+    monkeypatch.setattr(netns_util.os, "geteuid", lambda: 0)
+    monkeypatch.setattr(netns_util.shutil, "which", lambda name: None)
+    assert "iproute2" in (netns_util.unavailable() or "")
