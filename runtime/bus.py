@@ -254,8 +254,31 @@ def _raw_sample(sample: Any, received_ns: int) -> RawSample:
     )
 
 
-def _key_payload(sample: Any, received_ns: int) -> tuple[str, bytes, int]:
-    return (str(sample.key_expr), sample.payload.to_bytes(), received_ns)
+# Payloads above Zenoh's batch size were reassembled into a buffer of their own, so keeping the
+# sample pins nothing else; they are copied out on the loop, right before decoding reads them.
+_COPY_ON_LOOP = 64 * 1024
+
+
+def _sample_converter(key: str) -> Callable[[Any, int], tuple[str, Any, int]]:
+    """Drain-thread conversion for a typed subscription: (key, payload, received_ns), the
+    payload as bytes, or for a large one still as Zenoh's ZBytes."""
+    if "*" in key or "$" in key:  # a wildcard: each sample says which key it came on
+
+        def convert(sample: Any, received_ns: int) -> tuple[str, Any, int]:
+            payload = sample.payload
+            if len(payload) <= _COPY_ON_LOOP:
+                payload = payload.to_bytes()
+            return (str(sample.key_expr), payload, received_ns)
+
+    else:  # one key: no need to build its string for every sample
+
+        def convert(sample: Any, received_ns: int) -> tuple[str, Any, int]:
+            payload = sample.payload
+            if len(payload) <= _COPY_ON_LOOP:
+                payload = payload.to_bytes()
+            return (key, payload, received_ns)
+
+    return convert
 
 
 class RawSubscription:
@@ -314,8 +337,8 @@ class Subscription(Generic[M]):
         self.malformed = 0
         self.received = 0
         self._on_malformed = on_malformed
-        self._inbox: Inbox[tuple[str, bytes, int]] = Inbox(loop, maxsize, wakeup_fd=True)
-        self._sub = _channel_subscriber(session, key, self._inbox, _key_payload)
+        self._inbox: Inbox[tuple[str, Any, int]] = Inbox(loop, maxsize, wakeup_fd=True)
+        self._sub = _channel_subscriber(session, key, self._inbox, _sample_converter(key))
 
     @property
     def dropped(self) -> int:
@@ -331,6 +354,8 @@ class Subscription(Generic[M]):
                 key, payload, received_ns = items.popleft()
             else:
                 key, payload, received_ns = await self._inbox.get(timeout)
+            if type(payload) is not bytes:
+                payload = payload.to_bytes()
             try:
                 message = decode(payload, cls, key)
             except SchemaError as exc:
