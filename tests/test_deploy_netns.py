@@ -247,7 +247,7 @@ class Sides:
 
 @pytest.mark.parametrize("configs", ["deploy", "defaults"])
 def test_split_deployment_survives_a_cut_link(
-    hosts: TwoHosts, tmp_path: Path, configs: str
+    hosts: TwoHosts, tmp_path: Path, configs: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """`deploy`: the sides run with deploy/zenoh/*.json5; `defaults`: with the built-in bus
     settings and only `--connect` (the workstation side then joins as clients by itself)."""
@@ -307,8 +307,9 @@ def test_split_deployment_survives_a_cut_link(
         r"\[reasoner\].*recovered messages from publisher caches.*?recovered=(\d+).*?missed=(\d+)",
         ws_up.text(),
     )
-    print(
-        f"\nlink down {outage:.1f} s; first final description {delay:.2f} s after it came back; "
+    summary = (
+        f"\n[{configs}] link down {outage:.1f} s; first final description {delay:.2f} s "
+        "after it came back; "
         f"gestures recovered from the publisher cache: {len(recovered)} {recovered} "
         f"(ended on the robot during the outage: {during}); reasoner recovered/missed "
         f"messages: {stats[-1] if stats else 'not reported'}"
@@ -324,7 +325,9 @@ def test_split_deployment_survives_a_cut_link(
            for t, e in robot_events.where(event="alive") if e["key"].endswith("/alive/reasoner")]
         + [(0.0, "link down"), (outage, "link up")]
     )  # fmt: skip
-    print("\n".join(f"  {t:+7.2f} s  {what}" for t, what in timeline))
+    with capsys.disabled():  # shown in CI's log even when the test passes
+        print(summary)
+        print("\n".join(f"  {t:+7.2f} s  {what}" for t, what in timeline))
     assert delay < RECONNECT_GOAL_S, f"first description {delay:.2f} s after the link came back"
     assert stats and int(stats[-1][0]) > 0 and int(stats[-1][1]) == 0, stats
 
