@@ -248,15 +248,18 @@ def _channel_subscriber(
     return sub
 
 
-def _raw_sample(sample: Any, received_ns: int) -> RawSample:
-    return RawSample(
-        str(sample.key_expr), sample.payload.to_bytes(), str(sample.encoding), received_ns
-    )
-
-
 # Payloads above Zenoh's batch size were reassembled into a buffer of their own, so keeping the
 # sample pins nothing else; they are copied out on the loop, right before decoding reads them.
 _COPY_ON_LOOP = 64 * 1024
+
+
+def _raw_sample(sample: Any, received_ns: int) -> RawSample:
+    """A RawSample whose payload, when large, is still Zenoh's ZBytes (see `_COPY_ON_LOOP`);
+    `RawSubscription.recv` copies it out."""
+    payload = sample.payload
+    if len(payload) <= _COPY_ON_LOOP:
+        payload = payload.to_bytes()
+    return RawSample(str(sample.key_expr), payload, str(sample.encoding), received_ns)
 
 
 def _sample_converter(key: str) -> Callable[[Any, int], tuple[str, Any, int]]:
@@ -298,9 +301,11 @@ class RawSubscription:
 
     async def recv(self, timeout: float | None = None) -> RawSample:
         items = self._inbox._items
-        if items:
-            return items.popleft()
-        return await self._inbox.get(timeout)
+        sample = items.popleft() if items else await self._inbox.get(timeout)
+        if type(sample.payload) is not bytes:
+            payload: Any = sample.payload
+            sample = RawSample(sample.key, payload.to_bytes(), sample.encoding, sample.received_ns)
+        return sample
 
     def __aiter__(self) -> AsyncIterator[RawSample]:
         return self._iterate()

@@ -244,3 +244,21 @@ def test_a_corrupt_chunk_is_reported_as_damage(tmp_path: Path) -> None:
     assert damage and "CRC" in damage[0].upper()
     with pytest.raises(InputError, match="truncated or corrupt"):
         list(read_recording(path))
+
+
+async def test_large_frames_come_out_as_bytes_and_intact(buses) -> None:
+    """Frames above Zenoh's batch size stay in Zenoh's buffer until the loop takes them."""
+    a, b = buses
+    typed = a.subscribe(a.keys.camera, s.CameraFrame)
+    raw = a.subscribe_raw(a.keys.camera)
+    pub = b.publisher(b.keys.camera, s.CameraFrame)
+    await pub.wait_matching(timeout=10)
+    frames = [camera_frame(i, 320, 240) for i in range(5)]
+    assert len(encode(frames[0])) > 200_000
+    for frame in frames:
+        pub.put(frame)
+    got = [await typed.recv(timeout=10) for _ in frames]
+    assert [r.message for r in got] == frames
+    samples = [await raw.recv(timeout=10) for _ in frames]
+    assert all(type(x.payload) is bytes for x in samples)
+    assert [x.payload for x in samples] == [encode(f) for f in frames]
