@@ -194,28 +194,36 @@ class Inbox(Generic[T]):
     async def get(self, timeout: float | None = None) -> T:
         """The next item; TimeoutError after `timeout` s; EOFError once closed and drained."""
         items = self._items
-        deadline = None if timeout is None else self._loop.time() + timeout
+        loop = self._loop
+        deadline = None if timeout is None else loop.time() + timeout
         while not items:
             if self.closed:
                 raise EOFError("inbox closed")
-            waiter = self._waiter = self._loop.create_future()
+            remaining = 0.0
+            if deadline is not None:
+                remaining = deadline - loop.time()
+                if remaining <= 0:
+                    raise TimeoutError("no message before the timeout")
+            waiter = self._waiter = loop.create_future()
             if items or self.closed:  # arrived between the check and parking
                 self._waiter = None
                 continue
-            if deadline is None:
+            # A timer on our own future rather than asyncio.wait_for, which wraps it in a second
+            # future: one more trip round the event loop for every wake-up.
+            timer = None if deadline is None else loop.call_later(remaining, _expire, waiter)
+            try:
                 await waiter
-            else:
-                remaining = deadline - self._loop.time()
-                if remaining <= 0:
+            finally:
+                if timer is not None:
+                    timer.cancel()
+                if self._waiter is waiter:
                     self._waiter = None
-                    raise TimeoutError("no message before the timeout")
-                try:
-                    await asyncio.wait_for(waiter, remaining)
-                except TimeoutError:
-                    self._waiter = None
-                    if not items:
-                        raise
         return items.popleft()
+
+
+def _expire(waiter: asyncio.Future[None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 def _drain(handler: Any, inbox: Inbox[T], convert: Callable[[Any, int], T]) -> None:

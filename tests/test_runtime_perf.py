@@ -262,3 +262,24 @@ async def test_large_frames_come_out_as_bytes_and_intact(buses) -> None:
     samples = [await raw.recv(timeout=10) for _ in frames]
     assert all(type(x.payload) is bytes for x in samples)
     assert [x.payload for x in samples] == [encode(f) for f in frames]
+
+
+async def test_get_with_a_timeout_wakes_on_a_push_and_leaves_no_stale_waiter() -> None:
+    inbox: Inbox[int] = Inbox(asyncio.get_running_loop(), maxsize=4, wakeup_fd=True)
+    consumer = asyncio.ensure_future(inbox.get(timeout=10))
+    await wait_until(lambda: inbox._waiter is not None)
+    threading.Thread(target=inbox.push, args=(5,)).start()
+    assert await consumer == 5
+    with pytest.raises(TimeoutError):
+        await inbox.get(timeout=0.01)
+    assert inbox._waiter is None
+    cancelled = asyncio.ensure_future(inbox.get(timeout=10))
+    await wait_until(lambda: inbox._waiter is not None)
+    cancelled.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await cancelled
+    assert inbox._waiter is None
+    inbox.push(6)  # nobody parked: no wake-up is sent, the item waits
+    assert not inbox._wake_pending
+    assert await inbox.get(timeout=1) == 6
+    inbox.close()
