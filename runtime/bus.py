@@ -11,8 +11,10 @@ the subscription's inbox in one go: a bounded deque (when full the oldest item i
 counted) plus at most one wake-up of the event loop per burst, through an eventfd the loop
 watches (cheaper than `loop.call_soon_threadsafe`, which needs a handle and a self-pipe drain).
 Decoding happens on the event loop when the consumer takes the sample, so the drain thread never
-runs user code, and a malformed payload is counted and reported on the loop.
-bench/bus.py measures all of this against raw zenoh-python.
+runs user code, and a malformed payload is counted and reported on the loop; payloads larger than
+a Zenoh batch (camera frames) are also copied out of Zenoh there, just before decoding reads them.
+Publishers encode into one reused buffer. bench/bus.py measures all of this against raw
+zenoh-python and explains what limits the ratios.
 """
 
 from __future__ import annotations
