@@ -117,7 +117,7 @@ class PipelineMonitor:
             g = self.gestures[segment_id]
             if g.printed:
                 continue
-            if not (g.ended and g.description):
+            if not (g.ended and g.recognised and g.description):  # any arrival order
                 return
             for line in g.block():
                 self.emit(f"gesture {segment_id}: {line}")
