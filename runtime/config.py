@@ -4,8 +4,9 @@ Default (nothing configured): peer mode on loopback, multicast scouting off, and
 port. Every process listens on `tcp/127.0.0.1:<port>` (the first to start gets it; the others'
 listen attempt fails quietly and keeps retrying in the background) and on an ephemeral loopback
 port, and connects to `tcp/127.0.0.1:<port>`. Zenoh's gossip then tells every peer about the
-others' ephemeral listeners, so the processes end up fully meshed with no router; if the process
-holding the rendezvous port exits, another one takes it over and newcomers still find the group.
+others' ephemeral listeners, so the processes end up fully meshed with no router. If the process
+holding the rendezvous port exits, the meshed peers keep talking, but nobody takes the port over
+(zenoh 1.10 hangs on close with a pending listen retry, so listen retries are off).
 
 Multi-host: run `beyond router` on one machine and set BEYOND_ZENOH_MODE=client (or peer) with
 BEYOND_ZENOH_CONNECT=tcp/<router-host>:7447 on the others, or pass a full Zenoh JSON5 config file.
