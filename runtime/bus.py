@@ -334,9 +334,56 @@ class RawSubscription:
             self._inbox.close()
 
 
-class Subscription(Generic[M]):
-    """Decoded messages of one type on a key expression. A payload that does not decode is
-    counted in `malformed`, reported to `on_malformed(key, error)` and skipped."""
+class DecodedStream(Generic[M]):
+    """What every typed subscription shares: strict decoding, counting and async iteration over
+    an inbox of (key, payload, received_ns). A payload that does not decode is counted in
+    `malformed`, reported to `on_malformed(key, error)` and skipped. Subclasses fill `_inbox`."""
+
+    key: str
+    cls: type[M]
+    malformed: int
+    received: int
+    _on_malformed: MalformedHandler | None
+    _inbox: Inbox[Any]
+
+    @property
+    def dropped(self) -> int:
+        return self._inbox.dropped
+
+    def _accept(self, key: str, payload: Any, received_ns: int) -> Received[M] | None:
+        """The decoded message, or None (counted) when the payload is malformed."""
+        if type(payload) is not bytes:
+            payload = payload.to_bytes()
+        try:
+            message = decode(payload, self.cls, key)
+        except SchemaError as exc:
+            self.malformed += 1
+            if self._on_malformed is not None:
+                self._on_malformed(key, exc)
+            return None
+        self.received += 1
+        return Received(key, message, received_ns)
+
+    async def recv(self, timeout: float | None = None) -> Received[M]:
+        """The next well-formed message (malformed ones are counted and skipped)."""
+        while True:
+            got = self._accept(*await self._inbox.get(timeout))
+            if got is not None:
+                return got
+
+    def __aiter__(self) -> AsyncIterator[Received[M]]:
+        return self._iterate()
+
+    async def _iterate(self) -> AsyncIterator[Received[M]]:
+        while True:
+            try:
+                yield await self.recv()
+            except EOFError:
+                return
+
+
+class Subscription(DecodedStream[M]):
+    """Decoded messages of one type on a key expression (see `DecodedStream`)."""
 
     def __init__(
         self,
@@ -355,41 +402,15 @@ class Subscription(Generic[M]):
         self._inbox: Inbox[tuple[str, Any, int]] = Inbox(loop, maxsize, wakeup_fd=True)
         self._sub = _channel_subscriber(session, key, self._inbox, _sample_converter(key))
 
-    @property
-    def dropped(self) -> int:
-        return self._inbox.dropped
-
     async def recv(self, timeout: float | None = None) -> Received[M]:
         """The next well-formed message (malformed ones are counted and skipped)."""
         items = self._inbox._items
-        cls = self.cls
         while True:
             # Straight from the deque when something is waiting: no extra coroutine per message.
-            if items:
-                key, payload, received_ns = items.popleft()
-            else:
-                key, payload, received_ns = await self._inbox.get(timeout)
-            if type(payload) is not bytes:
-                payload = payload.to_bytes()
-            try:
-                message = decode(payload, cls, key)
-            except SchemaError as exc:
-                self.malformed += 1
-                if self._on_malformed is not None:
-                    self._on_malformed(key, exc)
-                continue
-            self.received += 1
-            return Received(key, message, received_ns)
-
-    def __aiter__(self) -> AsyncIterator[Received[M]]:
-        return self._iterate()
-
-    async def _iterate(self) -> AsyncIterator[Received[M]]:
-        while True:
-            try:
-                yield await self.recv()
-            except EOFError:
-                return
+            item = items.popleft() if items else await self._inbox.get(timeout)
+            got = self._accept(*item)
+            if got is not None:
+                return got
 
     def close(self) -> None:
         if not self._inbox.closed:

@@ -33,7 +33,7 @@ import logging
 import threading
 import time
 from collections import OrderedDict, deque
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
@@ -41,9 +41,9 @@ import zenoh
 from zenoh import ext
 
 from cognition.errors import InputError
-from runtime.bus import Inbox, Received
+from runtime.bus import DecodedStream, Inbox
 from schemas.base import Message
-from schemas.codec import SchemaError, decode, encode, wire_encoding
+from schemas.codec import SchemaError, encode, wire_encoding
 
 M = TypeVar("M", bound=Message)
 log = logging.getLogger("beyond.reliable")
@@ -136,7 +136,7 @@ class ReliablePublisher(Generic[M]):
             self._pub.undeclare()
 
 
-class ReliableSubscription(Generic[M]):
+class ReliableSubscription(DecodedStream[M]):
     """Decoded messages of one type on a key, recovered across link failures. Same interface as
     `runtime.bus.Subscription` (`recv`, async iteration, `received`, `malformed`, `dropped`,
     `close`), plus `recovered` (samples that came from a publisher cache, not off the wire) and
@@ -226,36 +226,6 @@ class ReliableSubscription(Generic[M]):
         with self._lock:
             self._settle(time.monotonic())
             return self._recovered
-
-    # -- consuming -------------------------------------------------------------------------
-
-    @property
-    def dropped(self) -> int:
-        return self._inbox.dropped
-
-    async def recv(self, timeout: float | None = None) -> Received[M]:
-        """The next well-formed message (malformed ones are counted and skipped)."""
-        while True:
-            key, payload, received_ns = await self._inbox.get(timeout)
-            try:
-                message = decode(payload, self.cls, key)
-            except SchemaError as exc:
-                self.malformed += 1
-                if self._on_malformed is not None:
-                    self._on_malformed(key, exc)
-                continue
-            self.received += 1
-            return Received(key, message, received_ns)
-
-    def __aiter__(self) -> AsyncIterator[Received[M]]:
-        return self._iterate()
-
-    async def _iterate(self) -> AsyncIterator[Received[M]]:
-        while True:
-            try:
-                yield await self.recv()
-            except EOFError:
-                return
 
     def close(self) -> None:
         if not self._inbox.closed:
