@@ -14,7 +14,7 @@ import uuid
 from pathlib import Path
 
 from runtime.config import BusConfig
-from schemas import Header, Joint, SkeletonFrame
+from schemas import Header, Joint, Keys, SkeletonFrame
 
 REPO = Path(__file__).resolve().parent.parent
 EXAMPLES = Path(__file__).resolve().parent / "runtime_examples"
@@ -83,3 +83,22 @@ def skeleton_frames(n: int, *, start_ns: int = 1_700_000_000_000_000_000, hz: fl
             )
         )
     return frames
+
+
+def skeleton_recording(path: Path, actions: list[str], seed: int, robot: str = "robot") -> None:
+    """A recording of synthetic gestures, skeleton frames only (no camera): the services then
+    describe the gestures without measured effects."""
+    from cognition.gestures import synthesize_continuous
+    from runtime.recording import RecordingWriter
+
+    stream = synthesize_continuous(actions, seed=seed)
+    key = Keys(robot).skeleton
+    t0 = 1_546_300_800_000_000_000
+    with RecordingWriter(path) as writer:
+        for i in range(stream.n_frames):
+            joints = {
+                n: Joint(position=(float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
+                for n, p in stream.joints.items()
+            }
+            header = Header(version=1, source="sim", seq=i, stamp=t0 + i * 33_333_333)
+            writer.write(key, SkeletonFrame(header=header, frame=i + 1, joints=joints))

@@ -28,11 +28,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from busutil_net import skeleton_recording
 from netns_util import REPO, Proc, TwoHosts, unavailable
-
-import schemas as s
-from cognition.gestures import synthesize_continuous
-from runtime.recording import RecordingWriter
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(175)]
 
@@ -45,21 +42,6 @@ VERBS = {
 RATE = "2"  # replay speed: the six gestures end about 2.4, 6, 8.3, 10, 13 and 15.5 s in
 RECONNECT_GOAL_S = 5.0
 DEPLOY = REPO / "deploy" / "zenoh"
-
-
-def skeleton_recording(path: Path, actions: list[str], seed: int, robot: str) -> None:
-    """Skeleton frames only (no camera): the services describe gestures without effects."""
-    stream = synthesize_continuous(actions, seed=seed)
-    keys = s.Keys(robot)
-    t0 = 1_546_300_800_000_000_000
-    with RecordingWriter(path) as writer:
-        for i in range(stream.n_frames):
-            joints = {
-                n: s.Joint(position=(float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
-                for n, p in stream.joints.items()
-            }
-            header = s.Header(version=1, source="sim", seq=i, stamp=t0 + i * 33_333_333)
-            writer.write(keys.skeleton, s.SkeletonFrame(header=header, frame=i + 1, joints=joints))
 
 
 class Events:

@@ -10,14 +10,12 @@ import sys
 from pathlib import Path
 
 import pytest
-from busutil_net import env_for, private_config
+from busutil_net import env_for, private_config, skeleton_recording
 
 import schemas as s
-from cognition.gestures import synthesize_continuous
 from cognition.grammar import DEFAULT_GRAMMAR
 from runtime.bus import Bus
 from runtime.config import BusConfig
-from runtime.recording import RecordingWriter
 from services.launcher import service_env, start_service, stop_services
 
 VERBS = {
@@ -25,20 +23,6 @@ VERBS = {
     "grasp": r"\b(grasps|grasped|grasping|picks|picked|picking)\b",
     "touch": r"\b(touches|touched|touching|pokes|poked|poking)\b",
 }
-
-
-def skeleton_recording(path: Path, actions: list[str], seed: int) -> None:
-    stream = synthesize_continuous(actions, seed=seed)
-    keys = s.Keys("robot")
-    t0 = 1_546_300_800_000_000_000
-    with RecordingWriter(path) as writer:
-        for i in range(stream.n_frames):
-            joints = {
-                n: s.Joint(position=(float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
-                for n, p in stream.joints.items()
-            }
-            header = s.Header(version=1, source="sim", seq=i, stamp=t0 + i * 33_333_333)
-            writer.write(keys.skeleton, s.SkeletonFrame(header=header, frame=i + 1, joints=joints))
 
 
 def run_up(
