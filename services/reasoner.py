@@ -18,7 +18,7 @@ from typing import Any
 from cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
 from cognition.errors import InputError, unknown
 from cognition.fusion import ACTION, action_vector, fuse, fuse_words
-from cognition.variables import EFFECTS, OBJECT_FEATURES
+from cognition.variables import EFFECTS
 from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
 from schemas import (
@@ -215,6 +215,3 @@ class AffordanceReasoner(Service):
 def _normalised(dist: dict[str, float]) -> dict[str, float]:
     total = sum(dist.values())
     return {k: v / total for k, v in dist.items()}
-
-
-__all__ = ["OBJECT_FEATURES", "AffordanceReasoner"]
