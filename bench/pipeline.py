@@ -113,7 +113,7 @@ async def pipeline_latency(config: BusConfig) -> tuple[list[float], float, float
     env = service_env(config, {"BEYOND_LOG_FORMAT": "text", "BEYOND_LOG_LEVEL": "WARNING"})
     procs = [
         await start_service("gestures", env),
-        await start_service("reasoner", env, options={"effects_wait_s": 0.0}),
+        await start_service("reasoner", env, options={"objects": False}),
         await start_service("describer", env),
     ]
     frames, triggers = stream_frames(seed=7)

@@ -39,6 +39,7 @@ COMMANDS: dict[str, str] = {
     "router": "router",
     "service": "service",
     "up": "up",
+    "analyse": "analyse",
     "ask": "ask",
 }
 

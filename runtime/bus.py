@@ -656,6 +656,25 @@ class Bus:
         self._closers.append(closer)
         return closer
 
+    def watch_tokens(
+        self, key_expr: str, on_change: Callable[[str, bool], None]
+    ) -> Callable[[], None]:
+        """Call `on_change(key, present)` on the event loop for every liveliness token matching
+        `key_expr` that appears (including those already there) or goes. Returns the undeclare."""
+        loop = asyncio.get_running_loop()
+
+        def on_sample(sample: Any) -> None:  # Zenoh thread
+            present = sample.kind == zenoh.SampleKind.PUT
+            with contextlib.suppress(RuntimeError):  # loop closed: nobody is listening
+                loop.call_soon_threadsafe(on_change, str(sample.key_expr), present)
+
+        sub = self.session.liveliness().declare_subscriber(
+            key_expr, _callback(on_sample), history=True
+        )
+        closer = lambda: _undeclare(sub)  # noqa: E731
+        self._closers.append(closer)
+        return closer
+
     async def wait_alive(self, key_expr: str, count: int = 1, timeout: float = 10.0) -> set[str]:
         """Wait until at least `count` distinct liveliness tokens match `key_expr`."""
         return await self._wait_tokens(key_expr, lambda n: n >= count, f"{count}", timeout)

@@ -37,7 +37,7 @@ from runtime.reliable import (
 from schemas.base import Header, Message
 from schemas.codec import SchemaError
 from schemas.keys import check_name
-from schemas.messages import ServiceHealth
+from schemas.messages import Progress, ServiceHealth
 
 M = TypeVar("M", bound=Message)
 Handler = Callable[[M], Awaitable[None] | None]
@@ -73,6 +73,10 @@ class Service:
             tuple[Subscription[Any] | ReliableSubscription[Any], Handler[Any]]
         ] = []
         self._publishers: list[Publisher[Any] | ReliablePublisher[Any]] = []
+        self._paced: set[str] = set()  # keys whose handled stamps are reported as Progress
+        self._handled: dict[str, int] = {}
+        self._last_handled: dict[str, int] = {}
+        self._progress: Publisher[Progress] | None = None
         self._recovery_reported: tuple[int, int] = (0, 0)
         self._tasks: list[asyncio.Task[None]] = []
         self._seen_reasons: set[tuple[str, str]] = set()
@@ -106,6 +110,7 @@ class Service:
         *,
         maxsize: int = ...,
         recover: Literal[False] = ...,
+        paced: bool = ...,
     ) -> Subscription[M]: ...
 
     @overload
@@ -117,6 +122,7 @@ class Service:
         *,
         maxsize: int = ...,
         recover: Literal[True] | RecoveryPolicy,
+        paced: bool = ...,
     ) -> ReliableSubscription[M]: ...
 
     def subscribe(
@@ -127,10 +133,12 @@ class Service:
         *,
         maxsize: int = 1024,
         recover: bool | RecoveryPolicy = False,
+        paced: bool = False,
     ) -> Subscription[M] | ReliableSubscription[M]:
         """Call `handler(message)` for every well-formed `cls` message on `key`. With `recover`,
         messages lost while a link was down come back from the publishers' caches (in order,
-        once each; see runtime.reliable)."""
+        once each; see runtime.reliable). With `paced` (sensor inputs), the stamp of every
+        message handled is published as `Progress`, so a player never outruns this service."""
         sub: Subscription[M] | ReliableSubscription[M]
         if recover:
             policy = recover if isinstance(recover, RecoveryPolicy) else None
@@ -140,6 +148,9 @@ class Service:
         else:
             sub = self.bus.subscribe(key, cls, maxsize=maxsize, on_malformed=self._malformed)
         self._subscriptions.append((sub, handler))
+        if paced:
+            self._paced.add(key)
+            self._handled.setdefault(key, -1)
         if self.started.is_set():
             self._tasks.append(asyncio.get_running_loop().create_task(self._consume(sub, handler)))
         return sub
@@ -254,6 +265,27 @@ class Service:
                 raise
             except Exception as exc:
                 self._failed(received.key, exc)
+            if sub.key in self._paced:
+                self._last_handled[sub.key] = received.message.header.stamp
+            if self._paced:
+                self.publish_progress()
+
+    def publish_progress(self) -> None:
+        """Publish how far each paced input is handled, how many messages each subscription
+        received and each publisher sent: after the handler, so everything an input caused has
+        been published before its progress says so."""
+        for key, stamp in self._last_handled.items():
+            self._handled[key] = max(self._handled.get(key, -1), stamp)
+        if self._progress is not None:
+            self._progress.put(
+                Progress(
+                    header=self.header(Progress, max(self._handled.values(), default=0)),
+                    service=self.name,
+                    handled=self._handled,
+                    published={p.key: p.sent for p in self._publishers},
+                    received={s.key: s.received for s, _ in self._subscriptions},
+                )
+            )
 
     async def _publish_health(self) -> None:
         pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, reliable=False)
@@ -312,6 +344,13 @@ class Service:
                 return [(health_key, self.health())]
 
             self.bus.queryable(health_key, answer_health)
+            if self._paced:
+                self._progress = self.bus.publisher(self.bus.keys.progress(self.name), Progress)
+                self._progress.put(
+                    Progress(
+                        header=self.header(Progress, 0), service=self.name, handled=self._handled
+                    )
+                )
             self._tasks.append(loop.create_task(self._publish_health()))
             undeclare_token = self.bus.declare_token(self.bus.keys.alive(self.name))
             self.started.set()

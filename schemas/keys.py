@@ -25,6 +25,7 @@ STREAMS: dict[str, tuple[str, type[Message]]] = {
     "camera_compressed": ("sensors/camera/compressed", m.CompressedCameraFrame),
     "objects": ("vision/objects", m.DetectedObjects),
     "effects": ("vision/effects", m.ObjectEffects),
+    "gesture_object": ("vision/gesture_object", m.GestureObject),
     "gesture_segment": ("gesture/segment", m.GestureSegment),
     "gesture_posterior": ("gesture/posterior", m.ActionPosterior),
     "affordance": ("affordance/prediction", m.AffordancePrediction),
@@ -35,6 +36,7 @@ STREAMS: dict[str, tuple[str, type[Message]]] = {
 ASK = "affordance/ask"  # queryable of the reasoner: AffordanceQuery in, AffordanceAnswer out
 HEALTH = "health"  # beyond/<robot>/health/<service>: ServiceHealth (published and queryable)
 ALIVE = "alive"  # beyond/<robot>/alive/<service>: liveliness tokens
+PROGRESS = "progress"  # beyond/<robot>/progress/<service>: Progress (sensor inputs handled)
 
 
 def check_name(kind: str, name: str) -> str:
@@ -92,6 +94,10 @@ class Keys:
         return self.stream("effects")
 
     @property
+    def gesture_object(self) -> str:
+        return self.stream("gesture_object")
+
+    @property
     def gesture_segment(self) -> str:
         return self.stream("gesture_segment")
 
@@ -123,6 +129,10 @@ class Keys:
         """Health key of one service, or of all with the default "*"."""
         return f"{self.root}/{HEALTH}/{_service_chunk(service)}"
 
+    def progress(self, service: str = "*") -> str:
+        """Progress key of one service, or of all with the default "*"."""
+        return f"{self.root}/{PROGRESS}/{_service_chunk(service)}"
+
     def alive(self, service: str = "*") -> str:
         """Liveliness token key of one service, or of all with the default "*"."""
         return f"{self.root}/{ALIVE}/{_service_chunk(service)}"
@@ -151,6 +161,8 @@ def type_for_key(key: str) -> type[Message] | None:
             return cls
     if suffix.startswith(f"{HEALTH}/") and suffix.count("/") == 1:
         return m.ServiceHealth
+    if suffix.startswith(f"{PROGRESS}/") and suffix.count("/") == 1:
+        return m.Progress
     return None
 
 

@@ -191,17 +191,42 @@ class ObjectEffect(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 
 class ObjectEffects(Message, frozen=True):
-    """The effects measured over one gesture (`segment_id` of the gesture streamer)."""
+    """The effects measured over one gesture (`segment_id` of the gesture streamer).
+
+    Version 2: the object segmenter sends exactly one per gesture, also when it could not measure
+    (`measured` false, `reason` says why: no camera stream, too few frames over the gesture, the
+    camera stopped), so a consumer never has to guess from a timer whether effects will come."""
+
+    VERSION: ClassVar[int] = 2
 
     frame: int
     effects: list[ObjectEffect]
     segment_id: int = 0
+    measured: bool = True
+    reason: str = ""
+
+
+class GestureObject(Message, frozen=True):
+    """The object a gesture is about, as the camera saw it when the gesture began: the biggest
+    object of the last camera frame stamped at or before the gesture's first frame. One per
+    gesture; `labels` is empty and `reason` says why when no frame showed an object. The
+    reasoner's anticipation joins on it by `segment_id`, never on "the latest objects seen"."""
+
+    segment_id: int
+    frame: int  # the camera frame the labels come from (0: none)
+    labels: dict[str, str]
+    reason: str = ""
 
 
 class GestureSegment(Message, frozen=True):
-    """A gesture starts or ends; `end_stamp` is set on "end"."""
+    """A gesture starts or ends; `end_stamp` is set on "end".
 
-    event: Literal["start", "end"]
+    Version 2: "cancel" withdraws a started gesture the segmenter did not keep (too short, or
+    still under way when the source ended), so no consumer waits for an end that never comes."""
+
+    VERSION: ClassVar[int] = 2
+
+    event: Literal["start", "end", "cancel"]
     segment_id: int
     frame: int
     start_stamp: int
@@ -300,11 +325,32 @@ class ServiceHealth(Message, frozen=True):
 
 
 class StreamEnd(Message, frozen=True):
-    """A sensor source is exhausted (end of a recording or log): how much it published."""
+    """A sensor source is exhausted (end of a recording or log): how much it published.
+
+    Version 2: `last_stamps` gives, per sensor stream name (schemas.keys.STREAMS), the stamp of
+    the last message published on it (a stream never published is absent). A consumer knows its
+    input is complete once it has handled the message with that stamp, whatever order the end
+    marker and the data arrive in."""
+
+    VERSION: ClassVar[int] = 2
 
     source: str
     messages: int
     dropped: int = 0
+    last_stamps: dict[str, int] = msgspec.field(default_factory=dict)
+
+
+class Progress(Message, frozen=True):
+    """How far a service has handled each of its sensor inputs: key -> stamp of the last message
+    handled (-1: none yet). The player paces itself on it, so a replay as fast as possible never
+    outruns the slowest consumer and nothing is dropped."""
+
+    service: str
+    handled: dict[str, int]
+    # messages published so far per output key: a consumer that has received that many knows
+    # it has everything this service derived from the inputs handled so far
+    published: dict[str, int] = msgspec.field(default_factory=dict)
+    received: dict[str, int] = msgspec.field(default_factory=dict)  # per input key
 
 
 class AffordanceQuery(Message, frozen=True):
@@ -335,6 +381,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     CompressedCameraFrame,
     DetectedObjects,
     ObjectEffects,
+    GestureObject,
     GestureSegment,
     ActionPosterior,
     AffordancePrediction,
@@ -342,6 +389,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     Description,
     ServiceHealth,
     StreamEnd,
+    Progress,
     AffordanceQuery,
     AffordanceAnswer,
 )

@@ -10,13 +10,21 @@ source plug-in.
   (x, y, z)})` or `("camera", rgb_uint8_array)` items; ingest stamps them with the clock and
   numbers them. A bounded queue sits between the plug-in and the bus: when the bus cannot keep up
   the oldest item is dropped and counted, never silently.
-When the source is exhausted a `StreamEnd` message says how many messages were published.
+When the source is exhausted a `StreamEnd` message says how many messages were published and
+the last stamp of each stream, so consumers know when they have seen everything.
+
+Replays never outrun their consumers: the services this ingest waits for report how far they
+have handled each sensor stream, and publishing waits while the slowest is more than
+`window_s` of stream time behind (runtime.pacing), so no rate, however fast, and no load drops a
+frame. Live sources are not held back (a sensor does not wait): their bounded queue drops the
+oldest item and counts it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import importlib
+import logging
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -27,6 +35,8 @@ from cognition.errors import InputError
 from cognition.gestures.logs import read_hand_log
 from runtime.bus import Publisher
 from runtime.images import message_from_image
+from runtime.log import event
+from runtime.pacing import DEFAULT_WINDOW_S, Pacer
 from runtime.recording import read_recording
 from runtime.reliable import EVENT_CACHE
 from runtime.service import Service
@@ -51,6 +61,7 @@ class SensorIngest(Service):
         start_delay_s: float = 0.0,
         wait_for: list[str] | None = None,
         wait_timeout_s: float = 60.0,
+        window_s: float = DEFAULT_WINDOW_S,
         **base: Any,
     ) -> None:
         super().__init__(**base)
@@ -71,6 +82,10 @@ class SensorIngest(Service):
         self.start_delay_s = start_delay_s
         self.wait_for = list(wait_for or [])
         self.wait_timeout_s = wait_timeout_s
+        if not window_s > 0 or window_s == float("inf"):
+            raise InputError(f"window_s {window_s} must be a positive number of seconds")
+        self.window_s = window_s
+        self.last_stamps: dict[str, int] = {}
         self.published = 0
         self.dropped_items = 0
         self.finished = asyncio.Event()
@@ -88,6 +103,14 @@ class SensorIngest(Service):
         # first frames: wait for their liveliness tokens (declared after their subscriptions).
         for name in self.wait_for:
             await self.bus.wait_alive(self.bus.keys.alive(name), timeout=self.wait_timeout_s)
+        keys = self.bus.keys
+        self.pacer = Pacer(
+            self.bus,
+            self.wait_for,
+            [keys.skeleton, keys.camera, keys.camera_compressed],
+            window_s=self.window_s,
+        )
+        await self.pacer.start()
         if self.start_delay_s:
             await asyncio.sleep(self.start_delay_s)
         try:
@@ -102,15 +125,30 @@ class SensorIngest(Service):
                     break
         except InputError as exc:
             self._failed("source", exc)
-        self.end.put(
-            StreamEnd(
-                header=self.header(StreamEnd),
-                source=str(self.recording or self.log_path or self.plugin),
-                messages=self.published,
-                dropped=self.dropped_items,
-            )
+        finally:
+            self.pacer.stop()
+        end = StreamEnd(
+            header=self.header(StreamEnd),
+            source=str(self.recording or self.log_path or self.plugin),
+            messages=self.published,
+            dropped=self.dropped_items,
+            last_stamps=dict(self.last_stamps),
         )
+        self.end.put(end)
         self.finished.set()
+        event(
+            self.log,
+            logging.INFO,
+            "source finished",
+            messages=self.published,
+            dropped=self.dropped_items,
+            held_back_s=round(self.pacer.waited_s, 3),
+        )
+
+    def _sent(self, stream: str, key: str, stamp: int) -> None:
+        self.published += 1
+        self.last_stamps[stream] = stamp
+        self.pacer.after(key, stamp)
 
     async def _pace(self, t0: int | None, stamp: int, wall0: float) -> None:
         loop = asyncio.get_running_loop()
@@ -122,24 +160,27 @@ class SensorIngest(Service):
             await asyncio.sleep(0)
 
     async def _play_recording(self, path: Path) -> None:
-        streams: dict[str, Publisher[Any]] = {
-            self.bus.keys.skeleton: self.skeleton,
-            self.bus.keys.camera: self.camera,
-            self.bus.keys.camera_compressed: self.compressed,
+        keys = self.bus.keys
+        streams: dict[str, tuple[str, Publisher[Any]]] = {
+            keys.skeleton: ("skeleton", self.skeleton),
+            keys.camera: ("camera", self.camera),
+            keys.camera_compressed: ("camera_compressed", self.compressed),
         }
         wall0 = asyncio.get_running_loop().time()
         t0: int | None = None
         for item in read_recording(path):
-            key = with_robot(item.key, self.bus.keys.robot)
-            pub = streams.get(key)
-            if pub is None:
+            key = with_robot(item.key, keys.robot)
+            target = streams.get(key)
+            if target is None:
                 continue
+            stream, pub = target
+            message = item.message()
+            stamp = message.header.stamp
             t0 = item.publish_time if t0 is None else t0
             await self._pace(t0, item.publish_time, wall0)
-            pub.put_bytes(item.wire()[0]) if item.wire()[1] == "msgpack" else pub.put(
-                item.message()
-            )
-            self.published += 1
+            await self.pacer.before(key, stamp)
+            pub.put(message)
+            self._sent(stream, key, stamp)
 
     async def _play_log(self, path: Path) -> None:
         log = read_hand_log(path)
@@ -147,6 +188,7 @@ class SensorIngest(Service):
         stamps = np.rint(log.time * 1e9).astype(np.int64)
         for i, (xyz, stamp) in enumerate(zip(log.xyz * self.scale, stamps, strict=True)):
             await self._pace(int(stamps[0]), int(stamp), wall0)
+            await self.pacer.before(self.bus.keys.skeleton, int(stamp))
             joint = Joint(position=(float(xyz[0]), float(xyz[1]), float(xyz[2])))
             self.skeleton.put(
                 SkeletonFrame(
@@ -155,7 +197,7 @@ class SensorIngest(Service):
                     joints={self.hand_joint: joint},
                 )
             )
-            self.published += 1
+            self._sent("skeleton", self.bus.keys.skeleton, int(stamp))
 
     async def _play_plugin(self, spec: str) -> None:
         source = load_plugin(spec)()
@@ -178,16 +220,18 @@ class SensorIngest(Service):
                 if payload is done:
                     break
                 frame += 1
+                keys = self.bus.keys
                 if kind == "skeleton":
                     joints = {n: Joint(position=tuple(map(float, p))) for n, p in payload.items()}  # type: ignore[arg-type]
-                    self.skeleton.put(
-                        SkeletonFrame(header=self.header(SkeletonFrame), frame=frame, joints=joints)
-                    )
+                    header = self.header(SkeletonFrame)
+                    self.skeleton.put(SkeletonFrame(header=header, frame=frame, joints=joints))
+                    self._sent("skeleton", keys.skeleton, header.stamp)
                 elif kind == "camera":
-                    self.camera.put(message_from_image(self.header(CameraFrame), payload))  # type: ignore[arg-type]
+                    header = self.header(CameraFrame)
+                    self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
+                    self._sent("camera", keys.camera, header.stamp)
                 else:
                     raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera")
-                self.published += 1
         finally:
             task.cancel()
 

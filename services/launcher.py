@@ -96,8 +96,11 @@ async def start_service(
     return sp
 
 
-async def stop_services(processes: list[ServiceProcess], timeout: float = 8.0) -> dict[str, int]:
-    """SIGTERM every running service, SIGKILL those still running after `timeout`."""
+async def stop_services(processes: list[ServiceProcess], timeout: float = 60.0) -> dict[str, int]:
+    """SIGTERM every running service, SIGKILL those still running after `timeout`. The timeout
+    is generous on purpose: on a loaded machine a healthy service can take seconds to close its
+    session, and killing it then would be reported as an unclean stop; only a hung one waits
+    that long."""
     for sp in processes:
         if sp.running:
             with contextlib.suppress(ProcessLookupError):

@@ -25,7 +25,7 @@ async def _run_once(config, env, keys: s.Keys) -> list[tuple[str, bytes]]:  # ty
         )
         procs = [
             await start_service("gestures", env),
-            await start_service("reasoner", env, options={"effects_wait_s": 0.2}),
+            await start_service("reasoner", env, options={"objects": False}),
         ]
         try:
             await bus.wait_alive(keys.alive(), count=2, timeout=60)

@@ -150,6 +150,9 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     timeout = args.timeout
     if timeout is None and ("ingest" in names or finite):
         timeout = DEFAULT_TIMEOUT
+    if "reasoner" in names and "objects" not in names and args.profile == "all":
+        # no object segmenter in this deployment: the reasoner must not wait for one
+        options["reasoner"].setdefault("objects", False)
     for name in names:
         check_options(name, service_class(name), options[name])
     out = Console()

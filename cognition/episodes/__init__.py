@@ -1,0 +1,31 @@
+"""Per-gesture logic of the pipeline, as plain classes that take time as an argument.
+
+Each class is what one service runs, with no bus in it: `GestureTracker` (gesture streamer),
+`ObjectWatch` (object segmenter), `FusionJoin` (affordance reasoner), `GestureReport` (the lines
+`beyond up` prints). Their outputs depend only on their inputs' stamps and contents, never on
+arrival order across streams or on a wall clock: joins are by stamp and segment id, and
+completeness comes from messages (a later frame, an explicit "not measured", the end of the
+stream) or from a deadline in stream time. `analyse_recording` runs them offline over a
+recording, which is the specification a run on the bus must equal.
+"""
+
+from cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
+from cognition.episodes.objects import FrameObjects, GestureEffects, ObjectAtStart, ObjectWatch
+from cognition.episodes.report import GestureReport
+from cognition.episodes.tracker import Belief, Cancelled, Ended, GestureTracker, Started
+
+__all__ = [
+    "Anticipation",
+    "Belief",
+    "Cancelled",
+    "Ended",
+    "FrameObjects",
+    "FusionJoin",
+    "GestureEffects",
+    "GestureReport",
+    "GestureTracker",
+    "ObjectAtStart",
+    "ObjectWatch",
+    "Outcome",
+    "Started",
+]

@@ -1,0 +1,239 @@
+"""Joining what the services see into the reasoner's beliefs, per gesture (SPEC.md P_comb).
+
+A gesture's anticipations (its belief at every frame, fused with the object it is about) need
+the object seen when the gesture began; its outcome (the final belief, the effects observed and
+the word probabilities) needs its final belief, its end and its measured effects. All are joined
+by segment id, in whatever order they arrive. Gestures are emitted strictly in segment order
+(everything of gesture n before anything of n + 1), so the output streams are the same sequence
+whatever the interleaving of the inputs.
+
+The object segmenter always answers (with the reason when it could not see), so while it is
+there (`objects_present`, from its liveliness) it is waited for, however late its answer comes.
+Only a segmenter that is not there is waited out, by a deadline in stream time (`deadline_s` of
+skeleton time past the instant, told by the beliefs and events), or at once when
+`expect_objects` is off. A deadline in stream time alone would not do: stream time can race
+ahead of a slow link (a replay as fast as possible), and an answer on its way would be lost.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+from cognition.bn.model import BayesNet
+from cognition.errors import InputError
+from cognition.fusion import ACTION, fuse, fuse_words
+from cognition.variables import EFFECTS
+
+R = TypeVar("R")
+
+
+@dataclass(frozen=True)
+class Prediction:
+    action_belief: dict[str, float]
+    evidence: dict[str, str]
+    effects: dict[str, dict[str, float]]
+
+
+@dataclass(frozen=True)
+class Anticipation(Generic[R]):
+    segment_id: int
+    frame: int
+    ref: R  # of the belief it fuses
+    prediction: Prediction
+
+
+@dataclass(frozen=True)
+class Outcome(Generic[R]):
+    segment_id: int
+    frame: int
+    ref: R  # of the final belief
+    prediction: Prediction
+    words: dict[str, float]
+    effects_dropped: str = ""  # why measured effects were left out, if they were
+
+
+Output = Anticipation[R] | Outcome[R]
+
+
+@dataclass
+class _Belief(Generic[R]):
+    frame: int
+    stamp: int
+    ref: R
+    belief: dict[str, float]
+
+
+@dataclass
+class _Gesture(Generic[R]):
+    start_stamp: int | None = None
+    features: dict[str, str] | None = None  # None until the object at the start is known
+    pending: list[_Belief[R]] = field(default_factory=list)
+    final: _Belief[R] | None = None
+    end_stamp: int | None = None
+    effects: tuple[dict[str, str], dict[str, str]] | None = None  # (object, effect) labels
+    last_seen: int = -1  # latest stamp any of its inputs carried
+
+
+class FusionJoin(Generic[R]):
+    def __init__(
+        self, model: BayesNet, *, expect_objects: bool = True, deadline_s: float = 10.0
+    ) -> None:
+        if not deadline_s >= 0 or deadline_s == float("inf"):
+            raise InputError(f"deadline_s {deadline_s} must be a finite number >= 0")
+        self.model = model
+        self.expect_objects = expect_objects
+        self.deadline_ns = round(deadline_s * 1e9)
+        self.gestures: dict[int, _Gesture[R]] = {}
+        self.finished: set[int] = set()
+        self.skeleton_time = -1
+        self.objects_present = False  # the object segmenter is alive (told by the caller)
+
+    # -- inputs ---------------------------------------------------------------------------
+
+    def started(self, segment_id: int, start_stamp: int) -> list[Output[R]]:
+        g = self._gesture(segment_id, start_stamp)
+        if g is not None:
+            g.start_stamp = start_stamp
+        return self._advance(start_stamp)
+
+    def object_seen(self, segment_id: int, labels: Mapping[str, str]) -> list[Output[R]]:
+        g = self._gesture(segment_id)
+        if g is not None and g.features is None:
+            g.features = self.known(labels)
+        return self._flush()
+
+    def belief(
+        self, segment_id: int, frame: int, stamp: int, belief: Mapping[str, float], ref: R,
+        final: bool = False,
+    ) -> list[Output[R]]:  # fmt: skip
+        g = self._gesture(segment_id, stamp)
+        if g is not None:
+            item = _Belief(frame, stamp, ref, dict(belief))
+            if final:
+                g.final = item
+            else:
+                g.pending.append(item)
+        return self._advance(stamp)
+
+    def ended(self, segment_id: int, start_stamp: int, end_stamp: int) -> list[Output[R]]:
+        g = self._gesture(segment_id, end_stamp)
+        if g is not None:
+            g.start_stamp = start_stamp if g.start_stamp is None else g.start_stamp
+            g.end_stamp = end_stamp
+        return self._advance(end_stamp)
+
+    def cancelled(self, segment_id: int) -> list[Output[R]]:
+        self.gestures.pop(segment_id, None)
+        self.finished.add(segment_id)
+        return self._flush()
+
+    def effects_seen(
+        self, segment_id: int, object_labels: Mapping[str, str], effect_labels: Mapping[str, str]
+    ) -> list[Output[R]]:
+        g = self._gesture(segment_id)
+        if g is not None and g.effects is None:
+            g.effects = (self.known(object_labels), self.known(effect_labels))
+        return self._flush()
+
+    def skeleton_at(self, stamp: int) -> list[Output[R]]:
+        return self._advance(stamp)
+
+    def objects_alive(self, present: bool) -> list[Output[R]]:
+        """The object segmenter is there (or is gone): while it is, nothing is waited out."""
+        self.objects_present = present
+        return self._flush()
+
+    # -- internals ------------------------------------------------------------------------
+
+    def known(self, labels: Mapping[str, str]) -> dict[str, str]:
+        """Labels the network knows (a clusters file may name values the network lacks)."""
+        values = self.model.values
+        return {k: v for k, v in labels.items() if k in values and v in values[k]}
+
+    def _gesture(self, segment_id: int, stamp: int = -1) -> _Gesture[R] | None:
+        if segment_id in self.finished:
+            return None  # a repeat of a finished gesture (recovered from a cache)
+        g = self.gestures.setdefault(segment_id, _Gesture())
+        g.last_seen = max(g.last_seen, stamp)
+        return g
+
+    def _advance(self, stamp: int) -> list[Output[R]]:
+        self.skeleton_time = max(self.skeleton_time, stamp)
+        return self._flush()
+
+    def _waited_out(self, stamp: int | None) -> bool:
+        if not self.expect_objects:
+            return True
+        if self.objects_present:
+            return False
+        return stamp is not None and self.skeleton_time >= stamp + self.deadline_ns
+
+    def _abandoned(self, g: _Gesture[R]) -> bool:
+        if g.final is not None and g.end_stamp is not None:
+            return False  # complete but for the camera, which `_waited_out` handles
+        return g.last_seen >= 0 and self.skeleton_time >= g.last_seen + self.deadline_ns
+
+    def _flush(self) -> list[Output[R]]:
+        outputs: list[Output[R]] = []
+        for segment_id in sorted(self.gestures):
+            g = self.gestures[segment_id]
+            if self._abandoned(g):
+                # no input about it for a deadline of stream time and still incomplete (its
+                # start or end never came): it must not hold back the gestures after it
+                del self.gestures[segment_id]
+                self.finished.add(segment_id)
+                continue
+            if g.features is None and self._waited_out(g.start_stamp):
+                g.features = {}
+            if g.features is None:
+                break
+            for item in g.pending:
+                prediction = self.predict(g.features, item.belief)
+                outputs.append(Anticipation(segment_id, item.frame, item.ref, prediction))
+            g.pending.clear()
+            if g.effects is None and g.end_stamp is not None and self._waited_out(g.end_stamp):
+                g.effects = ({}, {})
+            if g.final is None or g.end_stamp is None or g.effects is None:
+                break
+            outputs.append(self._outcome(segment_id, g))
+            del self.gestures[segment_id]
+            self.finished.add(segment_id)
+        return outputs
+
+    def predict(self, observed: Mapping[str, str], belief: Mapping[str, float]) -> Prediction:
+        action = fuse(self.model, ACTION, observed, belief).marginal(ACTION)
+        effects = {
+            var: fuse(self.model, var, observed, belief).marginal(var)
+            for var in EFFECTS
+            if var in self.model.values and var not in observed
+        }
+        return Prediction(
+            action_belief=_normalised(action),
+            evidence=dict(observed),
+            effects={k: _normalised(v) for k, v in effects.items()},
+        )
+
+    def _outcome(self, segment_id: int, g: _Gesture[R]) -> Outcome[R]:
+        assert g.final is not None and g.features is not None and g.effects is not None
+        observed = dict(g.features)
+        observed.update(g.effects[0])
+        observed.update(g.effects[1])
+        dropped = ""
+        try:
+            prediction = self.predict(observed, g.final.belief)
+        except InputError as exc:
+            # the measured effects contradict the gesture under the network: keep the object's
+            # features and the gesture, drop the effects, and say so
+            dropped = f"gesture {segment_id}: measured effects left out: {exc}"
+            observed = dict(g.features)
+            prediction = self.predict(observed, g.final.belief)
+        words = fuse_words(self.model, observed, g.final.belief)
+        clipped = {w: min(1.0, max(0.0, p)) for w, p in words.items()}
+        return Outcome(segment_id, g.final.frame, g.final.ref, prediction, clipped, dropped)
+
+
+def _normalised(dist: Mapping[str, float]) -> dict[str, float]:
+    total = sum(dist.values())
+    return {k: v / total for k, v in dist.items()}

@@ -1,0 +1,318 @@
+"""What the camera says about each gesture: the object it is about and the effects on it.
+
+Per camera frame: the segmented, labelled objects. Per gesture: the object acted on as seen when
+the gesture began (`ObjectAtStart`) and the effects measured over the gesture's own frames
+(`GestureEffects`), each exactly once, measured or with the reason it could not be.
+
+Why the decisions wait for what they wait for: the camera stream arrives in stamp order, so a
+frame stamped at or after an instant proves every frame before it has been seen. The object at a
+gesture's start is decided once a frame at or after the start has been handled, its effects once
+a frame after its end has; or when the camera is known to be complete (`camera_ended`: its last
+stamp is known from the stream's end marker and that frame has been handled, or it never had a
+frame); or when the camera has fallen silent while the skeleton moved `deadline_s` of stream time
+past the instant (`skeleton_time`, told by the gesture events). Nothing is decided on a wall
+clock, so the same frames and events give the same outputs in any arrival order.
+
+Camera history is kept until no gesture can still need it: `gestures_complete(t)` says every
+gesture event derived from the skeleton up to `t` has been received, so a gesture announced from
+now on starts after `t - onset_s` (the segmenter places an onset at most that far back), and
+older frames outside open windows can go. `buffer_bytes` is a last-resort cap on top.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+import numpy as np
+
+from cognition.errors import InputError
+from cognition.vision.clusters import ClusterModel
+from cognition.vision.pipeline import (
+    DetectedObject,
+    RecordingAnalyser,
+    RecordingAnalysis,
+    describe_frame,
+)
+
+R = TypeVar("R")
+EFFECT_VARIABLES = ("ObjVel", "HandVel", "ObjHandVel", "Contact")
+MIN_WINDOW_FRAMES = 3
+FPS_FRAMES = 4  # frames of a gesture's window its frame rate is measured on
+
+
+@dataclass(frozen=True)
+class FrameObjects(Generic[R]):
+    stamp: int
+    frame: int
+    ref: R
+    objects: list[DetectedObject]
+
+
+@dataclass(frozen=True)
+class ObjectAtStart(Generic[R]):
+    segment_id: int
+    frame: int  # camera frame the labels come from, 0 if none
+    labels: dict[str, str]
+    reason: str
+    ref: R  # of the gesture's start event
+
+
+@dataclass(frozen=True)
+class GestureEffects(Generic[R]):
+    segment_id: int
+    frame: int  # the gesture's last skeleton frame
+    analysis: RecordingAnalysis | None
+    reason: str  # why not measured, when analysis is None
+    ref: R  # of the gesture's end event
+
+    @property
+    def effect_labels(self) -> dict[str, str]:
+        labels = self.analysis.labels if self.analysis else {}
+        return {k: v for k, v in labels.items() if k in EFFECT_VARIABLES}
+
+    @property
+    def object_labels(self) -> dict[str, str]:
+        labels = self.analysis.labels if self.analysis else {}
+        return {k: v for k, v in labels.items() if k not in EFFECT_VARIABLES}
+
+
+Output = FrameObjects[R] | ObjectAtStart[R] | GestureEffects[R]
+
+
+@dataclass
+class _Buffered:
+    stamp: int
+    frame: int
+    image: np.ndarray
+    labels: dict[str, str]  # of the biggest object, empty when none
+
+
+@dataclass
+class _Window(Generic[R]):
+    segment_id: int
+    start_stamp: int
+    lo: int  # first stamp of the window (start - lead)
+    start_ref: R
+    stamps: list[int] = field(default_factory=list)
+    early: list[np.ndarray] = field(default_factory=list)  # until the frame rate is known
+    analyser: RecordingAnalyser | None = None
+    object_decided: bool = False
+    end: tuple[int, int, R] | None = None  # (end stamp, end frame, ref) once ended
+
+
+class ObjectWatch(Generic[R]):
+    """Camera frames and gesture events in, per-frame objects and per-gesture results out.
+
+    lead_s: the window of a gesture opens this long before its first frame (the hand approaching
+    shows in the camera before the skeleton segmenter calls it a gesture). fps: the camera's rate,
+    or None to measure it on each window's first frames. onset_s: how far back of the skeleton
+    the gesture segmenter may place an onset. buffer_bytes: the cap on camera history kept."""
+
+    def __init__(
+        self,
+        clusters: ClusterModel,
+        *,
+        lead_s: float = 0.3,
+        fps: float | None = None,
+        deadline_s: float = 5.0,
+        onset_s: float = 2.0,
+        buffer_bytes: int = 160 * 2**20,
+    ) -> None:
+        for name, value in (("lead_s", lead_s), ("deadline_s", deadline_s), ("onset_s", onset_s)):
+            if not np.isfinite(value) or value < 0:
+                raise InputError(f"{name} {value} must be a finite number >= 0")
+        if fps is not None and (not np.isfinite(fps) or fps <= 0):
+            raise InputError(f"fps {fps} must be positive (or unset: measured)")
+        self.clusters = clusters
+        self.lead_ns = round(lead_s * 1e9)
+        self.deadline_ns = round(deadline_s * 1e9)
+        self.onset_ns = round(onset_s * 1e9)
+        self.complete_until = -1  # gesture events are complete up to this skeleton stamp
+        self.evicted_early = 0  # frames the byte cap dropped while a gesture could need them
+        self._last_evicted: tuple[int, int, dict[str, str]] | None = None
+        self.buffer_bytes = buffer_bytes
+        self.fps = fps
+        self.buffer: deque[_Buffered] = deque()
+        self._buffered_bytes = 0
+        self.watermark = -1  # stamp of the last camera frame handled
+        self.camera_last: int | None = None  # last camera stamp, from the stream's end marker
+        self.camera_done = False
+        self.skeleton_time = -1
+        self.windows: dict[int, _Window[R]] = {}
+
+    # -- inputs ---------------------------------------------------------------------------
+
+    def camera(self, stamp: int, frame: int, image: np.ndarray, ref: R) -> list[Output[R]]:
+        """One camera frame: the results it completes, then its own objects."""
+        if stamp <= self.watermark:
+            raise InputError(
+                f"camera frame {frame} stamped {stamp} is not after the last one handled "
+                f"({self.watermark}); valid: frames in increasing stamp order"
+            )
+        result = describe_frame(image, self.clusters, require_objects=False)
+        biggest = max(result.objects, key=lambda o: o.features.area, default=None)
+        self._keep(_Buffered(stamp, frame, image, dict(biggest.labels) if biggest else {}))
+        self.watermark = stamp
+        for window in self.windows.values():
+            if stamp >= window.lo and (window.end is None or window.end[0] >= stamp):
+                self._push(window, stamp, image)
+        if self.camera_last is not None and stamp >= self.camera_last:
+            self.camera_done = True
+        outputs = self._decide()
+        outputs.append(FrameObjects(stamp, frame, ref, result.objects))
+        return outputs
+
+    def started(self, segment_id: int, start_stamp: int, ref: R) -> list[Output[R]]:
+        if segment_id in self.windows:
+            return []  # a repeat (recovered from a cache): already under way
+        window = _Window(segment_id, start_stamp, start_stamp - self.lead_ns, ref)
+        self.windows[segment_id] = window
+        for b in self.buffer:
+            if b.stamp >= window.lo:
+                self._push(window, b.stamp, b.image)
+        self._skeleton_at(start_stamp)
+        return self._decide()
+
+    def ended(
+        self, segment_id: int, start_stamp: int, end_stamp: int, frame: int, ref: R
+    ) -> list[Output[R]]:
+        if end_stamp < start_stamp:
+            raise InputError(
+                f"gesture {segment_id} ends at {end_stamp}, before its start {start_stamp}"
+            )
+        window = self.windows.get(segment_id)
+        if window is None:  # its start was never seen: open the window from the buffer
+            self.started(segment_id, start_stamp, ref)
+            window = self.windows[segment_id]
+        if window.end is None:
+            window.end = (end_stamp, frame, ref)
+        self._skeleton_at(end_stamp)
+        return self._decide()
+
+    def cancelled(self, segment_id: int) -> list[Output[R]]:
+        self.windows.pop(segment_id, None)
+        return self._decide()
+
+    def gestures_complete(self, stamp: int) -> list[Output[R]]:
+        """Every gesture event derived from the skeleton up to `stamp` has been received."""
+        self.complete_until = max(self.complete_until, stamp)
+        self._skeleton_at(stamp)
+        self._evict()
+        return self._decide()
+
+    def skeleton_at(self, stamp: int) -> list[Output[R]]:
+        """The skeleton stream has reached `stamp` (deadlines for a silent camera)."""
+        self._skeleton_at(stamp)
+        return self._decide()
+
+    def camera_ended(self, last_stamp: int | None) -> list[Output[R]]:
+        """The source has ended; its last camera frame was stamped `last_stamp` (None: the
+        stream had no camera)."""
+        self.camera_last = last_stamp if last_stamp is not None else -1
+        if self.watermark >= self.camera_last:
+            self.camera_done = True
+        return self._decide()
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _skeleton_at(self, stamp: int) -> None:
+        self.skeleton_time = max(self.skeleton_time, stamp)
+
+    def _keep(self, item: _Buffered) -> None:
+        self.buffer.append(item)
+        self._buffered_bytes += item.image.nbytes
+        self._evict()
+
+    def _evict(self) -> None:
+        # a frame can go once no gesture, open or still to be announced, can need it
+        keep_from = self.complete_until - self.onset_ns - self.lead_ns
+        for window in self.windows.values():
+            keep_from = min(keep_from, window.lo)
+        while self.buffer and self.buffer[0].stamp < keep_from:
+            self._drop_oldest()
+        while len(self.buffer) > 1 and self._buffered_bytes > self.buffer_bytes:
+            self.evicted_early += 1
+            self._drop_oldest()
+
+    def _drop_oldest(self) -> None:
+        old = self.buffer.popleft()
+        self._buffered_bytes -= old.image.nbytes
+        if old.labels:  # a later start looks back to the last frame that showed an object
+            self._last_evicted = (old.stamp, old.frame, old.labels)
+
+    def _push(self, window: _Window[R], stamp: int, image: np.ndarray) -> None:
+        window.stamps.append(stamp)
+        if window.analyser is None:
+            window.early.append(image)
+            if self.fps is None and len(window.stamps) < FPS_FRAMES:
+                return
+            fps = self.fps or float(1e9 / np.median(np.diff(window.stamps)))
+            window.analyser = RecordingAnalyser(fps, self.clusters)
+            for img in window.early:
+                window.analyser.push(img)
+            window.early.clear()
+        else:
+            window.analyser.push(image)
+
+    def _silent_since(self, stamp: int) -> bool:
+        return self.watermark < stamp and self.skeleton_time >= stamp + self.deadline_ns
+
+    def _decide(self) -> list[Output[R]]:
+        outputs: list[Output[R]] = []
+        for segment_id in sorted(self.windows):
+            window = self.windows[segment_id]
+            if not window.object_decided:
+                s = window.start_stamp
+                if not (self.watermark >= s or self.camera_done or self._silent_since(s)):
+                    continue
+                window.object_decided = True
+                outputs.append(self._object_at_start(window))
+            if window.end is None:
+                continue
+            e = window.end[0]
+            if self.watermark > e or self.camera_done or self._silent_since(e):
+                outputs.append(self._effects(window))
+                del self.windows[segment_id]
+        return outputs
+
+    def _object_at_start(self, window: _Window[R]) -> ObjectAtStart[R]:
+        seen = [(b.stamp, b.frame, b.labels) for b in self.buffer if b.labels]
+        if self._last_evicted is not None:
+            seen.insert(0, self._last_evicted)
+        seen = [item for item in seen if item[0] <= window.start_stamp]
+        if seen:
+            _, frame, labels = seen[-1]
+            return ObjectAtStart(window.segment_id, frame, dict(labels), "", window.start_ref)
+        if self.watermark < 0:
+            reason = "no camera frame before the gesture began"
+        elif self.watermark < window.start_stamp and not self.camera_done:
+            reason = "the camera stopped before the gesture began"
+        else:
+            reason = "no object on the table when the gesture began"
+        return ObjectAtStart(window.segment_id, 0, {}, reason, window.start_ref)
+
+    def _effects(self, window: _Window[R]) -> GestureEffects[R]:
+        assert window.end is not None
+        end_stamp, frame, ref = window.end
+        within = sum(1 for s in window.stamps if window.lo <= s <= end_stamp)
+        if within < MIN_WINDOW_FRAMES:
+            what = "no camera stream" if self.watermark < 0 else f"only {within} camera frames"
+            reason = (
+                f"effects not measured: {what} between the gesture's start and end "
+                f"(valid: at least {MIN_WINDOW_FRAMES})"
+            )
+            return GestureEffects(window.segment_id, frame, None, reason, ref)
+        if window.analyser is None:  # fewer than FPS_FRAMES frames in all: measure on them
+            fps = float(1e9 / np.median(np.diff(window.stamps)))
+            window.analyser = RecordingAnalyser(fps, self.clusters)
+            for img in window.early:
+                window.analyser.push(img)
+        try:
+            analysis = window.analyser.finish(within)
+        except InputError as exc:
+            return GestureEffects(
+                window.segment_id, frame, None, f"effects not measured: {exc}", ref
+            )
+        return GestureEffects(window.segment_id, frame, analysis, "", ref)

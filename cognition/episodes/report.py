@@ -1,0 +1,139 @@
+"""The lines a person reads about each gesture, the same offline (`beyond analyse`) and on the
+bus (`beyond up`).
+
+Lines depend only on contents: a gesture starts, the most likely action changes, an effect is
+anticipated before the end, the gesture ends, it is recognised, its description. A gesture's
+lines are released as one block in frame order once it is complete (ended, recognised and
+described), and blocks in segment order, so concurrent services interleaving their messages
+differently never change what is printed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+ANTICIPATION_THRESHOLD = 0.6  # an effect value this probable counts as anticipated
+ANTICIPATED = ("ObjVel",)
+AFTER_ALL_FRAMES = 1 << 62  # recognition and description come after every frame's events
+
+# order of event kinds within one frame of a gesture's block
+STARTED, LOOKS, ANTICIPATES, ENDED, RECOGNISED, DESCRIBED = range(6)
+
+
+@dataclass
+class GestureLines:
+    started: int | None = None
+    best: str = ""
+    end_frame: int | None = None
+    anticipated: dict[str, str] = field(default_factory=dict)
+    recognised: str = ""
+    description: str = ""
+    events: list[tuple[int, int, str]] = field(default_factory=list)  # (frame, kind, text)
+    printed: bool = False
+
+    @property
+    def complete(self) -> bool:
+        return self.end_frame is not None and bool(self.recognised) and bool(self.description)
+
+    def block(self) -> list[str]:
+        """The gesture's lines in frame order; anticipations count only before the end."""
+        end = self.end_frame if self.end_frame is not None else AFTER_ALL_FRAMES
+        kept = [e for e in self.events if e[1] != ANTICIPATES or e[0] <= end]
+        return [text for _, _, text in sorted(kept, key=lambda e: (e[0], e[1]))]
+
+
+class GestureReport:
+    """Feed it what the pipeline produced; `release()` gives the lines ready to print."""
+
+    def __init__(self) -> None:
+        self.gestures: dict[int, GestureLines] = {}
+
+    def _g(self, segment_id: int) -> GestureLines:
+        return self.gestures.setdefault(segment_id, GestureLines())
+
+    def started(self, segment_id: int, frame: int) -> None:
+        g = self._g(segment_id)
+        if g.started is None:
+            g.started = frame
+            g.events.append((frame, STARTED, f"started at frame {frame}"))
+
+    def ended(self, segment_id: int, frame: int) -> None:
+        g = self._g(segment_id)
+        if g.end_frame is None:
+            g.end_frame = frame
+            g.events.append((frame, ENDED, f"ended at frame {frame}"))
+
+    def cancelled(self, segment_id: int) -> None:
+        self.gestures.pop(segment_id, None)
+
+    def belief(
+        self, segment_id: int, frame: int, actions: Sequence[str], p: Sequence[float]
+    ) -> None:
+        """A non-final P_HMM at `frame`: a line when the most likely action changes."""
+        g = self._g(segment_id)
+        i = max(range(len(p)), key=p.__getitem__)
+        if actions[i] != g.best:
+            g.best = actions[i]
+            g.events.append(
+                (frame, LOOKS, f"frame {frame}, looks like {g.best} (P_HMM {p[i]:.2f})")
+            )
+
+    def anticipation(
+        self, segment_id: int, frame: int, effects: Mapping[str, Mapping[str, float]]
+    ) -> None:
+        g = self._g(segment_id)
+        for var in ANTICIPATED:
+            dist = effects.get(var)
+            if not dist:
+                continue
+            value = max(dist, key=dist.__getitem__)
+            if dist[value] >= ANTICIPATION_THRESHOLD and g.anticipated.get(var) != value:
+                g.anticipated[var] = value
+                text = (
+                    f"anticipates {var}={value} (P {dist[value]:.2f}) at frame {frame}, "
+                    "before the gesture ends"
+                )
+                g.events.append((frame, ANTICIPATES, text))
+
+    def recognised(
+        self, segment_id: int, action_belief: Mapping[str, float], evidence: Mapping[str, str]
+    ) -> None:
+        g = self._g(segment_id)
+        if g.recognised:
+            return
+        action = max(action_belief, key=action_belief.__getitem__)
+        g.recognised = action
+        given = ", ".join(f"{k}={v}" for k, v in evidence.items()) or "nothing"
+        text = f"recognised {action} (P {action_belief[action]:.2f}) given {given}"
+        g.events.append((AFTER_ALL_FRAMES, RECOGNISED, text))
+
+    def described(self, segment_id: int, sentence: str) -> None:
+        g = self._g(segment_id)
+        if not g.description:
+            g.description = sentence
+            g.events.append((AFTER_ALL_FRAMES, DESCRIBED, f'"{sentence}"'))
+
+    def release(self) -> list[str]:
+        """Lines of every complete gesture not printed yet, in segment order; a gesture waits for
+        the incomplete ones before it that have started."""
+        lines: list[str] = []
+        for segment_id in sorted(self.gestures):
+            g = self.gestures[segment_id]
+            if g.printed:
+                continue
+            if not g.complete:
+                if g.started is not None:
+                    break
+                continue  # never started here (a stray message): holds nothing back
+            lines += [f"gesture {segment_id}: {line}" for line in g.block()]
+            g.printed = True
+        return lines
+
+    @property
+    def all_printed(self) -> bool:
+        return all(g.printed for g in self.gestures.values() if g.started is not None)
+
+    @property
+    def described_count(self) -> int:
+        return sum(1 for g in self.gestures.values() if g.description)

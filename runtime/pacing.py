@@ -1,0 +1,127 @@
+"""Backpressure for players: never run further ahead of the slowest consumer than a window.
+
+A replay as fast as possible, or a paced one on a loaded machine, must not lose anything: a
+consumer that falls behind would otherwise see its queue overflow, or its peers act on a stream
+it has not caught up with. Consumers report, per sensor key, the stamp of the last message they
+handled (`Progress`, published by `Service` for `paced` subscriptions). Before publishing a
+message stamped `s` on key `k`, the player waits until every consumer of `k` has handled
+everything sent on `k` up to `s - window`. Which keys a consumer takes comes from its health
+reply (its declared inputs), asked once it is alive.
+
+Derived streams count too: a consumer that takes another consumer's output (the object
+segmenter takes the gesture streamer's events) must have received everything that one has
+published (`Progress.published` / `received`) before more is sent, or a late event would find
+the frames it needs long gone. The window holds across streams, not per stream: a camera
+running seconds ahead of the skeleton would have the object segmenter buffer (and, past its
+cap, forget) frames a gesture announced later still needs. Bounding every consumer's lag on
+every stream bounds that skew to the window.
+
+This decides only *when* the player sends, never what anyone outputs. A consumer that is no
+longer alive (its liveliness token gone) is not waited for: a player must not hang on a crashed
+service; that is checked on the wall clock, because it is about the machine, not the data.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Iterable
+
+from runtime.bus import Bus
+from schemas.messages import Progress, ServiceHealth
+
+log = logging.getLogger("beyond.pacing")
+DEFAULT_WINDOW_S = 0.5
+_CHECK_ALIVE_S = 2.0  # waiting this long on a consumer: is it still there?
+
+
+class Pacer:
+    def __init__(
+        self,
+        bus: Bus,
+        consumers: Iterable[str],
+        keys: Iterable[str],
+        window_s: float = DEFAULT_WINDOW_S,
+    ) -> None:
+        self.bus = bus
+        self.names = list(consumers)
+        self.keys = set(keys)
+        self.window_ns = round(window_s * 1e9)
+        self.takes: dict[str, set[str]] = {}  # consumer -> sensor keys it handles
+        self.handled: dict[str, dict[str, int]] = {}
+        self.sent: dict[str, int] = {}
+        self.published: dict[str, dict[str, int]] = {}  # service -> key -> messages sent
+        self.received: dict[str, dict[str, int]] = {}  # service -> key -> messages received
+        self.waited_s = 0.0
+        self._moved = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+
+    async def start(self) -> None:
+        """Subscribe to progress, then learn what each (alive) consumer takes."""
+        sub = self.bus.subscribe(self.bus.keys.progress(), Progress)
+
+        async def pump() -> None:
+            async for received in sub:
+                msg = received.message
+                mine = self.handled.setdefault(msg.service, {})
+                for key, stamp in msg.handled.items():
+                    mine[key] = max(mine.get(key, -1), stamp)
+                self.published[msg.service] = dict(msg.published)
+                self.received[msg.service] = dict(msg.received)
+                self._moved.set()
+
+        self._task = asyncio.get_running_loop().create_task(pump())
+        for name in self.names:
+            with contextlib.suppress(Exception):
+                for reply in await self.bus.query(self.bus.keys.health(name), ServiceHealth):
+                    taken = set(reply.message.inputs) & self.keys
+                    if taken:
+                        self.takes[name] = taken
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+    def _behind(self, stamp: int) -> list[str]:
+        published: dict[str, int] = {}
+        for counts in self.published.values():
+            for key, n in counts.items():
+                published[key] = published.get(key, 0) + n
+        behind = [
+            name
+            for name, counts in self.received.items()
+            if name in self.takes
+            and any(n < published[key] for key, n in counts.items() if key in published)
+        ]
+        for name, taken in self.takes.items():
+            if name in behind:
+                continue
+            handled = self.handled.get(name, {})
+            for key in taken:
+                last = self.sent.get(key)
+                if last is not None and handled.get(key, -1) < min(stamp - self.window_ns, last):
+                    behind.append(name)
+                    break
+        return behind
+
+    async def before(self, key: str, stamp: int) -> None:
+        """Wait until sending `stamp` (on `key`) keeps every consumer within the window on
+        every stream it takes."""
+        loop = asyncio.get_running_loop()
+        began = None
+        while behind := self._behind(stamp):
+            began = began or loop.time()
+            self._moved.clear()
+            try:
+                await asyncio.wait_for(self._moved.wait(), _CHECK_ALIVE_S)
+            except TimeoutError:
+                for name in behind:
+                    if not await self.bus.alive(self.bus.keys.alive(name)):
+                        log.warning("consumer %s is gone; no longer waiting for it", name)
+                        self.takes.pop(name, None)
+        if began is not None:
+            self.waited_s += loop.time() - began
+
+    def after(self, key: str, stamp: int) -> None:
+        self.sent[key] = max(self.sent.get(key, -1), stamp)
