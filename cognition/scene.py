@@ -483,47 +483,76 @@ def check_scene(
     """Run what the services run on a recording's two streams and compare with the truth.
 
     `skeleton`: joint -> (T, 3) metres (needs right_hand and torso); `images`: the camera frames
-    in stamp order. Gestures are found by the default segmenter and recognised by the default
-    models over exactly their frames (what the gesture streamer publishes as final); each one's
-    camera window is the frames stamped from `lead_s` before its first frame to its last frame,
-    analysed by `analyse_frames` with the shipped clusters at the frame rate measured from the
-    stamps (what the object segmenter does). A found gesture is matched to the item whose true
-    frames it overlaps most."""
-    from cognition.gestures import GestureSegmenter, extract_features, recognize_sequence
+    in stamp order. The streams go, in stamp order, through the classes the gesture streamer and
+    the object segmenter run (`cognition.episodes.GestureTracker` and `ObjectWatch`, default
+    models and shipped clusters): each gesture's action is the argmax of its final belief, its
+    labels are the object at its start and the effects measured over its frames. A found gesture
+    is matched to the item whose true frames it overlaps most."""
+    from cognition.episodes import (
+        Belief,
+        Ended,
+        GestureEffects,
+        GestureTracker,
+        ObjectWatch,
+        Started,
+    )
+    from cognition.gestures import extract_features
     from cognition.gestures.default_models import default_models
     from cognition.vision.clusters import ClusterModel
-    from cognition.vision.pipeline import analyse_frames
 
     for joint in ("right_hand", "torso"):
         if joint not in skeleton:
             raise InputError(f"skeleton has no joint {joint!r}; joints: {', '.join(skeleton)}")
     features = extract_features(skeleton["right_hand"], skeleton["torso"])
-    seg = GestureSegmenter()
-    found = [s for s in (seg.push(x) for x in features) if s is not None]
-    last = seg.finish()
-    if last is not None:
-        found.append(last)
     models = default_models()
-    clusters = ClusterModel.load()
+    tracker: GestureTracker[int] = GestureTracker(models)
+    watch: ObjectWatch[int] = ObjectWatch(ClusterModel.load(), lead_s=lead_s)
+    skel_s = np.asarray(skeleton_stamps, dtype=np.int64)
     cam_s = np.asarray(camera_stamps, dtype=np.int64)
+    action: dict[int, str] = {}
+    span: dict[int, tuple[int, int]] = {}
+    effects: dict[int, GestureEffects[int]] = {}
+
+    def watched(outputs: Sequence[object]) -> None:
+        for out in outputs:
+            if isinstance(out, GestureEffects):
+                effects[out.segment_id] = out
+
+    def tracked(events: Sequence[object]) -> None:
+        for ev in events:
+            if isinstance(ev, Belief) and ev.final:
+                action[ev.segment_id] = str(models.actions[int(np.argmax(ev.result.posterior))])
+            elif isinstance(ev, Ended):
+                first = int(np.searchsorted(skel_s, ev.start_stamp))
+                span[ev.segment_id] = (first, ev.ref + 1)
+                watched(watch.ended(ev.segment_id, ev.start_stamp, ev.end_stamp, ev.frame, ev.ref))
+            elif isinstance(ev, Started):
+                watched(watch.started(ev.segment_id, ev.stamp, ev.ref))
+
+    i = j = 0
+    while i < len(skel_s) or j < len(cam_s):
+        if j >= len(cam_s) or (i < len(skel_s) and skel_s[i] <= cam_s[j]):
+            tracked(tracker.push(int(skel_s[i]), i + 1, features[i], i))
+            watched(watch.gestures_complete(int(skel_s[i])))
+            i += 1
+        else:
+            watched(watch.camera(int(cam_s[j]), j + 1, images[j], j))
+            j += 1
+    tracked(tracker.finish())
+    watched(watch.camera_ended(int(cam_s[-1]) if len(cam_s) else None))
     checks: list[GestureCheck] = []
-    for s in found:
-        result = recognize_sequence(models, features[s.start : s.stop]).final
-        action = str(models.actions[int(np.argmax(result.posterior))])
-        lo = int(skeleton_stamps[s.start]) - round(lead_s * 1e9)
-        hi = int(skeleton_stamps[s.stop - 1])
-        sel = np.flatnonzero((cam_s >= lo) & (cam_s <= hi))
+    for segment_id in sorted(span):
+        start, stop = span[segment_id]
+        eff = effects.get(segment_id)
         labels: dict[str, str] = {}
-        if len(sel) >= 3:
-            fps = float(1e9 / np.median(np.diff(cam_s[sel])))
-            try:
-                labels = analyse_frames([images[int(i)] for i in sel], fps, clusters).labels
-            except InputError:
-                labels = {}
-        overlaps = [max(0, min(s.stop, t.frames[1]) - max(s.start, t.frames[0])) for t in truth]
+        if eff is not None and eff.analysis is not None:
+            labels = dict(eff.analysis.labels)
+        lo = int(skel_s[start]) - round(lead_s * 1e9)
+        n_frames = int(np.count_nonzero((cam_s >= lo) & (cam_s <= int(skel_s[stop - 1]))))
+        overlaps = [max(0, min(stop, t.frames[1]) - max(start, t.frames[0])) for t in truth]
         index = int(np.argmax(overlaps)) if overlaps and max(overlaps) > 0 else -1
         truth_k = {"Action": truth[index].action, **truth[index].labels} if index >= 0 else {}
         checks.append(
-            GestureCheck(index, (s.start, s.stop), action, dict(labels), truth_k, len(sel))
+            GestureCheck(index, (start, stop), action[segment_id], labels, truth_k, n_frames)
         )
     return checks

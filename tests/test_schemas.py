@@ -15,6 +15,11 @@ from cognition.errors import InputError
 H = s.Header(version=1, source="test", seq=7, stamp=1_700_000_000_123_456_789, correlation="x/1")
 
 
+def _h(cls: type[s.Message]) -> s.Header:
+    """H at the version `cls` is read at (decoding refuses any other)."""
+    return msgspec.structs.replace(H, version=cls.VERSION)
+
+
 def examples() -> list[s.Message]:
     return [
         s.SkeletonFrame(header=H, frame=3, joints={"hand_right": s.Joint((0.1, -0.2, 1.5), 0.5)}),
@@ -44,7 +49,7 @@ def examples() -> list[s.Message]:
             ],
         ),
         s.ObjectEffects(
-            header=H,
+            header=_h(s.ObjectEffects),
             frame=3,
             effects=[
                 s.ObjectEffect(
@@ -58,7 +63,17 @@ def examples() -> list[s.Message]:
                 )
             ],
         ),
-        s.GestureSegment(header=H, event="end", segment_id=2, frame=9, start_stamp=1, end_stamp=5),
+        s.GestureSegment(
+            header=_h(s.GestureSegment),
+            event="end",
+            segment_id=2,
+            frame=9,
+            start_stamp=1,
+            end_stamp=5,
+        ),
+        s.GestureObject(
+            header=H, segment_id=2, frame=4, labels={"Color": "blue", "Shape": "box"}, reason=""
+        ),
         s.ActionPosterior(
             header=H,
             segment_id=2,
@@ -93,7 +108,20 @@ def examples() -> list[s.Message]:
             malformed=3,
             errors=0,
         ),
-        s.StreamEnd(header=H, source="demo.mcap", messages=12, dropped=1),
+        s.StreamEnd(
+            header=_h(s.StreamEnd),
+            source="demo.mcap",
+            messages=12,
+            dropped=1,
+            last_stamps={"skeleton": 5, "camera": 4},
+        ),
+        s.Progress(
+            header=H,
+            service="objects",
+            handled={"beyond/robot/sensors/camera/raw": 4},
+            published={"beyond/robot/vision/objects": 3},
+            received={"beyond/robot/gesture/segment": 2},
+        ),
         s.AffordanceQuery(
             header=H,
             query=["ObjVel"],
