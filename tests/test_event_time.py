@@ -1,0 +1,146 @@
+"""Event time (issue 12): a replay's outputs depend on the recording, never on timing.
+
+The matrix: every shipped recording as fast as possible and at 4x, the shortest also at 1x and
+0.5x; three busy-looping processes beside the pipeline the whole time; the services (ingest
+included: it waits for its consumers) started in a shuffled order with random delays. Every
+run must print the gesture lines `beyond analyse` prints offline for the same recording, and
+every derived stream must carry the same messages, byte for byte, in every run of a recording.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from busutil_net import private_config
+
+import schemas as s
+from beyond.commands.analyse import _inputs
+from cognition.bn import learn_network, synthetic_dataset
+from cognition.episodes.offline import analyse_stream
+from cognition.gestures.default_models import default_models
+from cognition.vision.clusters import ClusterModel
+from runtime.bus import Bus
+from runtime.reliable import reliable_subscription
+from services.launcher import service_env, start_service, stop_services
+from services.monitor import PipelineMonitor
+
+RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"
+SHIPPED = sorted(p.name for p in RECORDINGS.glob("*.mcap"))
+DERIVED = (
+    "gesture_segment",
+    "gesture_posterior",
+    "objects",
+    "gesture_object",
+    "effects",
+    "affordance",
+    "words",
+    "description",
+)
+CONSUMERS = ["gestures", "objects", "reasoner", "describer"]
+
+
+@pytest.fixture(scope="module")
+def busy_machine() -> Iterator[None]:
+    """Three processes spinning on the CPU for as long as the matrix runs (a loaded 2-core
+    machine: the services get a fraction of a core each)."""
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(3)]
+    try:
+        yield
+    finally:
+        for p in spinners:
+            p.kill()
+            p.wait()
+
+
+def offline_lines(name: str) -> list[str]:
+    run = analyse_stream(
+        _inputs(RECORDINGS / name, "right_hand", "torso"),
+        gesture_models=default_models(),
+        clusters=ClusterModel.load(),
+        network=learn_network(synthetic_dataset()),
+    )
+    return run.lines
+
+
+async def run_pipeline(
+    name: str, rate: float, seed: int
+) -> tuple[list[str], dict[str, list[bytes]]]:
+    config = private_config()
+    env = service_env(config, {"BEYOND_CLOCK": "recording", "BEYOND_LOG_FORMAT": "text"})
+    rng = random.Random(seed)
+    lines: list[str] = []
+    captured: dict[str, list[bytes]] = {k: [] for k in DERIVED}
+    with Bus.open(config) as bus:
+        keys = bus.keys
+        monitor = PipelineMonitor(bus, lines.append)
+        monitor.start()
+
+        async def capture(stream: str) -> None:
+            cls = s.STREAMS[stream][1]
+            async for received in reliable_subscription(bus, keys.stream(stream), cls):
+                captured[stream].append(s.encode(received.message))
+
+        tasks = [asyncio.get_running_loop().create_task(capture(k)) for k in DERIVED]
+        bus.declare_token(keys.alive("monitor"))
+        options: dict[str, dict[str, Any]] = {
+            "ingest": {
+                "recording": str(RECORDINGS / name),
+                "rate": rate,
+                "wait_for": [*CONSUMERS, "monitor"],
+            }
+        }
+        order = [*CONSUMERS, "ingest"]
+        rng.shuffle(order)
+        procs = []
+        try:
+            for service in order:
+                await asyncio.sleep(rng.uniform(0.0, 1.5))
+                procs.append(await start_service(service, env, options=options.get(service)))
+            deadline = asyncio.get_running_loop().time() + 240
+            while not monitor.done():
+                assert asyncio.get_running_loop().time() < deadline, (name, rate, lines)
+                dead = [p.name for p in procs if not p.running]
+                assert not dead, (dead, [p.lines[-10:] for p in procs])
+                monitor.changed.clear()
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(monitor.changed.wait(), 0.5)
+        finally:
+            codes = await stop_services(procs)
+            monitor.stop()
+            for task in tasks:
+                task.cancel()
+    assert set(codes.values()) == {0}, (codes, [p.lines[-10:] for p in procs])
+    return lines, captured
+
+
+MATRIX = [(name, rate) for name in SHIPPED for rate in (0.0, 4.0)] + [
+    ("touch-box.mcap", 1.0),
+    ("touch-box.mcap", 0.5),
+]
+
+
+@pytest.mark.slow
+async def test_replays_equal_the_offline_analysis_at_any_rate_under_load(
+    busy_machine: None,
+) -> None:
+    expected = {name: offline_lines(name) for name in SHIPPED}
+    first: dict[str, dict[str, list[bytes]]] = {}
+    table = []
+    for seed, (name, rate) in enumerate(MATRIX):
+        lines, captured = await run_pipeline(name, rate, seed)
+        assert lines == expected[name], (name, rate)
+        reference = first.setdefault(name, captured)
+        same = all(captured[k] == reference[k] for k in DERIVED)
+        table.append((name, rate or "max", len(lines), sum(map(len, captured.values())), same))
+        assert same, (name, rate, {k: (len(captured[k]), len(reference[k])) for k in DERIVED})
+    assert all(expected[n] for n in SHIPPED)  # every recording has described gestures
+    for row in table:
+        print("event-time matrix:", *row)
