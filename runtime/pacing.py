@@ -6,7 +6,8 @@ it has not caught up with. Consumers report, per sensor key, the stamp of the la
 handled (`Progress`, published by `Service` for `paced` subscriptions). Before publishing a
 message stamped `s` on key `k`, the player waits until every consumer of `k` has handled
 everything sent on `k` up to `s - window`. Which keys a consumer takes comes from its health
-reply (its declared inputs), asked once it is alive.
+reply (its declared inputs), asked once it is alive; a consumer that never reports progress
+(a plain subscriber, a tool) is not waited for.
 
 Derived streams count too: a consumer that takes another consumer's output (the object
 segmenter takes the gesture streamer's events) must have received everything that one has
@@ -75,9 +76,12 @@ class Pacer:
         for name in self.names:
             with contextlib.suppress(Exception):
                 for reply in await self.bus.query(self.bus.keys.health(name), ServiceHealth):
-                    taken = set(reply.message.inputs) & self.keys
+                    health = reply.message
+                    taken = set(health.inputs) & self.keys
                     if taken:
                         self.takes[name] = taken
+                    if self.bus.keys.progress(name) in health.outputs:
+                        self.handled.setdefault(name, {})  # it reports: wait for it from now
 
     def stop(self) -> None:
         if self._task is not None:
@@ -95,7 +99,7 @@ class Pacer:
             and any(n < published[key] for key, n in counts.items() if key in published)
         ]
         for name, taken in self.takes.items():
-            if name in behind:
+            if name in behind or name not in self.handled:
                 continue
             handled = self.handled.get(name, {})
             for key in taken:

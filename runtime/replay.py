@@ -2,7 +2,9 @@
 
 `replay()` is the library form (tests and services call it in-process); `beyond replay` wraps it.
 Messages go out on reliable publishers (Zenoh blocks rather than drops when its queue is full),
-so an as-fast-as-possible replay into a pipeline is complete and deterministic.
+and with `pace_for` the replay never runs more than a window of recording time ahead of the
+slowest of those services (runtime.pacing), so an as-fast-as-possible replay into a pipeline is
+complete and deterministic.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Any
 
 from cognition.errors import InputError
 from runtime.bus import Bus
+from runtime.pacing import Pacer
 from runtime.recording import RecordedMessage, RecordingInfo, read_recording
 from schemas.codec import encode_into, wire_encoding
 from schemas.keys import with_robot
@@ -30,6 +33,7 @@ class ReplayStats:
     span_s: float = 0.0  # recording time covered (per pass)
     wall_s: float = 0.0
     damaged: str = ""
+    held_back_s: float = 0.0  # waiting for the slowest paced consumer
 
     @property
     def speed(self) -> float:
@@ -49,10 +53,11 @@ async def replay(
     robot: str | None = None,
     on_message: Callable[[RecordedMessage], None] | None = None,
     stop: asyncio.Event | None = None,
+    pace_for: Iterable[str] = (),
 ) -> ReplayStats:
     """Publish `path` on `bus`. rate: 2.0 = twice as fast, None = as fast as possible.
     robot: publish under this robot name instead of the recorded one. With `loop`, repeat until
-    `stop` is set (or forever)."""
+    `stop` is set (or forever). pace_for: services (by name) never to outrun."""
     if rate is not None and rate <= 0:
         raise InputError(f"replay rate {rate} must be positive (or as fast as possible)")
     if start is not None and end is not None and end < start:
@@ -62,6 +67,13 @@ async def replay(
     stats = ReplayStats()
     buffer = bytearray()
     topic_list = list(topics) if topics else None
+    pacer: Pacer | None = None
+    if pace_for:
+        from runtime.recording import inspect_recording
+
+        recorded = [c.topic for c in inspect_recording(path).channels]
+        pacer = Pacer(bus, pace_for, [with_robot(k, robot) if robot else k for k in recorded])
+        await pacer.start()
     began = event_loop.time()
 
     def damaged(info: RecordingInfo) -> None:
@@ -89,6 +101,11 @@ async def replay(
             elif stats.messages % 64 == 0:
                 await asyncio.sleep(0)  # let the loop breathe
             key = with_robot(item.key, robot) if robot else item.key
+            stamp = item.publish_time
+            if pacer is not None:
+                if item.cls is not None:
+                    stamp = item.message().header.stamp
+                await pacer.before(key, stamp)
             if item.cls is not None:
                 # = item.wire(), encoded into one reused buffer (Zenoh copies it in `put`):
                 # a fresh 230 kB block per camera frame costs more than the encoding.
@@ -101,6 +118,8 @@ async def replay(
             if pub is None:
                 pub = publishers[(key, encoding)] = bus.raw_publisher(key, encoding)
             pub.put(payload)
+            if pacer is not None:
+                pacer.after(key, stamp)
             stats.messages += 1
             if on_message is not None:
                 on_message(item)
@@ -110,6 +129,9 @@ async def replay(
         if not loop or (stop is not None and stop.is_set()) or stats.messages == count_before:
             break
     stats.wall_s = event_loop.time() - began
+    if pacer is not None:
+        pacer.stop()
+        stats.held_back_s = pacer.waited_s
     for pub in publishers.values():
         pub.undeclare()
     return stats

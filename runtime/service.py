@@ -227,7 +227,10 @@ class Service:
             errors=self.errors,
             last_error=self.last_error,
             inputs=sorted({s.key for s in subs}),
-            outputs=sorted({p.key for p in self._publishers}),
+            outputs=sorted(
+                {p.key for p in self._publishers}
+                | ({self.bus.keys.progress(self.name)} if self._paced else set())
+            ),
         )
 
     def _malformed(self, key: str, error: SchemaError) -> None:

@@ -31,6 +31,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="KEYEXPR",
         help="before playing, wait until a liveliness token matches (e.g. beyond/r/alive/*)",
     )
+    parser.add_argument(
+        "--pace-for",
+        metavar="NAME[,NAME...]",
+        help="services never to outrun (default: every service alive when the replay starts; "
+        "'none' for no pacing)",
+    )
     add_bus_arguments(parser)
 
 
@@ -43,6 +49,13 @@ def run(args: argparse.Namespace) -> int:
         with Bus.open(config) as bus:
             if args.wait_for:
                 await bus.wait_alive(args.wait_for, timeout=30.0)
+            if args.pace_for is None:
+                alive = await bus.alive(bus.keys.alive("*"))
+                pace_for = [key.rsplit("/", 1)[-1] for key in alive]
+            elif args.pace_for.strip().lower() == "none":
+                pace_for = []
+            else:
+                pace_for = [n.strip() for n in args.pace_for.split(",") if n.strip()]
             stats = await replay(
                 bus,
                 args.file,
@@ -53,11 +66,13 @@ def run(args: argparse.Namespace) -> int:
                 end=args.end,
                 robot=args.robot,
                 stop=stop,
+                pace_for=pace_for,
             )
         print(
             f"replayed {stats.messages} messages in {stats.passes} pass(es), "
             f"{stats.span_s:.3f} s of recording in {stats.wall_s:.3f} s "
-            f"({stats.speed:.1f}x real time)",
+            f"({stats.speed:.1f}x real time; held back {stats.held_back_s:.3f} s by "
+            f"{', '.join(pace_for) or 'nobody'})",
             file=sys.stderr,
         )
         if stats.damaged:
