@@ -428,6 +428,9 @@ class Publisher(Generic[M]):
         self.key = key
         self.cls = cls
         self.sent = 0
+        self.last_stamp = -1  # of the last message sent
+        self.skip_until = -1  # messages stamped at or before this are not sent (a restart)
+        self.suppressed = 0
         self._owner = threading.get_ident()
         self._buffer = bytearray()
         self._pub = session.declare_publisher(
@@ -442,6 +445,11 @@ class Publisher(Generic[M]):
     def put(self, message: M) -> None:
         if type(message) is not self.cls:
             raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
+        stamp = message.header.stamp
+        if stamp <= self.skip_until:
+            self.suppressed += 1  # a previous instance of this service already published it
+            return
+        self.last_stamp = stamp
         if threading.get_ident() == self._owner:
             # One buffer reused for every put (Zenoh copies it before `put` returns): no fresh
             # block per message, which for camera frames costs more than encoding them.

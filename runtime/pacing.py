@@ -17,9 +17,14 @@ running seconds ahead of the skeleton would have the object segmenter buffer (an
 cap, forget) frames a gesture announced later still needs. Bounding every consumer's lag on
 every stream bounds that skew to the window.
 
-This decides only *when* the player sends, never what anyone outputs. A consumer that is no
-longer alive (its liveliness token gone) is not waited for: a player must not hang on a crashed
-service; that is checked on the wall clock, because it is about the machine, not the data.
+This decides only *when* the player sends, never what anyone outputs. A consumer whose
+liveliness token goes away (it crashed, or was killed) is waited for up to `restart_wait_s`,
+so one that is restarted finds the stream where it left it; it gets the frames it missed from
+the publishers' caches, and asks this pacer (a queryable on `progress/*`, answered with the last
+`Progress` each service sent) what its predecessor already published, so it does not publish
+that again (runtime.service.Service.resume). One that does not come back is no longer waited
+for: a player must not hang on a dead service. Both are wall-clock decisions, because they are
+about the machine, not the data.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ class Pacer:
         consumers: Iterable[str],
         keys: Iterable[str],
         window_s: float = DEFAULT_WINDOW_S,
+        restart_wait_s: float = 30.0,
     ) -> None:
         self.bus = bus
         self.names = list(consumers)
@@ -55,6 +61,9 @@ class Pacer:
         self.published: dict[str, dict[str, int]] = {}  # service -> key -> messages sent
         self.received: dict[str, dict[str, int]] = {}  # service -> key -> messages received
         self.waited_s = 0.0
+        self.restart_wait_s = restart_wait_s
+        self.last: dict[str, Progress] = {}  # last Progress of each service
+        self._gone_since: dict[str, float] = {}
         self._moved = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
 
@@ -65,6 +74,7 @@ class Pacer:
         async def pump() -> None:
             async for received in sub:
                 msg = received.message
+                self.last[msg.service] = msg
                 mine = self.handled.setdefault(msg.service, {})
                 for key, stamp in msg.handled.items():
                     mine[key] = max(mine.get(key, -1), stamp)
@@ -73,6 +83,11 @@ class Pacer:
                 self._moved.set()
 
         self._task = asyncio.get_running_loop().create_task(pump())
+
+        async def answer(key: str, _payload: bytes | None) -> Progress | None:
+            return self.last.get(key.rsplit("/", 1)[-1])
+
+        self._close_queryable = self.bus.queryable(self.bus.keys.progress("*"), answer)
         for name in self.names:
             with contextlib.suppress(Exception):
                 for reply in await self.bus.query(self.bus.keys.health(name), ServiceHealth):
@@ -86,6 +101,7 @@ class Pacer:
     def stop(self) -> None:
         if self._task is not None:
             self._task.cancel()
+            self._close_queryable()
 
     def _behind(self, stamp: int) -> list[str]:
         published: dict[str, int] = {}
@@ -121,8 +137,14 @@ class Pacer:
                 await asyncio.wait_for(self._moved.wait(), _CHECK_ALIVE_S)
             except TimeoutError:
                 for name in behind:
-                    if not await self.bus.alive(self.bus.keys.alive(name)):
-                        log.warning("consumer %s is gone; no longer waiting for it", name)
+                    if await self.bus.alive(self.bus.keys.alive(name)):
+                        self._gone_since.pop(name, None)
+                        continue
+                    gone = self._gone_since.setdefault(name, loop.time())
+                    if gone == loop.time():
+                        log.warning("consumer %s is gone; waiting for it to come back", name)
+                    elif loop.time() - gone > self.restart_wait_s:
+                        log.warning("consumer %s did not come back; no longer waiting", name)
                         self.takes.pop(name, None)
         if began is not None:
             self.waited_s += loop.time() - began

@@ -106,6 +106,9 @@ class ReliablePublisher(Generic[M]):
         self.cls = cls
         self.cache = cache
         self.sent = 0
+        self.last_stamp = -1  # of the last message sent
+        self.skip_until = -1  # messages stamped at or before this are not sent (a restart)
+        self.suppressed = 0
         congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self._pub = ext.declare_advanced_publisher(
             session,
@@ -123,6 +126,11 @@ class ReliablePublisher(Generic[M]):
     def put(self, message: M) -> None:
         if type(message) is not self.cls:
             raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
+        stamp = message.header.stamp
+        if stamp <= self.skip_until:
+            self.suppressed += 1  # a previous instance of this service already published it
+            return
+        self.last_stamp = stamp
         self._pub.put(encode(message))
         self.sent += 1
 

@@ -273,6 +273,25 @@ class Service:
             if self._paced:
                 self.publish_progress()
 
+    def received_counts(self) -> dict[str, int]:
+        """Messages received per input key, as reported in `Progress` (a service whose inputs
+        carry their own sequence numbers may report those instead: they survive a restart)."""
+        return {s.key: s.received for s, _ in self._subscriptions}
+
+    async def resume(self) -> None:
+        """A restarted instance does not publish again what its predecessor already did: the
+        player keeps the last `Progress` of every service it paces (runtime.pacing), which says
+        up to which stamp each output key was published."""
+        try:
+            replies = await self.bus.query(self.bus.keys.progress(self.name), Progress, timeout=2.0)
+        except (InputError, TimeoutError):
+            return
+        done = {k: v for r in replies for k, v in r.message.published_stamps.items()}
+        for pub in self._publishers:
+            pub.skip_until = max(pub.skip_until, done.get(pub.key, -1))
+        if any(v >= 0 for v in done.values()):
+            event(self.log, logging.INFO, "resuming after a previous instance", **done)
+
     def publish_progress(self) -> None:
         """Publish how far each paced input is handled, how many messages each subscription
         received and each publisher sent: after the handler, so everything an input caused has
@@ -286,7 +305,8 @@ class Service:
                     service=self.name,
                     handled=self._handled,
                     published={p.key: p.sent for p in self._publishers},
-                    received={s.key: s.received for s, _ in self._subscriptions},
+                    received=self.received_counts(),
+                    published_stamps={p.key: p.last_stamp for p in self._publishers},
                 )
             )
 
@@ -339,6 +359,8 @@ class Service:
         undeclare_token = None
         try:
             await self.setup()
+            if self._paced:
+                await self.resume()
             for sub, handler in self._subscriptions:
                 self._tasks.append(loop.create_task(self._consume(sub, handler)))
             health_key = self.bus.keys.health(self.name)

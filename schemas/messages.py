@@ -231,6 +231,7 @@ class GestureSegment(Message, frozen=True):
     frame: int
     start_stamp: int
     end_stamp: int | None = None
+    event_seq: int = 0  # 1, 2, ... over the streamer's events: a receiver knows what it has
 
     def __post_init__(self) -> None:
         if self.event == "end" and self.end_stamp is None:
@@ -351,6 +352,9 @@ class Progress(Message, frozen=True):
     # it has everything this service derived from the inputs handled so far
     published: dict[str, int] = msgspec.field(default_factory=dict)
     received: dict[str, int] = msgspec.field(default_factory=dict)  # per input key
+    # stamp of the last message published per output key: a restarted instance of the service
+    # does not publish again what its predecessor already did
+    published_stamps: dict[str, int] = msgspec.field(default_factory=dict)
 
 
 class AffordanceQuery(Message, frozen=True):

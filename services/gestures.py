@@ -42,6 +42,7 @@ class GestureStreamer(Service):
         self.torso_joint = torso_joint
         self.buffer_frames = buffer_frames
         self.end_at: int | None = None  # last skeleton stamp of the source, once it has ended
+        self.events = 0
         self.finished = False
 
     async def setup(self) -> None:
@@ -95,8 +96,10 @@ class GestureStreamer(Service):
             if isinstance(ev, Belief):
                 self.publish_belief(ev)
             elif isinstance(ev, Started):
+                self.events += 1
                 self.segments.put(
                     GestureSegment(
+                        event_seq=self.events,
                         header=self.derive(ev.ref, GestureSegment),
                         event="start",
                         segment_id=ev.segment_id,
@@ -106,8 +109,10 @@ class GestureStreamer(Service):
                 )
             elif isinstance(ev, Ended | Cancelled):
                 ended = isinstance(ev, Ended)
+                self.events += 1
                 self.segments.put(
                     GestureSegment(
+                        event_seq=self.events,
                         header=self.derive(ev.ref, GestureSegment),
                         event="end" if ended else "cancel",
                         segment_id=ev.segment_id,

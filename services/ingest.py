@@ -38,10 +38,12 @@ from runtime.images import message_from_image
 from runtime.log import event
 from runtime.pacing import DEFAULT_WINDOW_S, Pacer
 from runtime.recording import read_recording
-from runtime.reliable import EVENT_CACHE
+from runtime.reliable import EVENT_CACHE, ReliablePublisher
 from runtime.service import Service
 from schemas import CameraFrame, CompressedCameraFrame, Joint, SkeletonFrame, StreamEnd
 from schemas.keys import with_robot
+
+CAMERA_CACHE = 300  # frames: 20 s at 15 fps, longer than a gesture and its lead
 
 
 class SensorIngest(Service):
@@ -93,8 +95,12 @@ class SensorIngest(Service):
     async def setup(self) -> None:
         keys = self.bus.keys
         self.skeleton = self.publisher(keys.skeleton, SkeletonFrame)
-        self.camera = self.publisher(keys.camera, CameraFrame)
-        self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame)
+        # camera frames are cached (never leaving the robot): an object segmenter restarted
+        # mid-gesture gets back the frames of the gesture it was analysing
+        self.camera = self.publisher(keys.camera, CameraFrame, cache=CAMERA_CACHE)
+        self.compressed = self.publisher(
+            keys.camera_compressed, CompressedCameraFrame, cache=CAMERA_CACHE
+        )
         self.end = self.publisher(keys.stream_end, StreamEnd, cache=EVENT_CACHE)
         self._tasks.append(asyncio.get_running_loop().create_task(self._play()))
 
@@ -161,7 +167,7 @@ class SensorIngest(Service):
 
     async def _play_recording(self, path: Path) -> None:
         keys = self.bus.keys
-        streams: dict[str, tuple[str, Publisher[Any]]] = {
+        streams: dict[str, tuple[str, Publisher[Any] | ReliablePublisher[Any]]] = {
             keys.skeleton: ("skeleton", self.skeleton),
             keys.camera: ("camera", self.camera),
             keys.camera_compressed: ("camera_compressed", self.compressed),

@@ -70,8 +70,11 @@ class ObjectSegmenter(Service):
         self.objects_out = self.publisher(keys.objects, DetectedObjects, cache=FRAME_CACHE)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, cache=EVENT_CACHE)
         self.effects_out = self.publisher(keys.effects, ObjectEffects, cache=EVENT_CACHE)
-        self.subscribe(keys.camera, CameraFrame, self.on_camera, paced=True)
-        self.subscribe(keys.camera_compressed, CompressedCameraFrame, self.on_camera, paced=True)
+        # recovered: restarted mid-gesture, it gets the gesture's frames back from the cache
+        self.subscribe(keys.camera, CameraFrame, self.on_camera, paced=True, recover=True)
+        self.subscribe(
+            keys.camera_compressed, CompressedCameraFrame, self.on_camera, paced=True, recover=True
+        )
         self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, recover=True)
         self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, recover=True)
         self.subscribe(keys.progress("gestures"), Progress, self.on_gestures_progress)
@@ -95,8 +98,15 @@ class ObjectSegmenter(Service):
         image = image_from_message(msg)
         self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image, msg.header))
 
+    def received_counts(self) -> dict[str, int]:
+        # gesture events carry their own index: the last one here says what has arrived, also
+        # for an instance restarted mid-stream that got the earlier ones from the cache
+        counts = super().received_counts()
+        counts[self.bus.keys.gesture_segment] = self.segments_received
+        return counts
+
     def on_segment(self, event: GestureSegment) -> None:
-        self.segments_received += 1
+        self.segments_received = max(self.segments_received, event.event_seq)
         self._gestures_complete()
         if event.event == "start":
             self.emit(self.watch.started(event.segment_id, event.start_stamp, event.header))

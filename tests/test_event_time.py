@@ -2,7 +2,10 @@
 
 The matrix: every shipped recording as fast as possible and at 4x, the shortest also at 1x and
 0.5x; three busy-looping processes beside the pipeline the whole time; the services (ingest
-included: it waits for its consumers) started in a shuffled order with random delays. Every
+included: it waits for its consumers) started in a shuffled order with random delays; and one
+run where the object segmenter is killed with SIGKILL while a gesture is under way and started
+again (the player waits for it, it gets the frames back from the camera cache and does not
+publish again what its predecessor had). Every
 run must print the gesture lines `beyond analyse` prints offline for the same recording, and
 every derived stream must carry the same messages, byte for byte, in every run of a recording.
 """
@@ -71,7 +74,7 @@ def offline_lines(name: str) -> list[str]:
 
 
 async def run_pipeline(
-    name: str, rate: float, seed: int
+    name: str, rate: float, seed: int, kill_during: int | None = None
 ) -> tuple[list[str], dict[str, list[bytes]]]:
     config = private_config()
     env = service_env(config, {"BEYOND_CLOCK": "recording", "BEYOND_LOG_FORMAT": "text"})
@@ -100,6 +103,7 @@ async def run_pipeline(
         order = [*CONSUMERS, "ingest"]
         rng.shuffle(order)
         procs = []
+        killed = []
         try:
             for service in order:
                 await asyncio.sleep(rng.uniform(0.0, 1.5))
@@ -107,6 +111,15 @@ async def run_pipeline(
             deadline = asyncio.get_running_loop().time() + 240
             while not monitor.done():
                 assert asyncio.get_running_loop().time() < deadline, (name, rate, lines)
+                g = monitor.report.gestures.get(kill_during or 0)
+                if g is not None and g.started is not None and not killed:
+                    victim = next(p for p in procs if p.name == "objects")
+                    victim.process.kill()  # SIGKILL: no clean-up, mid-gesture
+                    await victim.process.wait()
+                    killed.append(victim)
+                    procs.remove(victim)
+                    await bus.wait_gone(keys.alive("objects"), timeout=30)
+                    procs.append(await start_service("objects", env))
                 dead = [p.name for p in procs if not p.running]
                 assert not dead, (dead, [p.lines[-10:] for p in procs])
                 monitor.changed.clear()
@@ -118,12 +131,15 @@ async def run_pipeline(
             for task in tasks:
                 task.cancel()
     assert set(codes.values()) == {0}, (codes, [p.lines[-10:] for p in procs])
+    assert len(killed) == (kill_during is not None), "the gesture to kill during never started"
     return lines, captured
 
 
-MATRIX = [(name, rate) for name in SHIPPED for rate in (0.0, 4.0)] + [
-    ("touch-box.mcap", 1.0),
-    ("touch-box.mcap", 0.5),
+MATRIX: list[tuple[str, float, int | None]] = [
+    *[(name, rate, None) for name in SHIPPED for rate in (0.0, 4.0)],
+    ("touch-box.mcap", 1.0, None),
+    ("touch-box.mcap", 0.5, None),
+    ("tap-ball-grasp-box.mcap", 1.0, 2),  # the object segmenter killed during gesture 2
 ]
 
 
@@ -134,12 +150,14 @@ async def test_replays_equal_the_offline_analysis_at_any_rate_under_load(
     expected = {name: offline_lines(name) for name in SHIPPED}
     first: dict[str, dict[str, list[bytes]]] = {}
     table = []
-    for seed, (name, rate) in enumerate(MATRIX):
-        lines, captured = await run_pipeline(name, rate, seed)
+    for seed, (name, rate, kill_during) in enumerate(MATRIX):
+        lines, captured = await run_pipeline(name, rate, seed, kill_during)
         assert lines == expected[name], (name, rate)
         reference = first.setdefault(name, captured)
         same = all(captured[k] == reference[k] for k in DERIVED)
-        table.append((name, rate or "max", len(lines), sum(map(len, captured.values())), same))
+        kill = f"objects SIGKILLed in gesture {kill_during}" if kill_during else ""
+        count = sum(map(len, captured.values()))
+        table.append((name, rate or "max", kill, len(lines), count, same))
         assert same, (name, rate, {k: (len(captured[k]), len(reference[k])) for k in DERIVED})
     assert all(expected[n] for n in SHIPPED)  # every recording has described gestures
     for row in table:
