@@ -1,7 +1,7 @@
 """Event time (issue 12): a replay's outputs depend on the recording, never on timing.
 
-The matrix: every shipped recording as fast as possible and at 4x, the shortest also at 1x and
-0.5x; three busy-looping processes beside the pipeline the whole time; the services (ingest
+The matrix: every shipped recording as fast as possible, the shortest also at 4x, 1x and 0.5x,
+the demo recording at 4x; three busy-looping processes beside the pipeline the whole time; the services (ingest
 included: it waits for its consumers) started in a shuffled order with random delays; and one
 run where the object segmenter is killed with SIGKILL while a gesture is under way and started
 again (the player waits for it, it gets the frames back from the camera cache and does not
@@ -106,7 +106,7 @@ async def run_pipeline(
         killed = []
         try:
             for service in order:
-                await asyncio.sleep(rng.uniform(0.0, 1.5))
+                await asyncio.sleep(rng.uniform(0.0, 0.8))
                 procs.append(await start_service(service, env, options=options.get(service)))
             deadline = asyncio.get_running_loop().time() + 240
             while not monitor.done():
@@ -136,14 +136,17 @@ async def run_pipeline(
 
 
 MATRIX: list[tuple[str, float, int | None]] = [
-    *[(name, rate, None) for name in SHIPPED for rate in (0.0, 4.0)],
+    *[(name, 0.0, None) for name in SHIPPED],  # as fast as possible
+    ("touch-box.mcap", 4.0, None),
     ("touch-box.mcap", 1.0, None),
     ("touch-box.mcap", 0.5, None),
-    ("tap-ball-grasp-box.mcap", 1.0, 2),  # the object segmenter killed during gesture 2
+    ("tap-ball-grasp-box.mcap", 4.0, None),
+    ("tap-ball-grasp-box.mcap", 4.0, 2),  # the object segmenter killed during gesture 2
 ]
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)
 async def test_replays_equal_the_offline_analysis_at_any_rate_under_load(
     busy_machine: None,
 ) -> None:
