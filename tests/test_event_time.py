@@ -1,13 +1,13 @@
 """Event time (issue 12): a replay's outputs depend on the recording, never on timing.
 
 The matrix: every shipped recording as fast as possible, the shortest also at 4x, 1x and 0.5x,
-the demo recording at 4x; three busy-looping processes beside the pipeline the whole time; the services (ingest
-included: it waits for its consumers) started in a shuffled order with random delays; and one
-run where the object segmenter is killed with SIGKILL while a gesture is under way and started
-again (the player waits for it, it gets the frames back from the camera cache and does not
-publish again what its predecessor had). Every
-run must print the gesture lines `beyond analyse` prints offline for the same recording, and
-every derived stream must carry the same messages, byte for byte, in every run of a recording.
+the demo recording at 4x; three busy-looping processes beside the pipeline the whole time; the
+services (ingest included: it waits for its consumers) started in a shuffled order with random
+delays; and one run where the object segmenter is killed with SIGKILL while a gesture is under
+way and started again (the player waits for it, it gets the frames back from the camera cache
+and does not publish again what its predecessor had). Every run must print the gesture lines
+`beyond analyse` prints offline for the same recording, and every derived stream must carry the
+same messages, byte for byte, in every run of a recording.
 """
 
 from __future__ import annotations
