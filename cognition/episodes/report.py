@@ -31,6 +31,7 @@ class GestureLines:
     description: str = ""
     events: list[tuple[int, int, str]] = field(default_factory=list)  # (frame, kind, text)
     printed: bool = False
+    skipped: bool = False  # never completed, and a later gesture did
 
     @property
     def complete(self) -> bool:
@@ -116,23 +117,29 @@ class GestureReport:
 
     def release(self) -> list[str]:
         """Lines of every complete gesture not printed yet, in segment order; a gesture waits for
-        the incomplete ones before it that have started."""
+        the incomplete ones before it that have started. Descriptions come in segment order
+        (the reasoner emits gestures in order), so an incomplete gesture followed by a complete
+        one will never complete (a stray or withdrawn start): it is skipped, not waited for."""
         lines: list[str] = []
-        for segment_id in sorted(self.gestures):
+        ids = sorted(self.gestures)
+        for n, segment_id in enumerate(ids):
             g = self.gestures[segment_id]
-            if g.printed:
+            if g.printed or g.skipped:
                 continue
             if not g.complete:
-                if g.started is not None:
-                    break
-                continue  # never started here (a stray message): holds nothing back
+                if g.started is None:
+                    continue  # never started here (a stray message): holds nothing back
+                if any(self.gestures[later].complete for later in ids[n + 1 :]):
+                    g.skipped = True
+                    continue
+                break
             lines += [f"gesture {segment_id}: {line}" for line in g.block()]
             g.printed = True
         return lines
 
     @property
     def all_printed(self) -> bool:
-        return all(g.printed for g in self.gestures.values() if g.started is not None)
+        return all(g.printed or g.skipped for g in self.gestures.values() if g.started is not None)
 
     @property
     def described_count(self) -> int:

@@ -1,0 +1,220 @@
+"""The per-gesture logic (cognition.episodes) gives the same outputs whatever order its input
+streams interleave in: only the order within each stream is kept, as on the bus."""
+
+from __future__ import annotations
+
+import random
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from beyond.commands.analyse import _inputs
+from cognition.bn import learn_network, synthetic_dataset
+from cognition.episodes import (
+    Anticipation,
+    Belief,
+    Cancelled,
+    Ended,
+    FrameObjects,
+    FusionJoin,
+    GestureEffects,
+    GestureReport,
+    GestureTracker,
+    ObjectAtStart,
+    ObjectWatch,
+    Outcome,
+    Started,
+)
+from cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
+from cognition.gestures import extract_features
+from cognition.gestures.default_models import default_models
+from cognition.vision.clusters import ClusterModel
+
+RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "touch-box.mcap"
+
+
+@cache
+def streams() -> tuple[list[CameraInput], list[Any], list[tuple[int, int]]]:
+    """Camera frames, the tracker's events, and (skeleton stamp, events published so far)
+    after every skeleton frame (what the gesture streamer's Progress says)."""
+    items = list(_inputs(RECORDING, "right_hand", "torso"))
+    tracker: GestureTracker[int] = GestureTracker(default_models())
+    events: list[Any] = []
+    progress: list[tuple[int, int]] = []
+    for item in items:
+        if isinstance(item, SkeletonInput):
+            x = extract_features(item.hand, item.torso)[0]
+            events += tracker.push(item.stamp, item.frame, x, item.frame)
+            progress.append((item.stamp, len(events)))
+    events += tracker.finish()
+    cameras = [i for i in items if isinstance(i, CameraInput)]
+    return cameras, events, progress
+
+
+def interleave(rng: random.Random, *lanes: list[Any]) -> list[tuple[int, Any]]:
+    """A random merge of the lanes keeping each lane's order."""
+    pos = [0] * len(lanes)
+    out = []
+    while any(p < len(lane) for p, lane in zip(pos, lanes, strict=True)):
+        k = rng.choice([i for i, lane in enumerate(lanes) if pos[i] < len(lane)])
+        out.append((k, lanes[k][pos[k]]))
+        pos[k] += 1
+    return out
+
+
+def watch_outputs(order: list[tuple[int, Any]]) -> list[tuple[Any, ...]]:
+    watch: ObjectWatch[int] = ObjectWatch(ClusterModel.load())
+    segment_events = [e for e in streams()[1] if isinstance(e, Started | Ended | Cancelled)]
+    seen = 0
+    outputs: list[Any] = []
+    for lane, item in order:
+        if lane == 0:
+            outputs += watch.camera(item.stamp, item.frame, item.image, item.frame)
+        elif lane == 1:
+            seen += 1
+            if isinstance(item, Started):
+                outputs += watch.started(item.segment_id, item.stamp, item.ref)
+            elif isinstance(item, Ended):
+                outputs += watch.ended(
+                    item.segment_id, item.start_stamp, item.end_stamp, item.frame, item.ref
+                )
+            else:
+                outputs += watch.cancelled(item.segment_id)
+        else:  # the streamer's progress: complete up to its stamp once its events are all here
+            stamp, published = item
+            published = sum(
+                1 for e in streams()[1][:published] if isinstance(e, Started | Ended | Cancelled)
+            )
+            if published <= seen:
+                outputs += watch.gestures_complete(stamp)
+    outputs += watch.camera_ended(streams()[0][-1].stamp)
+    assert seen == len(segment_events)
+    summary: list[tuple[Any, ...]] = []
+    for out in outputs:
+        if isinstance(out, FrameObjects):
+            summary.append(
+                ("frame", out.frame, tuple(sorted(o.labels.items()) for o in out.objects))
+            )
+        elif isinstance(out, ObjectAtStart):
+            summary.append(("start", out.segment_id, out.frame, sorted(out.labels.items())))
+        elif isinstance(out, GestureEffects):
+            summary.append(("effects", out.segment_id, sorted(out.effect_labels.items())))
+    return summary
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_object_watch_ignores_arrival_order(seed: int) -> None:
+    cameras, events, progress = streams()
+    segment_events = [e for e in events if isinstance(e, Started | Ended | Cancelled)]
+    # the reference: everything in stamp order, as the offline analysis feeds it
+    reference = watch_outputs(
+        sorted(
+            [(0, c) for c in cameras] + [(1, e) for e in segment_events],
+            key=lambda x: (
+                x[1].stamp if x[0] == 0 else getattr(x[1], "end_stamp", None) or x[1].stamp
+            ),
+        )
+    )
+    shuffled = watch_outputs(interleave(random.Random(seed), cameras, segment_events, progress))
+    assert shuffled == reference
+    kinds = {s[0] for s in reference}
+    assert kinds == {"frame", "start", "effects"}  # the recording's gesture was seen and measured
+
+
+@pytest.fixture(scope="module")
+def network():  # type: ignore[no-untyped-def]
+    return learn_network(synthetic_dataset())
+
+
+def join_outputs(network: Any, order: list[tuple[int, Any]]) -> list[tuple[Any, ...]]:
+    join: FusionJoin[int] = FusionJoin(network)
+    join.objects_alive(True)
+    actions = list(default_models().actions)
+    out: list[Any] = []
+    for lane, item in order:
+        if lane == 0:
+            if isinstance(item, Belief):
+                belief = dict(zip(actions, item.posterior, strict=True))
+                out += join.belief(
+                    item.segment_id, item.frame, item.stamp, belief, item.ref, item.final
+                )
+            elif isinstance(item, Started):
+                out += join.started(item.segment_id, item.stamp)
+            elif isinstance(item, Ended):
+                out += join.ended(item.segment_id, item.start_stamp, item.end_stamp)
+        elif lane == 1:
+            out += join.object_seen(item[0], item[1])
+        else:
+            out += join.effects_seen(item[0], item[1], item[2])
+    return [
+        (type(o).__name__, o.segment_id, o.frame, sorted(o.prediction.action_belief.items()),
+         sorted(o.words.items()) if isinstance(o, Outcome) else ())
+        for o in out
+        if isinstance(o, Anticipation | Outcome)
+    ]  # fmt: skip
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_fusion_join_ignores_arrival_order(network: Any, seed: int) -> None:
+    _, events, _ = streams()
+    gesture_events = [e for e in events if isinstance(e, Belief | Started | Ended)]
+    ids = sorted({e.segment_id for e in gesture_events})
+    objects = [(i, {"Color": "green2", "Shape": "box", "Size": "medium"}) for i in ids]
+    effects = [(i, {}, {"ObjVel": "slow", "Contact": "short"}) for i in ids]
+    lanes = (gesture_events, objects, effects)
+    in_order = [(0, e) for e in gesture_events] + [(1, o) for o in objects]
+    reference = join_outputs(network, in_order + [(2, f) for f in effects])
+    assert reference and reference[-1][0] == "Outcome"
+    assert join_outputs(network, interleave(random.Random(seed), *lanes)) == reference
+
+
+def test_offline_run_describes_the_recording(network: Any) -> None:
+    run = analyse_stream(
+        _inputs(RECORDING, "right_hand", "torso"),
+        gesture_models=default_models(),
+        clusters=ClusterModel.load(),
+        network=network,
+    )
+    assert [o.segment_id for o in run.outcomes] == [1]
+    belief = run.outcomes[0].prediction.action_belief
+    assert max(belief, key=belief.__getitem__) == "touch"  # the recording shows a touch
+    assert run.object_at_start[1].labels == {"Color": "green2", "Shape": "box", "Size": "medium"}
+    assert run.effects[1].analysis is not None
+    assert any("touch" in line for line in run.lines if line.endswith('"'))
+
+
+def test_report_skips_a_start_that_never_completes() -> None:
+    report = GestureReport()
+    report.started(1, 10)  # a stray start: nothing else ever comes for it
+    report.started(2, 40)
+    report.ended(2, 80)
+    report.recognised(2, {"tap": 0.9, "grasp": 0.1}, {"Shape": "circle"})
+    assert report.release() == []  # gesture 2 is not described yet: 1 may still complete
+    report.described(2, "the robot tapped the ball")
+    lines = report.release()
+    assert lines[0] == "gesture 2: started at frame 40" and lines[-1].endswith(
+        '"the robot tapped the ball"'
+    )
+    assert report.all_printed
+
+
+def test_tracker_cancels_a_gesture_the_source_cut_short() -> None:
+    _, events, _ = streams()
+    assert [type(e).__name__ for e in events if not isinstance(e, Belief)] == ["Started", "Ended"]
+    tracker: GestureTracker[int] = GestureTracker(default_models())
+    cameras, _, _ = streams()
+    hand = [i for i in _inputs(RECORDING, "right_hand", "torso") if isinstance(i, SkeletonInput)]
+    cut = next(e for e in events if isinstance(e, Started)).frame + 20  # mid-gesture
+    out = []
+    for item in hand[:cut]:
+        out += tracker.push(item.stamp, item.frame, extract_features(item.hand, item.torso)[0], 0)
+    out += tracker.finish()
+    assert isinstance(out[-1], Cancelled | Ended)
+    assert any(isinstance(e, Started) for e in out)
+    assert len(cameras) > 0
