@@ -314,6 +314,8 @@ class Service:
         pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, reliable=False)
         while True:
             pub.put(self.health())
+            if self._paced:
+                self.publish_progress()
             self._report_recovery()
             await asyncio.sleep(self.health_period)
 
@@ -370,7 +372,12 @@ class Service:
 
             self.bus.queryable(health_key, answer_health)
             if self._paced:
-                self._progress = self.bus.publisher(self.bus.keys.progress(self.name), Progress)
+                # never blocking: a subscriber across a dead link (a remote monitor) must not
+                # stall the pipeline; a dropped report is repaired by the next, or by the
+                # periodic one beside health
+                self._progress = self.bus.publisher(
+                    self.bus.keys.progress(self.name), Progress, reliable=False
+                )
                 self._progress.put(
                     Progress(
                         header=self.header(Progress, 0), service=self.name, handled=self._handled

@@ -142,7 +142,7 @@ class PipelineMonitor:
             for key, stamp in handled.items():
                 if key in last and stamp < last[key]:
                     return False
-        if not self.report.all_printed:
+        if not self.report.all_ended_printed:
             return False
         return time.monotonic() - self.last_message >= quiet_s
 

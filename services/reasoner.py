@@ -46,7 +46,7 @@ class AffordanceReasoner(Service):
         *,
         model: str | None = None,
         objects: bool = True,
-        deadline_s: float = 10.0,
+        deadline_s: float = 30.0,
         **base: Any,
     ) -> None:
         super().__init__(**base)

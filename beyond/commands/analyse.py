@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         lead_s=float(ob.get("lead_s", 0.3)),
         fps=ob.get("fps"),
         camera_deadline_s=float(ob.get("deadline_s", 5.0)),
-        objects_deadline_s=float(r.get("deadline_s", 10.0)),
+        objects_deadline_s=float(r.get("deadline_s", 30.0)),
         on_line=emit,
     )
     if args.json:

@@ -78,7 +78,7 @@ class _Gesture(Generic[R]):
 
 class FusionJoin(Generic[R]):
     def __init__(
-        self, model: BayesNet, *, expect_objects: bool = True, deadline_s: float = 10.0
+        self, model: BayesNet, *, expect_objects: bool = True, deadline_s: float = 30.0
     ) -> None:
         if not deadline_s >= 0 or deadline_s == float("inf"):
             raise InputError(f"deadline_s {deadline_s} must be a finite number >= 0")

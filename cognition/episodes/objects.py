@@ -17,6 +17,11 @@ Camera history is kept until no gesture can still need it: `gestures_complete(t)
 gesture event derived from the skeleton up to `t` has been received, so a gesture announced from
 now on starts after `t - onset_s` (the segmenter places an onset at most that far back), and
 older frames outside open windows can go. `buffer_bytes` is a last-resort cap on top.
+
+Bounded against nonsense: at most `max_open` gestures under way (a start beyond is refused),
+a start older than anything the segmenter can still announce is refused, and a gesture that has
+not ended `max_gesture_s` of skeleton time after it started is dropped (a stray start), so no
+input can make the watch hold frames or analysers without bound.
 """
 
 from __future__ import annotations
@@ -119,6 +124,8 @@ class ObjectWatch(Generic[R]):
         deadline_s: float = 5.0,
         onset_s: float = 2.0,
         buffer_bytes: int = 160 * 2**20,
+        max_open: int = 8,
+        max_gesture_s: float = 60.0,
     ) -> None:
         for name, value in (("lead_s", lead_s), ("deadline_s", deadline_s), ("onset_s", onset_s)):
             if not np.isfinite(value) or value < 0:
@@ -129,6 +136,9 @@ class ObjectWatch(Generic[R]):
         self.lead_ns = round(lead_s * 1e9)
         self.deadline_ns = round(deadline_s * 1e9)
         self.onset_ns = round(onset_s * 1e9)
+        self.max_open = max_open
+        self.max_gesture_ns = round(max_gesture_s * 1e9)
+        self.abandoned = 0  # gestures dropped: never ended within max_gesture_s
         self.complete_until = -1  # gesture events are complete up to this skeleton stamp
         self.evicted_early = 0  # frames the byte cap dropped while a gesture could need them
         self._last_evicted: tuple[int, int, dict[str, str]] | None = None
@@ -167,6 +177,18 @@ class ObjectWatch(Generic[R]):
     def started(self, segment_id: int, start_stamp: int, ref: R) -> list[Output[R]]:
         if segment_id in self.windows:
             return []  # a repeat (recovered from a cache): already under way
+        if len(self.windows) >= self.max_open:
+            raise InputError(
+                f"gesture {segment_id} refused: {len(self.windows)} gestures already under way "
+                f"(valid: at most {self.max_open} at once)"
+            )
+        oldest = self.complete_until - self.onset_ns - self.max_gesture_ns
+        if self.complete_until >= 0 and start_stamp < oldest:
+            raise InputError(
+                f"gesture {segment_id} refused: it starts at {start_stamp}, long before the "
+                f"skeleton stream's {self.complete_until} (valid: within "
+                f"{(self.onset_ns + self.max_gesture_ns) / 1e9:g} s of it)"
+            )
         window = _Window(segment_id, start_stamp, start_stamp - self.lead_ns, ref)
         self.windows[segment_id] = window
         for b in self.buffer:
@@ -263,6 +285,13 @@ class ObjectWatch(Generic[R]):
         outputs: list[Output[R]] = []
         for segment_id in sorted(self.windows):
             window = self.windows[segment_id]
+            if (
+                window.end is None
+                and self.complete_until > window.start_stamp + self.max_gesture_ns
+            ):
+                del self.windows[segment_id]  # a start no end followed: not a gesture
+                self.abandoned += 1
+                continue
             if not window.object_decided:
                 s = window.start_stamp
                 if not (self.watermark >= s or self.camera_done or self._silent_since(s)):

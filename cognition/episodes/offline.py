@@ -59,7 +59,7 @@ def analyse_stream(
     lead_s: float = 0.3,
     fps: float | None = None,
     camera_deadline_s: float = 5.0,
-    objects_deadline_s: float = 10.0,
+    objects_deadline_s: float = 30.0,
     on_line: Callable[[str], None] | None = None,
 ) -> OfflineRun:
     """Items must come in stamp order within each kind (a recording's order is fine)."""

@@ -138,6 +138,14 @@ class GestureReport:
         return lines
 
     @property
+    def all_ended_printed(self) -> bool:
+        """Every gesture that ended has been printed (or skipped): once the source's streams
+        are all handled, a start with no end is a stray, not a gesture still under way."""
+        return all(
+            g.printed or g.skipped for g in self.gestures.values() if g.end_frame is not None
+        )
+
+    @property
     def all_printed(self) -> bool:
         return all(g.printed or g.skipped for g in self.gestures.values() if g.started is not None)
 
