@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from beyond.commands import argtypes
 from cognition.errors import InputError
 
 HELP = "segment tabletop objects in an image or MCAP recording; learn or evaluate the clusters"
@@ -23,26 +24,43 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "source", nargs="?", metavar="IMAGE_OR_MCAP", help="a PPM/PGM/PNG image or an MCAP file"
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    parser.add_argument("--overlay", metavar="OUT.png", help="draw contours, centroids, labels")
+    parser.add_argument(
+        "--overlay",
+        type=argtypes.output_file,
+        metavar="OUT.png",
+        help="draw contours, centroids, labels",
+    )
     parser.add_argument("--clusters", metavar="FILE.json", help="clusters file (default: shipped)")
     parser.add_argument(
         "--background", metavar="EMPTY", nargs="+", help="image(s) of the empty table"
     )
     parser.add_argument("--size", metavar="WxH", help="require frames of this size, e.g. 320x240")
-    parser.add_argument("--frame", type=int, help="MCAP: only the camera frame with this index")
+    parser.add_argument(
+        "--frame", type=argtypes.count(0), help="MCAP: only the camera frame with this index"
+    )
     parser.add_argument(
         "--reference-mask", metavar="MASK", help="report foreground IoU against this mask image"
     )
     parser.add_argument("--effects", action="store_true", help="MCAP: also measure the effects")
     parser.add_argument(
-        "--learn", metavar="OUT.json", help="run the exploration phase and write the clusters"
+        "--learn",
+        type=argtypes.output_file,
+        metavar="OUT.json",
+        help="run the exploration phase and write the clusters",
     )
     parser.add_argument(
-        "--evaluate", metavar="OUT_DIR", help="score on simulated data; confusion matrices (PNG)"
+        "--evaluate",
+        type=argtypes.output_dir,
+        metavar="OUT_DIR",
+        help="score on simulated data; confusion matrices (PNG)",
     )
-    parser.add_argument("--experiments", type=int, default=216, help="simulated experiments")
-    parser.add_argument("--stills", type=int, default=60, help="--evaluate: still scenes")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulation")
+    parser.add_argument(
+        "--experiments", type=argtypes.count(1, 100_000), default=216, help="simulated experiments"
+    )
+    parser.add_argument(
+        "--stills", type=argtypes.count(0, 100_000), default=60, help="--evaluate: still scenes"
+    )
+    parser.add_argument("--seed", type=argtypes.seed, default=0, help="seed of the simulation")
 
 
 def run(args: argparse.Namespace) -> int:
