@@ -111,5 +111,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    except RecursionError:
+        # json and yaml parse nested data recursively: a file of 50,000 '[' is bad input
+        print(
+            f"beyond {args.command}: error: a file given is nested too deeply to read",
+            file=sys.stderr,
+        )
+        return 2
     except KeyboardInterrupt:
         return 130

@@ -108,6 +108,22 @@ def _path(text: str, noun: str) -> Path:
         raise argparse.ArgumentTypeError(f"{text!r} is not a {noun} path ({exc})") from None
 
 
+def _checked(check: Callable[[str], Path]) -> Callable[[str], Path]:
+    """`check`, with an OSError while looking at the path (a name too long for the file system,
+    a loop of links) refused like any other bad path."""
+
+    def parse(text: str) -> Path:
+        try:
+            return check(text)
+        except OSError as exc:
+            raise argparse.ArgumentTypeError(f"cannot use {text[:80]!r}: {exc.strerror}") from None
+
+    parse.__name__ = check.__name__
+    parse.__doc__ = check.__doc__
+    return parse
+
+
+@_checked
 def output_file(text: str) -> Path:
     """A file we may create or overwrite: no folder, not read-only, in an existing writable
     folder (a typo in a folder name is an error, not a new folder)."""
@@ -120,6 +136,7 @@ def output_file(text: str) -> Path:
     return path
 
 
+@_checked
 def output_dir(text: str) -> Path:
     """A folder we may write into (created with its parents if needed)."""
     path = _path(text, "folder")

@@ -12,8 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rich.console import Console
 
 from beyond.commands import argtypes
+from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 
 HELP = "segment tabletop objects in an image or MCAP recording; learn or evaluate the clusters"
@@ -240,7 +242,6 @@ def _segment_mcap(
 
 
 def _learn(args: argparse.Namespace) -> int:
-    from rich.progress import Progress
 
     from cognition.vision.pipeline import learn_clusters
     from cognition.vision.tabletop import exploration
@@ -248,7 +249,7 @@ def _learn(args: argparse.Namespace) -> int:
     command = (
         f"beyond segment --learn {args.learn} --experiments {args.experiments} --seed {args.seed}"
     )
-    with Progress(transient=True) as progress:
+    with progress_bar(Console(stderr=True)) as progress:
         task = progress.add_task("exploration", total=args.experiments)
         model, _rows, _truth = learn_clusters(
             exploration(args.experiments, args.seed),
@@ -265,7 +266,6 @@ def _learn(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from rich.progress import Progress
 
     from cognition.vision.evaluation import evaluate_experiments, evaluate_stills
     from cognition.vision.tabletop import exploration
@@ -274,7 +274,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     out = Path(args.evaluate)
     seed = args.seed + 1_000_003  # never the exploration's own experiments
     objects = evaluate_stills(args.stills, seed, clusters) if args.stills else None
-    with Progress(transient=True) as progress:
+    with progress_bar(Console(stderr=True)) as progress:
         task = progress.add_task("experiments", total=args.experiments)
         exps = evaluate_experiments(
             exploration(args.experiments, seed),
