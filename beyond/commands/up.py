@@ -43,7 +43,13 @@ from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig
 from schemas.keys import check_name
-from services.launcher import ServiceProcess, service_env, start_service, stop_services
+from services.launcher import (
+    HealthWatch,
+    ServiceProcess,
+    service_env,
+    start_service,
+    stop_services,
+)
 from services.live_view import render
 from services.monitor import PipelineMonitor
 from services.options import check_options, load_options
@@ -162,6 +168,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
     live: Live | None = None
+    watch: HealthWatch | None = None
 
     def log_line(name: str, line: str) -> None:
         print(f"[{name}] {line}", file=sys.stderr, flush=True)
@@ -191,6 +198,10 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
                     await start_service("ingest", env, options=options["ingest"], sink=log_line)
                 )
             emit(f"pipeline up: {', '.join(names)} on robot {config.robot!r}")
+            watch = HealthWatch(
+                bus, processes, lambda n, why: emit(f"service {n} is stuck ({why}); stopping it")
+            )
+            watch.start()
             use_live = out.is_terminal and not args.no_live
             if use_live:
                 live = Live(render(pipeline, names), console=out, refresh_per_second=8)
@@ -215,6 +226,8 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             else:
                 status = 0  # stopped by the user
         finally:
+            if watch is not None:
+                await watch.stop()
             if live is not None:
                 live.update(render(pipeline, names))
                 live.stop()
