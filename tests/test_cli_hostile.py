@@ -37,7 +37,7 @@ from runtime.bus import Bus
 from runtime.recording import inspect_recording
 
 CASE_TIMEOUT = 60.0  # a hang, on a loaded 2-core machine (cases take well under a second)
-TOTAL_CASES = 2100  # spread over the subcommands; the issue asks for at least 2,000
+TOTAL_CASES = 2000  # spread over the subcommands; the issue asks for at least 2,000
 BUS_OPTIONS = {"--robot", "--mode", "--connect", "--listen", "--zenoh-config", "--port"}
 # these run until stopped when their arguments are good: only bad-at-parse cases for them
 FOREVER = {("router",), ("service",), ("up",), ("demo",)}
