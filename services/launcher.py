@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 LogSink = Callable[[str, str], None]
 LINE_MAX = 4096  # characters of one log line passed on (the rest is counted, not kept)
 LINES_KEPT = 1000  # last lines of each service kept in memory
-HEALTH_TIMEOUT_S = 5.0  # a health query unanswered this long is a miss
+HEALTH_TIMEOUT_S = 10.0  # a health query unanswered this long is a miss (a busy loop answers)
 STUCK_AFTER = 3  # misses in a row: the service is stuck
 
 
