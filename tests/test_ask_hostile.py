@@ -111,3 +111,14 @@ def test_ask_succeeds_every_time_against_a_running_reasoner(
     finally:
         reasoner.terminate()
         reasoner.wait(30)
+
+
+def test_description_caps_are_in_the_library() -> None:
+    """`describe --nbest 1000000000000` reached 5 GB before a MemoryError: refused up front."""
+    from cognition.descriptions import NBEST_MAX, SAMPLES_MAX, nbest_exact, sample_keys
+
+    with pytest.raises(InputError, match=f"up to {NBEST_MAX}"):
+        nbest_exact({}, 10**12)
+    with pytest.raises(InputError, match=f"0..{SAMPLES_MAX}"):
+        sample_keys(SAMPLES_MAX + 1, 0)
+    assert len(sample_keys(5, 0)) == 5

@@ -155,6 +155,8 @@ CORPUS: list[tuple[str, list[str], str]] = [
     ("segment --evaluate unwritable", ["segment", "--evaluate", "garbage.bin"], "not a folder"),
     ("service --config binary", ["service", "reasoner", "--config", "binary.yaml"], "UTF-8"),
     ("up --config binary", ["up", "--config", "binary.yaml", "--no-live"], "UTF-8"),
+    ("up --timeout -1", ["up", "--timeout", "-1", "--no-live"], "out of range"),
+    ("up --timeout nan", ["up", "--timeout", "nan", "--no-live"], "out of range"),
     ("echo bad key", ["echo", "a//b", "--duration", "1"], "invalid key expression"),
     ("record bad key", ["record", "a//b", "-o", "r.mcap"], "invalid key expression"),
     ("replay --topics bad key", ["replay", SHIPPED, "--topics", "a//b"], "invalid key"),

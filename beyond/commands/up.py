@@ -37,6 +37,7 @@ from typing import Any
 from rich.console import Console
 from rich.live import Live
 
+from beyond.commands import argtypes
 from cognition.errors import InputError
 from cognition.paths import REPO_ROOT
 from runtime.bus import Bus
@@ -75,12 +76,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="do not start this service (e.g. speech, when your own synthesizer replaces it)",
     )
     parser.add_argument(
-        "--rate", type=float, default=1.0, help="replay speed (0: as fast as possible)"
+        "--rate",
+        type=argtypes.number(float, lo=0, hi=1e6),
+        default=1.0,
+        help="replay speed (0: as fast as possible)",
     )
     parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
     parser.add_argument(
         "--timeout",
-        type=float,
+        type=argtypes.seconds(),
         default=None,
         help=f"give up after S seconds (default {DEFAULT_TIMEOUT:.0f} with a source or "
         "--until-stream-end, else run until stopped)",

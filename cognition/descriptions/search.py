@@ -430,7 +430,7 @@ def _top_order(scores: FloatArray, keys: IntArray | None, k: int) -> IntArray:
 
 def _check_n(n: int) -> int:
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= NBEST_MAX:
-        raise InputError(f"N-best size must be an integer in 1..{NBEST_MAX}, got {n!r}")
+        raise InputError(f"N-best size must be a positive integer up to {NBEST_MAX}, got {n!r}")
     return int(n)
 
 
