@@ -448,11 +448,13 @@ def _describe(exc: Exception, at: int, size: int) -> str:
 
 
 def require_mcap(path: str | Path) -> Path:
-    """`path` is a readable file that starts like an MCAP file, else an InputError.
+    """`path` is a readable MCAP file with a readable message (or undamaged and empty), else an
+    InputError.
 
-    A cheap check before a command joins the bus or starts its work: a file that is no recording
-    at all is refused first, on one line, rather than after a warning that 0 messages are
-    readable (damage later in the file is reported by the readers, with what they read)."""
+    A cheap check (it reads up to the first message) before a command joins the bus or starts
+    its work: a file that is no recording, or damaged before its first message, is refused
+    first, on one line, rather than after a warning that 0 messages are readable (damage later
+    in the file is reported by the readers, with what they read)."""
     p = Path(path)
     try:
         with open(p, "rb") as f:
@@ -465,6 +467,11 @@ def require_mcap(path: str | Path) -> Path:
         raise InputError(f"cannot read recording {p}: {exc.strerror}") from None
     if head != MCAP0_MAGIC:
         raise InputError(f"{p} is not an MCAP recording (it does not start with the MCAP magic)")
+    scanner = _Scanner(p)
+    for _ in scanner.messages():  # stops at the first message: a chunk read at most
+        return p
+    if scanner.info.error:
+        raise InputError(f"nothing readable: {scanner.info.damage()}")
     return p
 
 

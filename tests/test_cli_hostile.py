@@ -107,6 +107,8 @@ def arena(tmp_path_factory: pytest.TempPathFactory) -> Path:
     shipped = (REPO / "recordings" / "touch-box.mcap").read_bytes()
     (root / "half.mcap").write_bytes(shipped[:200_000])  # a recording killed half-way
     (root / "head.mcap").write_bytes(shipped[:40])  # magic and a cut header
+    # magic, then a record claiming to be 2^40 bytes long (a reader must not try to allocate it)
+    (root / "huge.mcap").write_bytes(shipped[:8] + b"\x06" + (2**40).to_bytes(8, "little"))
     (root / "adir").mkdir()
     return root
 
@@ -170,6 +172,9 @@ CORPUS: list[tuple[str, list[str], str]] = [
     ("record --duration nan", ["record", "-o", "r.mcap", "--duration", "nan"], "out of range"),
     ("replay garbage", ["replay", "garbage.bin"], "not an MCAP recording"),
     ("replay a folder", ["replay", "adir"], "is a folder"),
+    ("replay a cut header", ["replay", "head.mcap"], "nothing readable"),
+    ("replay a huge record", ["replay", "huge.mcap"], "exceeds limit"),
+    ("inspect a huge record", ["inspect", "huge.mcap"], "exceeds limit"),
     ("segment killed recording", ["segment", "half.mcap"], "readable: HALF messages"),
     ("describe empty sentences", ["describe", "MODEL", "--sentences", "empty.txt"], "is empty"),
     ("describe --nbest 1e12", ["describe", "MODEL", "--nbest", "1000000000000"], "[1, 10000]"),
@@ -301,7 +306,8 @@ BAD = {
     "output_dir": ["garbage.bin/sub", "garbage.bin", "", "x" * 300],
     "key": ["a//b", "", "/", "a/", "a/**/**", "a?b", "a#b", "*x", "beyond/*a", "/beyond/**"],
     "file": ["nope.mcap", "adir", "garbage.bin", "empty.txt", "binary.yaml", "half.mcap",
-             "head.mcap", "deep.json", "junk.json", "list.json", "garbage.bin/x", "x" * 300],
+             "head.mcap", "huge.mcap", "deep.json", "junk.json", "list.json", "garbage.bin/x",
+             "x" * 300],
 }  # fmt: skip
 GOOD = {
     "number": ["1", "2", "0.5"],
