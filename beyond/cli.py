@@ -18,6 +18,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import NoReturn
 
 from cognition.errors import InputError
 
@@ -53,8 +54,19 @@ def _load(command: str) -> ModuleType | None:
         raise
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (what was wrong), then exit 2, like InputError.
+
+    argparse prints the whole usage first; a script reading the first line of stderr (and a
+    person reading a log) should see the error itself. Subparsers inherit the class."""
+
+    def error(self, message: str) -> NoReturn:
+        text = " ".join(message.split())
+        self.exit(2, f"{self.prog}: error: {text} (see {self.prog} --help)\n")
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="beyond",
         description="Interpret and describe human actions with grounded affordances.",
     )
@@ -75,7 +87,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args_list = list(sys.argv[1:] if argv is None else argv)
     first = args_list[0] if args_list else None
     parser = build_parser(first if first in COMMANDS else None)
-    args = parser.parse_args(args_list)
+    try:
+        args = parser.parse_args(args_list)
+    except SystemExit as exc:  # a usage error (already printed, one line) or --help
+        return exc.code if isinstance(exc.code, int) else 2
     module = getattr(args, "_module", None)
     if module is None:
         parser.print_help()
@@ -84,6 +99,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(module.run(args) or 0)
     except InputError as exc:
         print(f"beyond {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        # a file the user named (or the folder it is in) cannot be read or written: bad input
+        # from the user's side, not a bug; the path checks in argtypes catch most of them earlier
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"beyond {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
+    except UnicodeDecodeError as exc:
+        print(
+            f"beyond {args.command}: error: a file given is not UTF-8 text ({exc.reason})",
+            file=sys.stderr,
+        )
+        return 2
+    except RecursionError:
+        # json and yaml parse nested data recursively: a file of 50,000 '[' is bad input
+        print(
+            f"beyond {args.command}: error: a file given is nested too deeply to read",
+            file=sys.stderr,
+        )
         return 2
     except KeyboardInterrupt:
         return 130

@@ -7,6 +7,17 @@ import argparse
 from runtime.config import ENV_VARS, MODES, BusConfig, load_config
 
 
+def _port(text: str) -> int:
+    """A TCP port, refused while parsing (argparse's int would take -1 or 10**100)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 0 < value < 65536:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port; valid: 1-65535")
+    return value
+
+
 def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group(
         "bus",
@@ -22,7 +33,7 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file")
     group.add_argument(
-        "--port", type=int, help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)"
+        "--port", type=_port, help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)"
     )
 
 

@@ -137,7 +137,15 @@ def zenoh_config(config: BusConfig) -> Any:
     """A zenoh.Config for this BusConfig (imported lazily: zenoh is slow to import)."""
     import zenoh
 
-    zc = zenoh.Config.from_file(str(config.config_file)) if config.config_file else zenoh.Config()
+    try:
+        zc = (
+            zenoh.Config.from_file(str(config.config_file))
+            if config.config_file
+            else zenoh.Config()
+        )
+    except Exception as exc:  # zenoh raises its own ZError, with a multi-line reason
+        reason = " ".join(str(exc).split())[:300]
+        raise InputError(f"Zenoh config file {config.config_file} is not valid: {reason}") from None
     sets: dict[str, Any] = {}
     if config.config_file is None or config.mode != "peer":
         sets["mode"] = config.mode

@@ -39,7 +39,7 @@ from mcap.records import Channel, Chunk, Footer, Metadata, Schema
 from mcap.records import Header as McapHeader
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import CRCValidationError, StreamReader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 from cognition.errors import InputError
 from schemas.base import Message
@@ -349,6 +349,11 @@ class _Scanner:
             channel = self.channels.get(record.channel_id)
             if channel is None:
                 raise InputError(f"message on unknown channel {record.channel_id}")
+            # counted here, so every reader's damage report says what it read (not 0)
+            t = record.publish_time
+            info.messages += 1
+            info.start = t if info.start is None else min(info.start, t)
+            info.end = t if info.end is None else max(info.end, t)
             yield channel, record
         elif isinstance(record, Schema):
             self.schemas[record.id] = record
@@ -442,6 +447,34 @@ def _describe(exc: Exception, at: int, size: int) -> str:
     return f"{name}{': ' + text if text else ''}"
 
 
+def require_mcap(path: str | Path) -> Path:
+    """`path` is a readable MCAP file with a readable message (or undamaged and empty), else an
+    InputError.
+
+    A cheap check (it reads up to the first message) before a command joins the bus or starts
+    its work: a file that is no recording, or damaged before its first message, is refused
+    first, on one line, rather than after a warning that 0 messages are readable (damage later
+    in the file is reported by the readers, with what they read)."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            head = f.read(len(MCAP0_MAGIC))
+    except FileNotFoundError:
+        raise InputError(f"recording {p} does not exist") from None
+    except IsADirectoryError:
+        raise InputError(f"recording {p} is a folder; valid: an MCAP file") from None
+    except OSError as exc:
+        raise InputError(f"cannot read recording {p}: {exc.strerror}") from None
+    if head != MCAP0_MAGIC:
+        raise InputError(f"{p} is not an MCAP recording (it does not start with the MCAP magic)")
+    scanner = _Scanner(p)
+    for _ in scanner.messages():  # stops at the first message: a chunk read at most
+        return p
+    if scanner.info.error:
+        raise InputError(f"nothing readable: {scanner.info.damage()}")
+    return p
+
+
 def inspect_recording(path: str | Path) -> RecordingInfo:
     """Channels, schemas, counts and time range; never raises for damage (see `.error`)."""
     scanner = _Scanner(path)
@@ -458,10 +491,6 @@ def inspect_recording(path: str | Path) -> RecordingInfo:
         t = msg.publish_time
         ci.first_stamp = t if ci.first_stamp is None else min(ci.first_stamp, t)
         ci.last_stamp = t if ci.last_stamp is None else max(ci.last_stamp, t)
-        info = scanner.info
-        info.messages += 1
-        info.start = t if info.start is None else min(info.start, t)
-        info.end = t if info.end is None else max(info.end, t)
     return scanner.info
 
 

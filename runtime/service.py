@@ -44,6 +44,18 @@ Handler = Callable[[M], Awaitable[None] | None]
 _MAX_REMEMBERED_REASONS = 1000
 
 
+REASON_MAX = 500  # characters of a logged reason (and of ServiceHealth.last_error)
+
+
+def _bounded(text: str, limit: int = REASON_MAX) -> str:
+    """`text` on one line of at most `limit` characters: a hostile payload's error (a 5,000-joint
+    frame's list of joint names) must not become a 95 KB log line that a reader chokes on."""
+    text = " ".join(text.split())
+    if len(text) <= limit:
+        return text
+    return f"{text[: limit - 30]}... ({len(text)} characters)"
+
+
 class Service:
     """Subclass, set `name` (or pass it), override `setup()`."""
 
@@ -234,7 +246,7 @@ class Service:
         )
 
     def _malformed(self, key: str, error: SchemaError) -> None:
-        reason = str(error)
+        key, reason = _bounded(key, 200), _bounded(str(error))
         self.last_error = reason
         if (key, reason) not in self._seen_reasons:
             if len(self._seen_reasons) < _MAX_REMEMBERED_REASONS:
@@ -243,9 +255,10 @@ class Service:
 
     def _failed(self, key: str, exc: BaseException) -> None:
         self.errors += 1
-        self.last_error = f"{type(exc).__name__}: {exc}"
+        key = _bounded(key, 200)
+        self.last_error = _bounded(f"{type(exc).__name__}: {exc}")
         if isinstance(exc, InputError):
-            reason = str(exc)
+            reason = _bounded(str(exc))
             if (key, reason) not in self._seen_reasons:
                 if len(self._seen_reasons) < _MAX_REMEMBERED_REASONS:
                     self._seen_reasons.add((key, reason))

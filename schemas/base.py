@@ -7,9 +7,13 @@ sender on another version or a message on the wrong key is refused instead of ha
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Annotated, ClassVar
 
 import msgspec
+
+# Bounds checked by msgspec's C decoder as a payload is decoded (cheap: no Python per field).
+NAME_MAX = 256  # characters of a name, label, key or id string
+STAMP_MAX = 2**63 - 1  # nanoseconds since the epoch (and sequence numbers): int64, never negative
 
 
 class Header(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -22,11 +26,11 @@ class Header(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     in a chain, copied along the chain).
     """
 
-    version: int
-    source: str
-    seq: int
-    stamp: int
-    correlation: str = ""
+    version: Annotated[int, msgspec.Meta(ge=0, le=1_000_000)]
+    source: Annotated[str, msgspec.Meta(max_length=NAME_MAX)]
+    seq: Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
+    stamp: Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
+    correlation: Annotated[str, msgspec.Meta(max_length=2 * NAME_MAX)] = ""
 
 
 class Message(

@@ -14,7 +14,7 @@ from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
-from schemas.base import Header, Message
+from schemas.base import NAME_MAX, STAMP_MAX, Header, Message
 
 # Bytes per pixel of the raw encodings Foxglove understands.
 RAW_ENCODINGS: dict[str, int] = {
@@ -41,10 +41,52 @@ def _check_distribution(name: str, dist: dict[str, float]) -> None:
         raise ValueError(f"{name} sums to {total:.6g}, not 1")
 
 
-# Checked by msgspec's C decoder (fast enough for 30 Hz x many joints): finite, bounded values.
+# ---------------------------------------------------------------- bounds
+# What a payload may hold, checked for meaning as well as shape when it is decoded: a message
+# outside these is malformed (a SchemaError, counted and skipped by the services), so one hostile
+# message cannot make a service allocate, compute or log without bound. Checked by msgspec's C
+# decoder (fast enough for 30 Hz x many joints); the few cross-field checks are __post_init__.
 # NaN and infinities fail the bounds; they would not survive JSON recordings either.
+FRAME_MAX = 2**40  # frame indices: 1,000 years at 30 fps
+ID_MAX = 2**31 - 1  # segment, object and user ids
+JOINTS_MAX = 128  # joints per skeleton frame (Kinect has 25, MediaPipe 33)
+IMAGE_SIDE_MAX = 16_384  # pixels per image side
+IMAGE_BYTES_MAX = 32 * 2**20  # bytes of one camera frame (4K RGBA is 31.6 MiB)
+OBJECTS_MAX = 256  # objects per frame, effects per gesture
+FEATURES_MAX = 64  # numbers per feature vector
+VARIABLES_MAX = 64  # variables of an evidence, a query or a prediction
+VALUES_MAX = 64  # values of one variable's distribution, actions of a posterior
+WORDS_MAX = 4096  # words of one WordProbabilities
+SENTENCES_MAX = 10_000  # sentences of one Description (beyond describe's --nbest limit)
+TEXT_MAX = 4096  # characters of a sentence or an error text
+ROWS_MAX = 65_536  # rows of an AffordanceAnswer (the reasoner refuses bigger joint queries)
+SPEED_MAX = 1e6  # m/s or px/s
+AREA_MAX = 1e12  # px^2 (or m^2)
+SECONDS_MAX = 1e9  # any duration in seconds (31 years)
+FINITE = 1e300
+
 Coordinate = Annotated[float, msgspec.Meta(ge=-1e6, le=1e6)]
 Probability = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+Finite = Annotated[float, msgspec.Meta(ge=-FINITE, le=FINITE)]
+LogValue = Annotated[float, msgspec.Meta(le=FINITE)]  # a log-probability: -inf allowed, no NaN
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=FINITE)]
+Speed = Annotated[float, msgspec.Meta(ge=0.0, le=SPEED_MAX)]
+Seconds = Annotated[float, msgspec.Meta(ge=0.0, le=SECONDS_MAX)]
+Stamp = Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
+FrameIndex = Annotated[int, msgspec.Meta(ge=0, le=FRAME_MAX)]
+Id = Annotated[int, msgspec.Meta(ge=0, le=ID_MAX)]
+Count = Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
+Name = Annotated[str, msgspec.Meta(max_length=NAME_MAX)]
+Text = Annotated[str, msgspec.Meta(max_length=TEXT_MAX)]
+Distribution = Annotated[dict[Name, Probability], msgspec.Meta(max_length=VALUES_MAX)]
+Assignment = Annotated[dict[Name, Name], msgspec.Meta(max_length=VARIABLES_MAX)]
+Features = Annotated[list[Finite], msgspec.Meta(max_length=FEATURES_MAX)]
+Likelihoods = Annotated[dict[Name, NonNegative], msgspec.Meta(max_length=VALUES_MAX)]
+# per key expression (Progress): -1 = nothing yet
+PerKey = Annotated[
+    dict[Text, Annotated[int, msgspec.Meta(ge=-1, le=STAMP_MAX)]],
+    msgspec.Meta(max_length=VARIABLES_MAX),
+]
 
 
 class Joint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -59,17 +101,18 @@ class Joint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 class SkeletonFrame(Message, frozen=True):
     """One frame of a body tracker: joint name -> position and confidence."""
 
-    frame: int
-    joints: dict[str, Joint]
-    user: int = 0
-    frame_id: str = "depth_camera"
+    frame: FrameIndex
+    # joint names are not length-checked: this decode is the hot path, and the count is capped
+    joints: Annotated[dict[str, Joint], msgspec.Meta(max_length=JOINTS_MAX)]
+    user: Id = 0
+    frame_id: Name = "depth_camera"
 
 
 class Time(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """Foxglove's timestamp layout."""
 
-    sec: int
-    nsec: int
+    sec: Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX // 1_000_000_000)]
+    nsec: Annotated[int, msgspec.Meta(ge=0, le=999_999_999)]
 
     @classmethod
     def from_ns(cls, ns: int) -> Time:
@@ -85,12 +128,12 @@ class CameraFrame(Message, frozen=True):
     SCHEMA_NAME: ClassVar[str] = "foxglove.RawImage"
 
     timestamp: Time
-    frame_id: str
-    width: int
-    height: int
-    encoding: str
-    step: int
-    data: bytes
+    frame_id: Name
+    width: Annotated[int, msgspec.Meta(ge=0, le=IMAGE_SIDE_MAX)]
+    height: Annotated[int, msgspec.Meta(ge=0, le=IMAGE_SIDE_MAX)]
+    encoding: Name
+    step: Annotated[int, msgspec.Meta(ge=0, le=IMAGE_BYTES_MAX)]
+    data: Annotated[bytes, msgspec.Meta(max_length=IMAGE_BYTES_MAX)]
 
     def __post_init__(self) -> None:
         if self.encoding not in RAW_ENCODINGS:
@@ -138,11 +181,11 @@ class CompressedCameraFrame(Message, frozen=True):
     SCHEMA_NAME: ClassVar[str] = "foxglove.CompressedImage"
 
     timestamp: Time
-    frame_id: str
-    format: str
-    data: bytes
-    width: int = 0
-    height: int = 0
+    frame_id: Name
+    format: Name
+    data: Annotated[bytes, msgspec.Meta(max_length=IMAGE_BYTES_MAX)]
+    width: Annotated[int, msgspec.Meta(ge=0, le=IMAGE_SIDE_MAX)] = 0
+    height: Annotated[int, msgspec.Meta(ge=0, le=IMAGE_SIDE_MAX)] = 0
 
     def __post_init__(self) -> None:
         if self.timestamp.to_ns() != self.header.stamp:
@@ -157,20 +200,20 @@ class DetectedObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """One segmented object: continuous features and the cluster labels they fall in
     (the network's Color, Shape and Size values)."""
 
-    id: int
-    centroid: tuple[float, float]
-    area: float
-    colour: list[float]
-    shape: list[float]
-    size: list[float]
-    colour_label: str
-    shape_label: str
-    size_label: str
+    id: Id
+    centroid: tuple[Coordinate, Coordinate]
+    area: Annotated[float, msgspec.Meta(ge=0.0, le=AREA_MAX)]
+    colour: Features
+    shape: Features
+    size: Features
+    colour_label: Name
+    shape_label: Name
+    size_label: Name
 
 
 class DetectedObjects(Message, frozen=True):
-    frame: int
-    objects: list[DetectedObject]
+    frame: FrameIndex
+    objects: Annotated[list[DetectedObject], msgspec.Meta(max_length=OBJECTS_MAX)]
 
 
 class ObjectEffect(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -178,16 +221,16 @@ class ObjectEffect(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     as `units` says), contact, and their discretisation into the network's effect values
     (labels keys: ObjVel, HandVel, ObjHandVel, Contact)."""
 
-    object_id: int
-    object_velocity: float
-    hand_velocity: float | None  # None: the hand was not seen
-    object_hand_velocity: float | None
+    object_id: Id
+    object_velocity: Speed
+    hand_velocity: Speed | None  # None: the hand was not seen
+    object_hand_velocity: Speed | None
     contact: bool
-    contact_duration: float | None
-    labels: dict[str, str] = msgspec.field(default_factory=dict)
+    contact_duration: Seconds | None
+    labels: Assignment = msgspec.field(default_factory=dict)
     # the acted-on object's Color, Shape, Size labels (it may not be the biggest on the table)
-    object_labels: dict[str, str] = msgspec.field(default_factory=dict)
-    units: str = "m/s"
+    object_labels: Assignment = msgspec.field(default_factory=dict)
+    units: Name = "m/s"
 
 
 class ObjectEffects(Message, frozen=True):
@@ -199,11 +242,11 @@ class ObjectEffects(Message, frozen=True):
 
     VERSION: ClassVar[int] = 2
 
-    frame: int
-    effects: list[ObjectEffect]
-    segment_id: int = 0
+    frame: FrameIndex
+    effects: Annotated[list[ObjectEffect], msgspec.Meta(max_length=OBJECTS_MAX)]
+    segment_id: Id = 0
     measured: bool = True
-    reason: str = ""
+    reason: Text = ""
 
 
 class GestureObject(Message, frozen=True):
@@ -212,10 +255,10 @@ class GestureObject(Message, frozen=True):
     gesture; `labels` is empty and `reason` says why when no frame showed an object. The
     reasoner's anticipation joins on it by `segment_id`, never on "the latest objects seen"."""
 
-    segment_id: int
-    frame: int  # the camera frame the labels come from (0: none)
-    labels: dict[str, str]
-    reason: str = ""
+    segment_id: Id
+    frame: FrameIndex  # the camera frame the labels come from (0: none)
+    labels: Assignment
+    reason: Text = ""
 
 
 class GestureSegment(Message, frozen=True):
@@ -227,27 +270,29 @@ class GestureSegment(Message, frozen=True):
     VERSION: ClassVar[int] = 2
 
     event: Literal["start", "end", "cancel"]
-    segment_id: int
-    frame: int
-    start_stamp: int
-    end_stamp: int | None = None
-    event_seq: int = 0  # 1, 2, ... over the streamer's events: a receiver knows what it has
+    segment_id: Id
+    frame: FrameIndex
+    start_stamp: Stamp
+    end_stamp: Stamp | None = None
+    event_seq: Count = 0  # 1, 2, ... over the streamer's events: a receiver knows what it has
 
     def __post_init__(self) -> None:
         if self.event == "end" and self.end_stamp is None:
             raise ValueError("an 'end' event needs end_stamp")
+        if self.end_stamp is not None and self.end_stamp < self.start_stamp:
+            raise ValueError(f"end_stamp {self.end_stamp} is before start_stamp {self.start_stamp}")
 
 
 class ActionPosterior(Message, frozen=True):
     """P_HMM(A | G_1^t) at frame t of a segment, with the per-action log-likelihoods
     (cumulative, and divided by t as plotted in the article)."""
 
-    segment_id: int
-    frame: int
-    actions: list[str]
-    posterior: list[float]
-    log_likelihood: list[float]
-    normalised_log_likelihood: list[float]
+    segment_id: Id
+    frame: FrameIndex
+    actions: Annotated[list[Name], msgspec.Meta(max_length=VALUES_MAX)]
+    posterior: Annotated[list[Probability], msgspec.Meta(max_length=VALUES_MAX)]
+    log_likelihood: Annotated[list[LogValue], msgspec.Meta(max_length=VALUES_MAX)]
+    normalised_log_likelihood: Annotated[list[LogValue], msgspec.Meta(max_length=VALUES_MAX)]
     final: bool = False  # over exactly the gesture's frames, published just before its "end"
 
     def __post_init__(self) -> None:
@@ -261,11 +306,11 @@ class ActionPosterior(Message, frozen=True):
 class AffordancePrediction(Message, frozen=True):
     """P_comb over effect variables given the observed evidence and the action belief."""
 
-    segment_id: int
-    frame: int
-    action_belief: dict[str, float]
-    evidence: dict[str, str]
-    effects: dict[str, dict[str, float]]
+    segment_id: Id
+    frame: FrameIndex
+    action_belief: Distribution
+    evidence: Assignment
+    effects: Annotated[dict[Name, Distribution], msgspec.Meta(max_length=VARIABLES_MAX)]
     final: bool = False  # anticipation while the gesture unfolds, or the belief once complete
 
     def __post_init__(self) -> None:
@@ -277,10 +322,10 @@ class AffordancePrediction(Message, frozen=True):
 class WordProbabilities(Message, frozen=True):
     """P(word present | evidence) per vocabulary word."""
 
-    segment_id: int
-    words: dict[str, float]
-    evidence: dict[str, str] = msgspec.field(default_factory=dict)
-    action_belief: dict[str, float] = msgspec.field(default_factory=dict)
+    segment_id: Id
+    words: Annotated[dict[Name, Probability], msgspec.Meta(max_length=WORDS_MAX)]
+    evidence: Assignment = msgspec.field(default_factory=dict)
+    action_belief: Distribution = msgspec.field(default_factory=dict)
     final: bool = True
 
     def __post_init__(self) -> None:
@@ -290,22 +335,24 @@ class WordProbabilities(Message, frozen=True):
 
 
 class ScoredSentence(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    text: str
-    score: float
+    text: Text
+    score: LogValue  # -inf: a sentence with an impossible word
 
 
 class Evidence(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """What a description was computed from: hard values and soft distributions."""
 
-    hard: dict[str, str] = msgspec.field(default_factory=dict)
-    soft: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)
+    hard: Assignment = msgspec.field(default_factory=dict)
+    soft: Annotated[dict[Name, Likelihoods], msgspec.Meta(max_length=VARIABLES_MAX)] = (
+        msgspec.field(default_factory=dict)
+    )
 
 
 class Description(Message, frozen=True):
     """N-best sentences, best first, and the evidence that produced them."""
 
-    segment_id: int
-    sentences: list[ScoredSentence]
+    segment_id: Id
+    sentences: Annotated[list[ScoredSentence], msgspec.Meta(max_length=SENTENCES_MAX)]
     evidence: Evidence
     final: bool = True
 
@@ -313,16 +360,20 @@ class Description(Message, frozen=True):
 class ServiceHealth(Message, frozen=True):
     """Periodic self-report of a service."""
 
-    service: str
-    uptime_s: float
-    messages_in: int
-    messages_out: int
-    dropped: int
-    malformed: int
-    errors: int
-    last_error: str = ""
-    inputs: list[str] = msgspec.field(default_factory=list)
-    outputs: list[str] = msgspec.field(default_factory=list)
+    service: Name
+    uptime_s: Seconds
+    messages_in: Count
+    messages_out: Count
+    dropped: Count
+    malformed: Count
+    errors: Count
+    last_error: Text = ""
+    inputs: Annotated[list[Text], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
+        default_factory=list
+    )
+    outputs: Annotated[list[Text], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
+        default_factory=list
+    )
 
 
 class StreamEnd(Message, frozen=True):
@@ -335,10 +386,12 @@ class StreamEnd(Message, frozen=True):
 
     VERSION: ClassVar[int] = 2
 
-    source: str
-    messages: int
-    dropped: int = 0
-    last_stamps: dict[str, int] = msgspec.field(default_factory=dict)
+    source: Name
+    messages: Count
+    dropped: Count = 0
+    last_stamps: Annotated[dict[Name, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = (
+        msgspec.field(default_factory=dict)
+    )
 
 
 class Progress(Message, frozen=True):
@@ -346,37 +399,39 @@ class Progress(Message, frozen=True):
     handled (-1: none yet). The player paces itself on it, so a replay as fast as possible never
     outruns the slowest consumer and nothing is dropped."""
 
-    service: str
-    handled: dict[str, int]
+    service: Name
+    handled: PerKey
     # messages published so far per output key: a consumer that has received that many knows
     # it has everything this service derived from the inputs handled so far
-    published: dict[str, int] = msgspec.field(default_factory=dict)
-    received: dict[str, int] = msgspec.field(default_factory=dict)  # per input key
+    published: PerKey = msgspec.field(default_factory=dict)
+    received: PerKey = msgspec.field(default_factory=dict)  # per input key
     # stamp of the last message published per output key: a restarted instance of the service
     # does not publish again what its predecessor already did
-    published_stamps: dict[str, int] = msgspec.field(default_factory=dict)
+    published_stamps: PerKey = msgspec.field(default_factory=dict)
 
 
 class AffordanceQuery(Message, frozen=True):
     """An ad-hoc question to the reasoner: P(query | evidence, soft evidence, gesture evidence).
     `soft`: variable -> {value: likelihood}; `gesture`: P_HMM(A | G) by action (fused)."""
 
-    query: list[str]
-    evidence: dict[str, str] = msgspec.field(default_factory=dict)
-    soft: dict[str, dict[str, float]] = msgspec.field(default_factory=dict)
-    gesture: dict[str, float] = msgspec.field(default_factory=dict)
+    query: Annotated[list[Name], msgspec.Meta(max_length=VARIABLES_MAX)]
+    evidence: Assignment = msgspec.field(default_factory=dict)
+    soft: Annotated[dict[Name, Likelihoods], msgspec.Meta(max_length=VARIABLES_MAX)] = (
+        msgspec.field(default_factory=dict)
+    )
+    gesture: Likelihoods = msgspec.field(default_factory=dict)
 
 
 class AnswerRow(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    assignment: dict[str, str]
-    p: float
+    assignment: Assignment
+    p: Annotated[float, msgspec.Meta(ge=0.0, le=1.0 + 1e-6)]  # rounding may pass 1 a little
 
 
 class AffordanceAnswer(Message, frozen=True):
     """The reasoner's answer: the joint posterior of the queried variables, row by row."""
 
-    variables: list[str]
-    rows: list[AnswerRow]
+    variables: Annotated[list[Name], msgspec.Meta(max_length=VARIABLES_MAX)]
+    rows: Annotated[list[AnswerRow], msgspec.Meta(max_length=ROWS_MAX)]
 
 
 ALL_MESSAGES: tuple[type[Message], ...] = (

@@ -2,6 +2,12 @@
 
 Each service runs as `python -m beyond service NAME` with the bus settings in its environment,
 exactly as it would on another machine, so `beyond up` exercises the real deployment path.
+
+A service's output is read in chunks, not lines: any line length and any bytes are fine (a line
+over asyncio's 64 KiB readline limit used to kill the reader; the pipe then filled and the
+service blocked on its next log line, frozen). Lines are cut to LINE_MAX characters and the last
+LINES_KEPT are kept. `HealthWatch` asks every service for its health; one that does not answer
+for STUCK_AFTER queries in a row is reported as stuck and stopped.
 """
 
 from __future__ import annotations
@@ -11,13 +17,21 @@ import contextlib
 import os
 import signal
 import sys
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from runtime.config import BusConfig
 
+if TYPE_CHECKING:
+    from runtime.bus import Bus
+
 LogSink = Callable[[str, str], None]
+LINE_MAX = 4096  # characters of one log line passed on (the rest is counted, not kept)
+LINES_KEPT = 1000  # last lines of each service kept in memory
+HEALTH_TIMEOUT_S = 10.0  # a health query unanswered this long is a miss (a busy loop answers)
+STUCK_AFTER = 3  # misses in a row: the service is stuck
 
 
 @dataclass
@@ -25,7 +39,8 @@ class ServiceProcess:
     name: str
     process: asyncio.subprocess.Process
     reader: asyncio.Task[None] | None = None
-    lines: list[str] = field(default_factory=list)
+    lines: deque[str] = field(default_factory=lambda: deque(maxlen=LINES_KEPT))
+    stuck: bool = False
 
     @property
     def running(self) -> bool:
@@ -84,16 +99,117 @@ async def start_service(
     )
     sp = ServiceProcess(name, proc)
 
-    async def read() -> None:
-        assert proc.stdout is not None
-        async for raw in proc.stdout:
-            line = raw.decode("utf-8", "replace").rstrip()
-            sp.lines.append(line)
-            if sink is not None:
-                sink(name, line)
+    def line(text: str) -> None:
+        sp.lines.append(text)
+        if sink is not None:
+            sink(name, text)
 
-    sp.reader = asyncio.get_running_loop().create_task(read())
+    assert proc.stdout is not None
+    sp.reader = asyncio.get_running_loop().create_task(read_lines(proc.stdout, line))
     return sp
+
+
+async def read_lines(stream: asyncio.StreamReader, on_line: Callable[[str], None]) -> None:
+    """Pass each line of `stream` to `on_line`, decoded leniently and cut to LINE_MAX characters,
+    until end of file. Reads in chunks so no line is too long and the writer never blocks on a
+    full pipe because we stopped reading."""
+    pending = bytearray()
+    dropped = 0  # bytes of the current line beyond what is kept
+
+    def emit(raw: bytes | bytearray, extra: int) -> None:
+        text = bytes(raw).decode("utf-8", "replace").rstrip()
+        if extra or len(text) > LINE_MAX:
+            total = len(raw) + extra
+            text = f"{text[:LINE_MAX]}... (line of {total} bytes cut)"
+        on_line(text)
+
+    while True:
+        chunk = await stream.read(1 << 16)
+        if not chunk:
+            break
+        pending += chunk
+        while (end := pending.find(b"\n")) >= 0:
+            emit(pending[:end], dropped)
+            del pending[: end + 1]
+            dropped = 0
+        if len(pending) > 4 * LINE_MAX:  # a very long line: keep its start, count the rest
+            dropped += len(pending) - 4 * LINE_MAX
+            del pending[4 * LINE_MAX :]
+    if pending or dropped:
+        emit(pending, dropped)
+
+
+async def stop_stuck(sp: ServiceProcess, grace: float = 2.0) -> int:
+    """Stop a service that no longer answers: SIGTERM (and SIGCONT, should it be stopped), then
+    SIGKILL after `grace` s, since a blocked event loop may never run its signal handler."""
+    for sig in (signal.SIGTERM, signal.SIGCONT):
+        with contextlib.suppress(ProcessLookupError):
+            sp.process.send_signal(sig)
+    try:
+        return await asyncio.wait_for(sp.process.wait(), grace)
+    except TimeoutError:
+        with contextlib.suppress(ProcessLookupError):
+            sp.process.kill()
+        return await sp.process.wait()
+
+
+class HealthWatch:
+    """Asks every running service for its health every `period` s; a service that misses
+    `stuck_after` answers in a row is reported (`on_stuck(name, why)`), marked stuck and stopped.
+
+    Why a query and not the periodic health messages: the query is answered on the service's
+    event loop, so it fails exactly when the service is frozen (blocked on a full pipe, a long
+    computation, a stopped process), while the process still looks alive to the OS."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        processes: list[ServiceProcess],
+        on_stuck: Callable[[str, str], None],
+        *,
+        period: float = 2.0,
+        timeout: float = HEALTH_TIMEOUT_S,
+        stuck_after: int = STUCK_AFTER,
+    ) -> None:
+        self.bus, self.processes, self.on_stuck = bus, processes, on_stuck
+        self.period, self.timeout, self.stuck_after = period, timeout, stuck_after
+        self.misses: dict[str, int] = {}
+        self.answered: dict[str, int] = {}
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._run())
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+    async def check(self, sp: ServiceProcess) -> None:
+        from schemas import ServiceHealth
+
+        key = self.bus.keys.health(sp.name)
+        try:
+            replies = await self.bus.query(key, ServiceHealth, timeout=self.timeout)
+        except Exception:  # a malformed reply is no answer either
+            replies = []
+        if replies:
+            self.misses[sp.name] = 0
+            self.answered[sp.name] = self.answered.get(sp.name, 0) + 1
+            return
+        self.misses[sp.name] = misses = self.misses.get(sp.name, 0) + 1
+        if misses >= self.stuck_after and sp.running and not sp.stuck:
+            sp.stuck = True
+            why = f"no health answer to {misses} queries of {self.timeout:g} s in a row"
+            self.on_stuck(sp.name, why)
+            await stop_stuck(sp)
+
+    async def _run(self) -> None:
+        while True:
+            running = [sp for sp in self.processes if sp.running and not sp.stuck]
+            await asyncio.gather(*(self.check(sp) for sp in running))
+            await asyncio.sleep(self.period)
 
 
 async def stop_services(processes: list[ServiceProcess], timeout: float = 60.0) -> dict[str, int]:

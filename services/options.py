@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import inspect
 import json
+import math
+import typing
 from pathlib import Path
 from typing import Any
+
+import msgspec
 
 from cognition.errors import InputError, unknown
 
@@ -22,7 +26,12 @@ def load_options(path: str | Path | None) -> dict[str, dict[str, Any]]:
     p = Path(path)
     if not p.is_file():
         raise InputError(f"service config file {p} does not exist")
-    text = p.read_text(encoding="utf-8")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(
+            f"service config {p} is not UTF-8 text; valid: a YAML or JSON file"
+        ) from None
     try:
         if p.suffix.lower() == ".json":
             data = json.loads(text)
@@ -52,7 +61,36 @@ def check_options(service: str, cls: type, options: dict[str, Any]) -> dict[str,
     for name in options:
         if name not in valid:
             raise unknown(f"option of service {service!r}", name, valid)
-    return options
+    hints = typing.get_type_hints(getattr(cls, "__init__"))  # noqa: B009 (mypy: class, not instance)
+    return {name: _typed(service, name, value, hints.get(name)) for name, value in options.items()}
+
+
+def _typed(service: str, name: str, value: Any, hint: Any) -> Any:
+    """`value` as the constructor's annotation says, or an InputError naming the expected type.
+
+    Why at start-up: a value of the wrong type (effects_wait_s="abc") is otherwise found only
+    when the service first uses it, half-way through a run, and the gesture it was handling is
+    then never described. Every numeric option is a size, a count, a rate, a scale or a wait, so
+    numbers must also be finite and >= 0."""
+    if hint is None:
+        return value
+    try:
+        out = msgspec.convert(value, hint, strict=False)
+    except msgspec.ValidationError:
+        shown = repr(value) if len(repr(value)) <= 80 else repr(value)[:77] + "..."
+        raise InputError(
+            f"option {name} of service {service!r} must be {_type_name(hint)}; got {shown}"
+        ) from None
+    number = isinstance(out, int | float) and not isinstance(out, bool)
+    if number and not (math.isfinite(out) and out >= 0):
+        raise InputError(
+            f"option {name} of service {service!r} must be a finite number >= 0; got {out}"
+        )
+    return out
+
+
+def _type_name(hint: Any) -> str:
+    return str(hint).replace("typing.", "") if not isinstance(hint, type) else hint.__name__
 
 
 _BASE = {"config", "bus", "clock", "health_period", "name"}

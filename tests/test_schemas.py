@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import schemas as s
 from cognition.errors import InputError
+from schemas.messages import IMAGE_BYTES_MAX
 
 H = s.Header(version=1, source="test", seq=7, stamp=1_700_000_000_123_456_789, correlation="x/1")
 
@@ -262,7 +263,12 @@ def test_camera_frame_is_foxglove_raw_image() -> None:
     props = schema["properties"]
     for name in ("timestamp", "frame_id", "width", "height", "encoding", "step", "data"):
         assert name in props
-    assert props["data"] == {"type": "string", "contentEncoding": "base64"}
+    # the byte cap, as base64 characters
+    assert props["data"] == {
+        "type": "string",
+        "contentEncoding": "base64",
+        "maxLength": 4 * -(-IMAGE_BYTES_MAX // 3),
+    }
     assert props["timestamp"]["properties"].keys() == {"sec", "nsec"}
     frame = s.CameraFrame.build(H, 4, 2, bytes(range(24)))
     as_json = json.loads(s.to_json(frame))

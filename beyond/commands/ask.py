@@ -9,10 +9,12 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+from typing import Any
 
 from rich.console import Console
 from rich.table import Table
 
+from beyond.commands import argtypes
 from cognition.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
@@ -28,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--soft", nargs="+", action="extend", default=[], metavar="VAR=value:p,value:p"
     )
     parser.add_argument("--gesture", metavar="ACTION=p,...", help="P_HMM(A | G) to fuse")
-    parser.add_argument("--timeout", type=float, default=3.0)
+    parser.add_argument("--timeout", type=argtypes.seconds(), default=3.0)
     parser.add_argument("--json", action="store_true")
     add_bus_arguments(parser)
 
@@ -71,15 +73,34 @@ def build_query(args: argparse.Namespace) -> AffordanceQuery:
 async def ask(args: argparse.Namespace) -> AffordanceAnswer:
     query = build_query(args)
     with Bus.open(config_from_args(args)) as bus:
-        replies = await bus.query(
-            bus.keys.ask, AffordanceAnswer, payload=query, timeout=args.timeout
-        )
+        replies = await _ask_until(bus, query, args.timeout)
     if not replies:
         raise InputError(
             f"no affordance reasoner answered on {bus.keys.ask} within {args.timeout} s; "
             "start one with `beyond service reasoner` or `beyond up`"
         )
     return replies[0].message
+
+
+async def _ask_until(bus: Bus, query: AffordanceQuery, timeout: float) -> list[Any]:
+    """Ask until a reasoner answers or `timeout` is over.
+
+    A session just opened has not yet learnt of the reasoner's queryable: a query then finds no
+    one and ends at once with no reply (7 times out of 12, asked right away). So ask again, a
+    little later each time, for as long as the user allowed."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    pause = 0.02
+    while True:
+        remaining = deadline - loop.time()
+        replies = await bus.query(
+            bus.keys.ask, AffordanceAnswer, payload=query, timeout=max(remaining, 0.01)
+        )
+        remaining = deadline - loop.time()
+        if replies or remaining <= 0:
+            return replies
+        await asyncio.sleep(min(pause, remaining))
+        pause = min(2 * pause, 0.25)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,6 +21,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from beyond.commands import argtypes
 from beyond.commands.evidence_args import add_evidence_arguments, resolve_evidence
 from beyond.commands.terminal import progress_bar
 from cognition.bn.bag import load_bag
@@ -52,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="network definition (default: networkDefinition.txt beside BAG if there is one, "
         "else the bundled synthetic definition)",
     )
-    learn.add_argument("-o", "--output", type=Path, required=True, metavar="MODEL")
+    learn.add_argument("-o", "--output", type=argtypes.output_file, required=True, metavar="MODEL")
     learn.add_argument(
         "--unseen",
         choices=UNSEEN_RULES,
@@ -60,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="word CPT for parent configurations never seen in training (default: absent, "
         "the reference's behaviour)",
     )
-    learn.add_argument("--max-parents", type=int, default=DEFAULT_MAX_PARENTS)
+    learn.add_argument("--max-parents", type=argtypes.count(0, 64), default=DEFAULT_MAX_PARENTS)
     learn.add_argument(
         "--scorer",
         choices=("counts", "pgmpy"),

@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 from rich.console import Console
 from rich.table import Table
 
+from beyond.commands import argtypes
 from cognition.bn.model import BayesNet, learn_network
 from cognition.bn.synthetic import synthetic_dataset
 
@@ -30,7 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--network", action="store_true", help="tour the affordance–words network, no bus"
     )
-    parser.add_argument("--top", type=int, default=8, help="with --network: words to list")
+    parser.add_argument(
+        "--top", type=argtypes.count(1, 10_000), default=8, help="with --network: words to list"
+    )
     parser.add_argument("--no-live", action="store_true", help="event lines only, no live view")
 
 

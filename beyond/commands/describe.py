@@ -18,16 +18,18 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from beyond.commands import argtypes
 from beyond.commands.evidence_args import add_evidence_arguments, resolve_evidence
 from cognition.bn.model import load_model
 from cognition.descriptions import (
+    NBEST_MAX,
+    SAMPLES_MAX,
     ScoredSentence,
     nbest_exact,
     nbest_from_file,
     nbest_sampled,
     plot_nbest,
 )
-from cognition.errors import InputError
 
 HELP = "N-best sentences describing the evidence (exact search over the grammar by default)"
 
@@ -35,24 +37,31 @@ HELP = "N-best sentences describing the evidence (exact search over the grammar 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", type=Path, metavar="MODEL", help="network model file (.json)")
     add_evidence_arguments(parser)
-    parser.add_argument("--nbest", type=int, default=10, metavar="N")
+    parser.add_argument("--nbest", type=argtypes.count(1, NBEST_MAX), default=10, metavar="N")
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--sentences", type=Path, metavar="FILE", help="re-score these sentences")
-    source.add_argument("--samples", type=int, metavar="N", help="re-score N random sentences")
-    parser.add_argument("--seed", type=int, default=0, help="seed for --samples (default 0)")
+    source.add_argument(
+        "--samples",
+        type=argtypes.count(1, SAMPLES_MAX),
+        metavar="N",
+        help="re-score N random sentences",
+    )
+    parser.add_argument(
+        "--seed", type=argtypes.seed, default=0, help="seed for --samples (default 0)"
+    )
     parser.add_argument(
         "--legacy-offset",
         action="store_true",
         help="score (1 + Σ log P)/L as the reference code behind the published tables did",
     )
     parser.add_argument("--require", metavar="REGEX", help="keep only sentences matching REGEX")
-    parser.add_argument("--plot", type=Path, metavar="OUT.png", help="also draw the list as PNG")
+    parser.add_argument(
+        "--plot", type=argtypes.output_file, metavar="OUT.png", help="also draw the list as PNG"
+    )
 
 
 def describe(args: argparse.Namespace) -> tuple[list[ScoredSentence], str]:
     """The N-best list for parsed arguments, and a label of the evidence behind it."""
-    if args.nbest < 1:
-        raise InputError(f"--nbest must be at least 1; got {args.nbest}")
     model = load_model(args.model)
     ev = resolve_evidence(args, model)
     words = model.word_probabilities(ev.observed, ev.soft)
@@ -60,8 +69,6 @@ def describe(args: argparse.Namespace) -> tuple[list[ScoredSentence], str]:
     if args.sentences is not None:
         best = nbest_from_file(args.sentences, words, args.nbest, **options)
     elif args.samples is not None:
-        if args.samples < 1:
-            raise InputError(f"--samples must be at least 1; got {args.samples}")
         best = nbest_sampled(words, args.samples, args.seed, args.nbest, **options)
     else:
         best = nbest_exact(words, args.nbest, **options)
@@ -81,7 +88,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps([{"sentence": s.sentence, "score": json_score(s.score)} for s in best]))
         return 0
     if not best:
-        Console(stderr=True).print("no sentence matches --require")
+        why = f" matches --require {args.require!r}" if args.require else " to rank"
+        Console(stderr=True).print(f"no sentence{why}")
         return 0
     table = Table(title=f"{len(best)}-best descriptions", caption=f"given {label}")
     table.add_column("#", justify="right")

@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import sys
 
+from beyond.commands import argtypes
 from beyond.commands.terminal import stop_on_signals
 from runtime.bus import Bus, decode_any
 from runtime.cliargs import add_bus_arguments, config_from_args
@@ -15,10 +16,12 @@ HELP = "print the messages on a key expression, decoded"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("keyexpr", help="key expression, e.g. beyond/robot/sensors/skeleton")
+    parser.add_argument(
+        "keyexpr", type=argtypes.keyexpr, help="key expression, e.g. beyond/robot/sensors/skeleton"
+    )
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
-    parser.add_argument("--count", type=int, help="stop after this many messages")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--count", type=argtypes.count(), help="stop after this many messages")
+    parser.add_argument("--duration", type=argtypes.seconds(), help="stop after this many seconds")
     add_bus_arguments(parser)
 
 

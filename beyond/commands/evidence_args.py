@@ -16,6 +16,7 @@ import argparse
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from beyond.commands import argtypes
 from cognition.bn.evidence import parse_evidence, parse_soft
 from cognition.bn.model import BayesNet
 from cognition.errors import InputError
@@ -44,7 +45,7 @@ def add_evidence_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", default=None, metavar="A:B", help="frames of LOG (1-based)")
     parser.add_argument(
         "--scale",
-        type=float,
+        type=argtypes.number(float, lo=0, hi=1e6, lo_open=True),
         default=LOG_SCALE,
         metavar="S",
         help=f"multiply LOG positions by S (default {LOG_SCALE}: millimetres to metres)",

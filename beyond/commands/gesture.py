@@ -28,6 +28,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from beyond.commands import argtypes
 from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 from cognition.gestures.datasets import (
@@ -52,16 +53,30 @@ def _progress(console: Console) -> Progress:
 
 
 def _training_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--states", type=int, default=6, help="HMM states per action (default 6)")
-    p.add_argument("--mix", type=int, default=3, help="Gaussians per state (default 3)")
-    p.add_argument("--iter", type=int, default=30, help="EM iterations at most (default 30)")
+    p.add_argument(
+        "--states", type=argtypes.count(1, 100), default=6, help="HMM states per action (default 6)"
+    )
+    p.add_argument(
+        "--mix", type=argtypes.count(1, 50), default=3, help="Gaussians per state (default 3)"
+    )
+    p.add_argument(
+        "--iter",
+        type=argtypes.count(1, 100_000),
+        default=30,
+        help="EM iterations at most (default 30)",
+    )
 
 
 def _data_args(p: argparse.ArgumentParser, seed: int) -> None:
     p.add_argument(
-        "--count", type=int, default=30, help="synthetic gestures per action (default 30)"
+        "--count",
+        type=argtypes.count(1, 100_000),
+        default=30,
+        help="synthetic gestures per action (default 30)",
     )
-    p.add_argument("--seed", type=int, default=seed, help=f"synthetic data seed (default {seed})")
+    p.add_argument(
+        "--seed", type=argtypes.seed, default=seed, help=f"synthetic data seed (default {seed})"
+    )
     p.add_argument(
         "--push-as",
         choices=("grasp", "tap", "touch"),
@@ -80,7 +95,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="'synthetic' (default), a folder of hand recordings (grasp1_hand/ ...), "
         "or MCAP recordings (a .mcap file or a folder of them)",
     )
-    train.add_argument("--out", required=True, type=Path, help="model file to write (.json)")
+    train.add_argument(
+        "--out", required=True, type=argtypes.output_file, help="model file to write (.json)"
+    )
     _training_args(train)
     _data_args(train, TRAIN_SEED)
 
@@ -90,7 +107,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     stream.add_argument("--frames", default=None, help="A:B, 1-based inclusive (default: all)")
     stream.add_argument(
         "--scale",
-        type=float,
+        type=argtypes.number(float, lo=0, hi=1e6, lo_open=True),
         default=LOG_SCALE,
         help=f"multiply logged positions by S (default {LOG_SCALE}: logs -> model units)",
     )
@@ -99,7 +116,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     stream.add_argument(
         "--garbage", action="store_true", help="add the garbage model as a class, if loaded"
     )
-    stream.add_argument("--plot", type=Path, default=None, help="also write a PNG plot here")
+    stream.add_argument(
+        "--plot", type=argtypes.output_file, default=None, help="also write a PNG plot here"
+    )
 
     ev = sub.add_parser("evaluate", help="accuracy, confusion and early recognition")
     ev.add_argument("models", help="model file, or 'cv' for leave-one-gesture-out cross-validation")
@@ -107,7 +126,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ev.add_argument("--json", action="store_true", help="print the report as JSON")
     ev.add_argument(
         "--out",
-        type=Path,
+        type=argtypes.output_dir,
         default=Path("gesture-evaluation"),
         help="folder for the PNG plots (default ./gesture-evaluation)",
     )

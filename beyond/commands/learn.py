@@ -17,10 +17,10 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 from rich.console import Console
 
+from beyond.commands import argtypes
 from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 
@@ -51,13 +51,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="synthetic",
         help="'synthetic' (default) or a folder of hand recordings (grasp1_hand/ ...)",
     )
-    parser.add_argument("--out", type=Path, required=True, help="output folder")
+    parser.add_argument("--out", type=argtypes.output_dir, required=True, help="output folder")
     parser.add_argument("--json", action="store_true", help="also print results.json on stdout")
     parser.add_argument(
-        "--demos", type=int, default=20, help="demonstrations watched per action (default 20)"
+        "--demos",
+        type=argtypes.count(1, 100_000),
+        default=20,
+        help="demonstrations watched per action (default 20)",
     )
     parser.add_argument(
-        "--test", type=int, default=60, help="held-out demonstrations per action (default 60)"
+        "--test",
+        type=argtypes.count(1, 100_000),
+        default=60,
+        help="held-out demonstrations per action (default 60)",
     )
     parser.add_argument(
         "--sizes",
@@ -67,19 +73,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--threshold",
-        type=float,
+        type=argtypes.number(float, lo=0, hi=1, what="a probability"),
         default=0.9,
         help="keep a demonstration when max P_BN(A | ...) is at least this (default 0.9)",
     )
-    parser.add_argument("--states", type=int, default=6, help="HMM states (default 6)")
-    parser.add_argument("--mix", type=int, default=1, help="Gaussians per state (default 1)")
-    parser.add_argument("--iter", type=int, default=10, help="EM iterations at most (default 10)")
+    parser.add_argument(
+        "--states", type=argtypes.count(1, 100), default=6, help="HMM states (default 6)"
+    )
+    parser.add_argument(
+        "--mix", type=argtypes.count(1, 50), default=1, help="Gaussians per state (default 1)"
+    )
+    parser.add_argument(
+        "--iter",
+        type=argtypes.count(1, 100_000),
+        default=10,
+        help="EM iterations at most (default 10)",
+    )
     parser.add_argument(
         "--no-calibrate",
         action="store_true",
         help="do not calibrate the gesture evidence's temper (use kappa = 1)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of everything synthetic")
+    parser.add_argument(
+        "--seed", type=argtypes.seed, default=0, help="seed of everything synthetic"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

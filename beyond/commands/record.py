@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import sys
 
+from beyond.commands import argtypes
 from beyond.commands.terminal import stop_on_signals
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
@@ -18,15 +19,29 @@ HELP = "record bus traffic on key expressions into an MCAP file"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "keys", nargs="*", metavar="KEYEXPR", help="key expressions (default: beyond/<robot>/**)"
+        "keys",
+        nargs="*",
+        type=argtypes.keyexpr,
+        metavar="KEYEXPR",
+        help="key expressions (default: beyond/<robot>/**)",
     )
-    parser.add_argument("-o", "--output", required=True, help="MCAP file to write")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
-    parser.add_argument("--count", type=int, help="stop after this many messages")
-    parser.add_argument("--chunk-size", type=int, default=DEFAULT_CHUNK_SIZE, help="bytes")
+    parser.add_argument(
+        "-o", "--output", type=argtypes.output_file, required=True, help="MCAP file to write"
+    )
+    parser.add_argument("--duration", type=argtypes.seconds(), help="stop after this many seconds")
+    parser.add_argument("--count", type=argtypes.count(), help="stop after this many messages")
+    parser.add_argument(
+        "--chunk-size",
+        type=argtypes.count(1024, 2**30, "bytes"),
+        default=DEFAULT_CHUNK_SIZE,
+        help="bytes",
+    )
     parser.add_argument("--compression", choices=list(COMPRESSIONS), default="zstd")
     parser.add_argument(
-        "--flush-interval", type=float, default=1.0, help="close a chunk at least this often (s)"
+        "--flush-interval",
+        type=argtypes.seconds(),
+        default=1.0,
+        help="close a chunk at least this often (s)",
     )
     add_bus_arguments(parser)
 

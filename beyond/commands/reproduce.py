@@ -14,6 +14,7 @@ from pathlib import Path
 
 from rich.console import Console
 
+from beyond.commands import argtypes
 from cognition.errors import InputError
 from cognition.paths import SOURCES, shared_data_dir
 
@@ -24,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--data", type=Path, help="the article's data folder (default: ../shared/data)"
     )
-    parser.add_argument("--out", type=Path, required=True, help="output folder")
+    parser.add_argument("--out", type=argtypes.output_dir, required=True, help="output folder")
 
 
 def run(args: argparse.Namespace) -> int:

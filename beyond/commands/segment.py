@@ -12,7 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rich.console import Console
 
+from beyond.commands import argtypes
+from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 
 HELP = "segment tabletop objects in an image or MCAP recording; learn or evaluate the clusters"
@@ -23,26 +26,43 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "source", nargs="?", metavar="IMAGE_OR_MCAP", help="a PPM/PGM/PNG image or an MCAP file"
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    parser.add_argument("--overlay", metavar="OUT.png", help="draw contours, centroids, labels")
+    parser.add_argument(
+        "--overlay",
+        type=argtypes.output_file,
+        metavar="OUT.png",
+        help="draw contours, centroids, labels",
+    )
     parser.add_argument("--clusters", metavar="FILE.json", help="clusters file (default: shipped)")
     parser.add_argument(
         "--background", metavar="EMPTY", nargs="+", help="image(s) of the empty table"
     )
     parser.add_argument("--size", metavar="WxH", help="require frames of this size, e.g. 320x240")
-    parser.add_argument("--frame", type=int, help="MCAP: only the camera frame with this index")
+    parser.add_argument(
+        "--frame", type=argtypes.count(0), help="MCAP: only the camera frame with this index"
+    )
     parser.add_argument(
         "--reference-mask", metavar="MASK", help="report foreground IoU against this mask image"
     )
     parser.add_argument("--effects", action="store_true", help="MCAP: also measure the effects")
     parser.add_argument(
-        "--learn", metavar="OUT.json", help="run the exploration phase and write the clusters"
+        "--learn",
+        type=argtypes.output_file,
+        metavar="OUT.json",
+        help="run the exploration phase and write the clusters",
     )
     parser.add_argument(
-        "--evaluate", metavar="OUT_DIR", help="score on simulated data; confusion matrices (PNG)"
+        "--evaluate",
+        type=argtypes.output_dir,
+        metavar="OUT_DIR",
+        help="score on simulated data; confusion matrices (PNG)",
     )
-    parser.add_argument("--experiments", type=int, default=216, help="simulated experiments")
-    parser.add_argument("--stills", type=int, default=60, help="--evaluate: still scenes")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulation")
+    parser.add_argument(
+        "--experiments", type=argtypes.count(1, 100_000), default=216, help="simulated experiments"
+    )
+    parser.add_argument(
+        "--stills", type=argtypes.count(0, 100_000), default=60, help="--evaluate: still scenes"
+    )
+    parser.add_argument("--seed", type=argtypes.seed, default=0, help="seed of the simulation")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -222,7 +242,6 @@ def _segment_mcap(
 
 
 def _learn(args: argparse.Namespace) -> int:
-    from rich.progress import Progress
 
     from cognition.vision.pipeline import learn_clusters
     from cognition.vision.tabletop import exploration
@@ -230,7 +249,7 @@ def _learn(args: argparse.Namespace) -> int:
     command = (
         f"beyond segment --learn {args.learn} --experiments {args.experiments} --seed {args.seed}"
     )
-    with Progress(transient=True) as progress:
+    with progress_bar(Console(stderr=True)) as progress:
         task = progress.add_task("exploration", total=args.experiments)
         model, _rows, _truth = learn_clusters(
             exploration(args.experiments, args.seed),
@@ -247,7 +266,6 @@ def _learn(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from rich.progress import Progress
 
     from cognition.vision.evaluation import evaluate_experiments, evaluate_stills
     from cognition.vision.tabletop import exploration
@@ -256,7 +274,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     out = Path(args.evaluate)
     seed = args.seed + 1_000_003  # never the exploration's own experiments
     objects = evaluate_stills(args.stills, seed, clusters) if args.stills else None
-    with Progress(transient=True) as progress:
+    with progress_bar(Console(stderr=True)) as progress:
         task = progress.add_task("experiments", total=args.experiments)
         exps = evaluate_experiments(
             exploration(args.experiments, seed),

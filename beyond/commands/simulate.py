@@ -23,6 +23,7 @@ from typing import TextIO
 import numpy as np
 from rich.console import Console
 
+from beyond.commands import argtypes
 from beyond.commands.terminal import progress_bar
 from cognition.errors import InputError
 from cognition.scene import (
@@ -58,18 +59,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "scene", metavar="SCENE", help=f"a preset ({', '.join(PRESETS)}) or {SPEC_HELP}"
     )
-    parser.add_argument("-o", "--output", required=True, metavar="FILE.mcap", help="output file")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulation (default 0)")
+    parser.add_argument(
+        "-o",
+        "--output",
+        type=argtypes.output_file,
+        required=True,
+        metavar="FILE.mcap",
+        help="output file",
+    )
+    parser.add_argument(
+        "--seed", type=argtypes.seed, default=0, help="seed of the simulation (default 0)"
+    )
     parser.add_argument(
         "--camera-fps",
-        type=float,
+        type=argtypes.number(float),
         default=15.0,
         help=f"camera frame rate, {CAMERA_FPS_RANGE[0]:g}..{CAMERA_FPS_RANGE[1]:g} (default 15)",
     )
     parser.add_argument(
         "--format", choices=FORMATS, default="jpeg", help="camera frames (default jpeg)"
     )
-    parser.add_argument("--quality", type=int, default=80, help="JPEG quality 1..95 (default 80)")
+    parser.add_argument(
+        "--quality",
+        type=argtypes.count(1, 95, "JPEG quality"),
+        default=80,
+        help="JPEG quality 1..95 (default 80)",
+    )
     parser.add_argument(
         "--robot", default=DEFAULT_ROBOT, help=f"robot name in the keys (default {DEFAULT_ROBOT})"
     )

@@ -6,20 +6,32 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import signal
+from typing import Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 
+class _Bar(Progress):
+    """A progress bar that never stands before an error: erased when its block raises, and not
+    drawn at all off a terminal (a log or a pipe would keep its last frame as a line)."""
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is not None:
+            self.live.transient = True
+        super().__exit__(exc_type, exc, tb)
+
+
 def progress_bar(console: Console, *, transient: bool = True) -> Progress:
     """A bar with description, count and elapsed time (on stderr when `console` is)."""
-    return Progress(
+    return _Bar(
         TextColumn("[bold]{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         console=console,
         transient=transient,
+        disable=not console.is_terminal,
     )
 
 

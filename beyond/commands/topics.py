@@ -7,6 +7,7 @@ import asyncio
 import time
 from collections import defaultdict
 
+from beyond.commands import argtypes
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from schemas.codec import type_from_encoding
@@ -17,9 +18,14 @@ HELP = "list live keys with message rates (and live services)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "keyexpr", nargs="?", help="key expression to watch (default: beyond/<robot>/**)"
+        "keyexpr",
+        nargs="?",
+        type=argtypes.keyexpr,
+        help="key expression to watch (default: beyond/<robot>/**)",
     )
-    parser.add_argument("--duration", type=float, default=2.0, help="seconds to listen")
+    parser.add_argument(
+        "--duration", type=argtypes.seconds(), default=2.0, help="seconds to listen"
+    )
     add_bus_arguments(parser)
 
 

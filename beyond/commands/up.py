@@ -37,13 +37,20 @@ from typing import Any
 from rich.console import Console
 from rich.live import Live
 
+from beyond.commands import argtypes
 from cognition.errors import InputError
 from cognition.paths import REPO_ROOT
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig
 from schemas.keys import check_name
-from services.launcher import ServiceProcess, service_env, start_service, stop_services
+from services.launcher import (
+    HealthWatch,
+    ServiceProcess,
+    service_env,
+    start_service,
+    stop_services,
+)
 from services.live_view import render
 from services.monitor import PipelineMonitor
 from services.options import check_options, load_options
@@ -69,12 +76,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="do not start this service (e.g. speech, when your own synthesizer replaces it)",
     )
     parser.add_argument(
-        "--rate", type=float, default=1.0, help="replay speed (0: as fast as possible)"
+        "--rate",
+        type=argtypes.number(float, lo=0, hi=1e6),
+        default=1.0,
+        help="replay speed (0: as fast as possible)",
     )
     parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
     parser.add_argument(
         "--timeout",
-        type=float,
+        type=argtypes.seconds(),
         default=None,
         help=f"give up after S seconds (default {DEFAULT_TIMEOUT:.0f} with a source or "
         "--until-stream-end, else run until stopped)",
@@ -165,6 +175,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
     live: Live | None = None
+    watch: HealthWatch | None = None
 
     def log_line(name: str, line: str) -> None:
         print(f"[{name}] {line}", file=sys.stderr, flush=True)
@@ -194,6 +205,10 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
                     await start_service("ingest", env, options=options["ingest"], sink=log_line)
                 )
             emit(f"pipeline up: {', '.join(names)} on robot {config.robot!r}")
+            watch = HealthWatch(
+                bus, processes, lambda n, why: emit(f"service {n} is stuck ({why}); stopping it")
+            )
+            watch.start()
             use_live = out.is_terminal and not args.no_live
             if use_live:
                 live = Live(render(pipeline, names), console=out, refresh_per_second=8)
@@ -218,6 +233,8 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             else:
                 status = 0  # stopped by the user
         finally:
+            if watch is not None:
+                await watch.stop()
             if live is not None:
                 live.update(render(pipeline, names))
                 live.stop()

@@ -28,6 +28,13 @@ from cognition.bn.definition import Variable
 from cognition.errors import InputError, unknown
 
 MAX_CORE_STATES = 5_000_000
+# Work per query is capped, with the limit in the message (the reasoner and `beyond bn query`
+# share it): 18 word variables made 262,144 rows and blocked the reasoner for 4.7 s, x4 per two
+# more words. Rows: the product of the queried variables' cardinalities; 4,096 hold the joint of
+# all eight affordance nodes (2,592). Work, for a query with word variables: rows x affordance
+# states summed over (each row sums over them); 2**21 cells take about 0.05 s (nine words).
+MAX_JOINT_ROWS = 4096
+MAX_QUERY_WORK = 2**21
 
 
 @dataclass(frozen=True)
@@ -243,6 +250,12 @@ class CompiledNetwork:
                 raise unknown("query variable", name, tuple(self.variables))
         if len(set(query)) != len(query):
             raise InputError(f"query names a variable twice: {', '.join(query)}")
+        rows = math.prod(self.variables[n].card for n in query)
+        if rows > MAX_JOINT_ROWS:
+            raise InputError(
+                f"a joint query over {len(query)} variables has {rows} rows, over the limit of "
+                f"{MAX_JOINT_ROWS}; query fewer variables at once (each alone gives its marginal)"
+            )
         evidence = evidence or {}
         soft = soft or {}
         phi, free, idx = self._weights(evidence, soft, query)
@@ -256,6 +269,13 @@ class CompiledNetwork:
                 kept = sorted(pos)
                 table = np.transpose(table, [kept.index(p) for p in pos])
         else:
+            work = rows * phi.size
+            if work > MAX_QUERY_WORK:
+                raise InputError(
+                    f"a joint query over {len(query)} variables with words needs {rows} rows x "
+                    f"{phi.size} affordance states = {work} cells, over the limit of "
+                    f"{MAX_QUERY_WORK}; query fewer words at once (or give more evidence)"
+                )
             labels = {n: self.axis[n] for n in core_q}
             operands: list[Any] = [phi, list(free)]
             for k, name in enumerate(leaf_q):

@@ -28,11 +28,13 @@ from __future__ import annotations
 
 from cognition.descriptions.plot import plot_nbest
 from cognition.descriptions.sampling import (
+    SAMPLES_MAX,
     hsgen_phrase_probabilities,
     sample_keys,
     sample_sentences,
 )
 from cognition.descriptions.search import (
+    NBEST_MAX,
     brute_force_nbest,
     brute_force_nbest_plain,
     brute_force_scores,
@@ -45,6 +47,8 @@ from cognition.descriptions.search import (
 from cognition.descriptions.space import ScoredSentence, SentenceSpace, score_sentence
 
 __all__ = [
+    "NBEST_MAX",
+    "SAMPLES_MAX",
     "ScoredSentence",
     "SentenceSpace",
     "brute_force_nbest",

@@ -172,6 +172,10 @@ def slot_distributions(grammar: Grammar = DEFAULT_GRAMMAR) -> list[FloatArray]:
     return dists
 
 
+# Samples are drawn at once, one int64 per slot and sample: a million is ~0.1 GB, the article
+# drew 10,000. More is refused with the limit in the message instead of exhausting memory.
+SAMPLES_MAX = 1_000_000
+
 _DIST_CACHE: dict[int, tuple[Grammar, list[FloatArray]]] = {}
 
 
@@ -179,6 +183,8 @@ def sample_keys(count: int, seed: int, *, grammar: Grammar = DEFAULT_GRAMMAR) ->
     """Keys of `count` sentences drawn like HSGen (repeats kept, in draw order)."""
     if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 0:
         raise InputError(f"number of samples must be a non-negative integer, got {count!r}")
+    if count > SAMPLES_MAX:
+        raise InputError(f"number of samples {count} is over the limit; valid: 0..{SAMPLES_MAX}")
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise InputError(f"seed must be a non-negative integer, got {seed!r}")
     space = SentenceSpace.of(grammar)

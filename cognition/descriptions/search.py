@@ -42,6 +42,10 @@ from cognition.grammar import DEFAULT_GRAMMAR, Grammar
 
 Require = re.Pattern[str] | str | None
 
+# A list longer than this is no description any more, and its work and memory grow with n
+# (n = 10**12 reached 5 GB before failing): refused with the limit in the message.
+NBEST_MAX = 10_000
+
 
 def nbest_exact(
     word_probs: Mapping[str, float],
@@ -317,6 +321,8 @@ def nbest_from_file(
         raise InputError(f"sentence file {path} does not exist; give a file of sentences") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read sentence file {path}: {exc}") from None
+    if not text.strip():
+        raise InputError(f"sentence file {path} is empty; valid: one sentence per line")
     return nbest_from_sentences(
         text.splitlines(),
         word_probs,
@@ -423,8 +429,8 @@ def _top_order(scores: FloatArray, keys: IntArray | None, k: int) -> IntArray:
 
 
 def _check_n(n: int) -> int:
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
-        raise InputError(f"N-best size must be a positive integer, got {n!r}")
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= NBEST_MAX:
+        raise InputError(f"N-best size must be a positive integer up to {NBEST_MAX}, got {n!r}")
     return int(n)
 
 
