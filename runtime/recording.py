@@ -5,12 +5,20 @@ Format decisions (see runtime/README.md):
   "jsonschema" schema (the msgspec schema, `$ref`s inlined), both well-known MCAP encodings, so
   any MCAP tool decodes them without this project; msgpack, the wire encoding, is converted on
   the way in and back on replay (`RecordedMessage.wire()`), losslessly (floats round-trip
-  exactly, bytes as base64). Camera frames are stored under Foxglove's schema names
-  `foxglove.RawImage` / `foxglove.CompressedImage`, whose fields they carry, so Foxglove shows
-  them. Samples on keys that are not ours are stored as they came, schemaless, with their Zenoh
-  encoding as the message encoding.
-- log_time = when the recorder received the sample; publish_time = the header stamp.
+  exactly, bytes as base64, stamps as Foxglove `Time` {sec, nsec} so that a JavaScript reader,
+  whose numbers are doubles, keeps them exact). Each channel names its JSON form in its
+  metadata (`beyond.json_form`, see `schemas.codec.RECORDING_JSON_FORM`); a channel without it
+  is form 1 (stamps as integers), read as before. Camera frames are stored under Foxglove's
+  schema names `foxglove.RawImage` / `foxglove.CompressedImage`, whose fields they carry, so
+  Foxglove shows them. Samples on keys that are not ours are stored as they came, schemaless,
+  with their Zenoh encoding as the message encoding.
+- log_time = publish_time = the header stamp (the data's time), so a viewer's timeline, the
+  message's own stamp and the camera `timestamp` agree. A sample without a stamp (0: a
+  service whose recording clock has not started yet) or not ours is logged at its receive
+  time moved onto the stamps' clock (by the offset of the last stamped sample), never at 0.
   Replay follows publish_time.
+- No attachment index and, without metadata, no metadata index: an empty index group with a
+  summary offset pointing at it is an error to `mcap doctor`. The data-section CRC is written.
 - Chunked and compressed (zstd); the file is written unbuffered and the open chunk is closed at
   least every `flush_interval` s, so a killed recorder leaves every closed chunk readable.
   The reader here reads sequentially and stops cleanly at the first damaged record.
@@ -39,18 +47,19 @@ from mcap.records import Channel, Chunk, Footer, Metadata, Schema
 from mcap.records import Header as McapHeader
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import CRCValidationError, StreamReader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 
 from cognition.errors import InputError
 from schemas.base import Message
 from schemas.codec import (
+    RECORDING_JSON_FORM,
     REGISTRY,
     SchemaError,
     decode,
     encode,
-    from_json,
-    json_schema_bytes,
-    to_json,
+    from_recording_json,
+    recording_json_schema_bytes,
+    to_recording_json,
     type_from_encoding,
     wire_encoding,
 )
@@ -60,6 +69,7 @@ JSON = "json"
 JSONSCHEMA = "jsonschema"
 META_TYPE = "beyond.type"
 META_VERSION = "beyond.version"
+META_FORM = "beyond.json_form"
 DEFAULT_CHUNK_SIZE = 256 * 1024
 COMPRESSIONS = {
     "zstd": CompressionType.ZSTD,
@@ -130,7 +140,16 @@ class RecordingWriter:
             stream: Any = self._file
         else:
             self._file, stream = None, target
-        self._writer = Writer(stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+        indexes = IndexType.CHUNK | IndexType.MESSAGE
+        if metadata:
+            indexes |= IndexType.METADATA
+        self._writer = Writer(
+            stream,
+            chunk_size=chunk_size,
+            compression=COMPRESSIONS[compression],
+            index_types=indexes,
+            enable_data_crcs=True,
+        )
         self._writer.start(profile="", library=_library())
         if metadata:
             self._writer.add_metadata("beyond", dict(sorted(metadata.items())))
@@ -139,6 +158,7 @@ class RecordingWriter:
         self._flush_interval = flush_interval
         self._last_flush = time.monotonic()
         self._unflushed = 0
+        self._stamp_offset = 0  # last stamp minus its receive time: the stamps' clock
         self.count = 0
         self.malformed = 0
         self._closed = False
@@ -147,7 +167,9 @@ class RecordingWriter:
         sid = self._schemas.get(cls)
         if sid is None:
             sid = self._schemas[cls] = self._writer.register_schema(
-                name=cls.schema_name(), encoding=JSONSCHEMA, data=json_schema_bytes(cls)
+                name=cls.schema_name(),
+                encoding=JSONSCHEMA,
+                data=recording_json_schema_bytes(cls),
             )
         return sid
 
@@ -160,7 +182,11 @@ class RecordingWriter:
                     topic=key,
                     message_encoding=JSON,
                     schema_id=self._schema_id(cls),
-                    metadata={META_TYPE: cls.type_name(), META_VERSION: str(cls.VERSION)},
+                    metadata={
+                        META_TYPE: cls.type_name(),
+                        META_VERSION: str(cls.VERSION),
+                        META_FORM: str(RECORDING_JSON_FORM),
+                    },
                 )
             else:
                 cid = self._writer.register_channel(
@@ -170,29 +196,36 @@ class RecordingWriter:
         return cid
 
     def write(self, key: str, message: Message, *, log_time: int | None = None) -> None:
-        """Store a message; log_time defaults to its stamp (deterministic recordings)."""
+        """Store a message; log_time defaults to its stamp (deterministic recordings), and the
+        publish time is the stamp, or log_time for an unstamped message."""
         stamp = message.header.stamp
+        log = log_time if log_time is not None else stamp
         self._add(
             self._channel_id(key, type(message), JSON),
-            log_time if log_time is not None else stamp,
-            stamp,
-            to_json(message),
+            log,
+            stamp or log,
+            to_recording_json(message),
             message.header.seq,
         )
 
-    def write_wire(self, key: str, payload: bytes, encoding: str, log_time: int) -> Message | None:
-        """Store a sample as it came off the wire. Ours (by encoding or key) are decoded and
-        stored as JSON; a malformed one raises SchemaError; others are stored raw."""
+    def write_wire(self, key: str, payload: bytes, encoding: str, received: int) -> Message | None:
+        """Store a sample as it came off the wire at `received` (ns). Ours (by encoding or key)
+        are decoded and stored as JSON at their stamp; a malformed one raises SchemaError;
+        others are stored raw at their receive time on the stamps' clock."""
         cls = type_from_encoding(encoding) or type_for_key(key)
         if cls is None:
-            self._add(self._channel_id(key, None, encoding), log_time, log_time, payload, 0)
+            at = received + self._stamp_offset
+            self._add(self._channel_id(key, None, encoding), at, at, payload, 0)
             return None
         try:
             message = decode(payload, cls, key)
         except SchemaError:
             self.malformed += 1
             raise
-        self.write(key, message, log_time=log_time)
+        stamp = message.header.stamp
+        if stamp:
+            self._stamp_offset = stamp - received
+        self.write(key, message, log_time=stamp or received + self._stamp_offset)
         return message
 
     def _add(self, channel: int, log_time: int, publish_time: int, data: bytes, seq: int) -> None:
@@ -254,12 +287,13 @@ class RecordedMessage:
     encoding: str  # MCAP message encoding of `data`
     cls: type[Message] | None
     data: bytes
+    form: int = RECORDING_JSON_FORM  # JSON form of `data` (schemas.codec), 1 in older files
 
     def message(self) -> Message:
         """The decoded message (strict); InputError if the channel is not one of ours."""
         if self.cls is None:
             raise InputError(f"channel {self.key} ({self.encoding}) is not a beyond message")
-        return from_json(self.data, self.cls, self.key)
+        return from_recording_json(self.data, self.cls, self.key, self.form)
 
     def wire(self) -> tuple[bytes, str]:
         """(payload, Zenoh encoding) to publish this message as the original sender did."""
@@ -318,6 +352,7 @@ class _Scanner:
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.types: dict[int, type[Message] | None] = {}
+        self.forms: dict[int, int] = {}
 
     def messages(self) -> Iterator[tuple[Channel, McapMessage]]:
         info = self.info
@@ -361,6 +396,8 @@ class _Scanner:
                 if record.message_encoding == JSON and type_name in REGISTRY:
                     cls = REGISTRY[type_name]
                 self.types[record.id] = cls
+                form = record.metadata.get(META_FORM, "1")
+                self.forms[record.id] = int(form) if form.isdigit() else -1
                 info.channels.append(
                     ChannelInfo(
                         topic=record.topic,
@@ -520,6 +557,7 @@ def read_recording(
             encoding=channel.message_encoding,
             cls=scanner.types.get(channel.id),
             data=msg.data,
+            form=scanner.forms.get(channel.id, 1),
         )
         heapq.heappush(heap, (item.publish_time, counter, item))
         while heap and heap[0][0] <= msg.log_time - window:
