@@ -17,6 +17,7 @@ from typing import Any
 from cognition.errors import InputError
 from runtime.bus import Bus
 from runtime.recording import RecordedMessage, RecordingInfo, read_recording
+from runtime.replay_control import ReplayControl
 from schemas.codec import encode_into, wire_encoding
 from schemas.keys import with_robot
 
@@ -49,10 +50,13 @@ async def replay(
     robot: str | None = None,
     on_message: Callable[[RecordedMessage], None] | None = None,
     stop: asyncio.Event | None = None,
+    remap: Callable[[str], str] | None = None,
+    control: ReplayControl | None = None,
 ) -> ReplayStats:
     """Publish `path` on `bus`. rate: 2.0 = twice as fast, None = as fast as possible.
     robot: publish under this robot name instead of the recorded one. With `loop`, repeat until
-    `stop` is set (or forever)."""
+    `stop` is set (or forever). remap: renames each key as published (runtime.replay_control);
+    control: pause/step (the schedule shifts by the time held)."""
     if rate is not None and rate <= 0:
         raise InputError(f"replay rate {rate} must be positive (or as fast as possible)")
     if start is not None and end is not None and end < start:
@@ -88,7 +92,11 @@ async def replay(
                     await asyncio.sleep(delay)
             elif stats.messages % 64 == 0:
                 await asyncio.sleep(0)  # let the loop breathe
+            if control is not None:
+                pass_start += await control.gate()
             key = with_robot(item.key, robot) if robot else item.key
+            if remap is not None:
+                key = remap(key)
             if item.cls is not None:
                 # = item.wire(), encoded into one reused buffer (Zenoh copies it in `put`):
                 # a fresh 230 kB block per camera frame costs more than the encoding.

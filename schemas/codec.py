@@ -137,6 +137,16 @@ def from_json(data: bytes | str, cls: type[M], key: str = "") -> M:
     return _check(message, cls, key)
 
 
+def from_object(obj: Any, cls: type[M], key: str = "") -> M:
+    """Strictly convert decoded JSON (dicts, lists, numbers) to `cls`, as `from_json` would;
+    for a message typed in by hand (`beyond pub`)."""
+    try:
+        message: M = msgspec.convert(obj, cls)
+    except msgspec.ValidationError as exc:
+        raise SchemaError(f"bad {_where(key, cls)}: {_version_problem(obj, cls) or exc}") from None
+    return _check(message, cls, key)
+
+
 def _inline(node: Any, defs: dict[str, Any]) -> Any:
     if isinstance(node, dict):
         ref = node.get("$ref")
