@@ -7,7 +7,9 @@ import argparse
 from runtime.config import ENV_VARS, MODES, BusConfig, load_config
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
+def add_bus_arguments(parser: argparse.ArgumentParser, *, port_flag: str = "--port") -> None:
+    """The bus options; `port_flag` renames `--port` for a command whose own --port is another
+    port (`beyond foxglove --port` is its WebSocket's)."""
     group = parser.add_argument_group(
         "bus",
         "how to join the Zenoh network (defaults: " + "; ".join(f"{k}" for k in ENV_VARS) + ")",
@@ -22,7 +24,10 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file")
     group.add_argument(
-        "--port", type=int, help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)"
+        port_flag,
+        dest="port",
+        type=int,
+        help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)",
     )
 
 

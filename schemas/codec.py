@@ -160,12 +160,18 @@ def _inline(node: Any, defs: dict[str, Any]) -> Any:
     return node
 
 
-def json_schema(cls: type[Message]) -> dict[str, Any]:
-    """Self-contained JSON Schema (draft 2020-12) of a message type, `$ref`s inlined because
-    some viewers (Foxglove) do not follow them. Our types are not recursive."""
+def self_contained_schema(cls: type[Any]) -> dict[str, Any]:
+    """msgspec's JSON Schema of any Struct type with its `$ref`s inlined."""
     raw = msgspec.json.schema(cls)
     schema: dict[str, Any] = _inline(raw, raw.get("$defs", {}))
     schema.pop("$defs", None)
+    return schema
+
+
+def json_schema(cls: type[Message]) -> dict[str, Any]:
+    """Self-contained JSON Schema (draft 2020-12) of a message type, `$ref`s inlined because
+    some viewers (Foxglove) do not follow them. Our types are not recursive."""
+    schema = self_contained_schema(cls)
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = cls.schema_name()
     schema["description"] = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
