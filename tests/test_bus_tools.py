@@ -11,6 +11,7 @@ from pathlib import Path
 
 import jsonschema
 import pytest
+from busutil_net import REPO, env_for, private_config, skeleton_frames
 
 import schemas as s
 from runtime.bus import Bus
@@ -20,7 +21,6 @@ from runtime.replay import replay
 from runtime.replay_control import ReplayControl, remapper
 from runtime.service import Service
 from schemas.codec import recording_json_schema, to_recording_json
-from tests.busutil_net import REPO, env_for, private_config, skeleton_frames
 
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
 

@@ -18,10 +18,10 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+from busutil_net import REPO, env_for, free_port, private_config
 from websockets.asyncio.client import connect
 
 from runtime.bus import Bus
-from tests.busutil_net import REPO, env_for, free_port, private_config
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 RECORDING = REPO / "recordings" / "touch-box.mcap"

@@ -14,12 +14,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from busutil_net import REPO, env_for, private_config
 
 import schemas as s
 from runtime.bus import Bus
 from runtime.recording import inspect_recording, read_recording
 from runtime.replay import replay
-from tests.busutil_net import REPO, env_for, private_config
 
 SHIPPED = sorted((REPO / "recordings").glob("*.mcap"))
 CHECKER = REPO / "tests" / "js" / "mcap_check.js"
