@@ -70,6 +70,7 @@ JSONSCHEMA = "jsonschema"
 META_TYPE = "beyond.type"
 META_VERSION = "beyond.version"
 META_FORM = "beyond.json_form"
+META_VIEW = "beyond.view"  # a derived Foxglove view channel (not replayed)
 DEFAULT_CHUNK_SIZE = 256 * 1024
 COMPRESSIONS = {
     "zstd": CompressionType.ZSTD,
@@ -117,7 +118,10 @@ class RecordingWriter:
 
     flush_interval: close the open chunk at least this often (seconds of wall time) so a crash
     loses at most that much; None (the default) closes chunks only when full, which keeps the
-    output byte-for-byte deterministic for a deterministic input."""
+    output byte-for-byte deterministic for a deterministic input.
+    foxglove_views: also store each message's Foxglove views (runtime.foxglove_views: skeleton
+    scene, object annotations, plottable beliefs, description log lines) on their own channels,
+    marked `beyond.view` so that replay and the readers here skip them."""
 
     def __init__(
         self,
@@ -127,6 +131,7 @@ class RecordingWriter:
         compression: str = "zstd",
         flush_interval: float | None = None,
         metadata: dict[str, str] | None = None,
+        foxglove_views: bool = False,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise InputError(
@@ -159,6 +164,8 @@ class RecordingWriter:
         self._last_flush = time.monotonic()
         self._unflushed = 0
         self._stamp_offset = 0  # last stamp minus its receive time: the stamps' clock
+        self._views: dict[str, int] = {}  # view topic -> channel id
+        self._with_views = foxglove_views
         self.count = 0
         self.malformed = 0
         self._closed = False
@@ -207,6 +214,29 @@ class RecordingWriter:
             to_recording_json(message),
             message.header.seq,
         )
+        if self._with_views:
+            self._write_views(key, message, log)
+
+    def _write_views(self, key: str, message: Message, log_time: int) -> None:
+        from runtime.foxglove_views import VIEWS_OF, encode_view, root_of
+
+        root = root_of(key)
+        if root is None:
+            return
+        for view in VIEWS_OF.get(type(message), ()):
+            topic = view.topic(root)
+            cid = self._views.get(topic)
+            if cid is None:
+                sid = self._writer.register_schema(
+                    name=view.schema_name, encoding=JSONSCHEMA, data=view.schema()
+                )
+                cid = self._views[topic] = self._writer.register_channel(
+                    topic=topic,
+                    message_encoding=JSON,
+                    schema_id=sid,
+                    metadata={META_VIEW: view.name},
+                )
+            self._add(cid, log_time, log_time, encode_view(view, message), message.header.seq)
 
     def write_wire(self, key: str, payload: bytes, encoding: str, received: int) -> Message | None:
         """Store a sample as it came off the wire at `received` (ns). Ours (by encoding or key)
@@ -214,8 +244,7 @@ class RecordingWriter:
         others are stored raw at their receive time on the stamps' clock."""
         cls = type_from_encoding(encoding) or type_for_key(key)
         if cls is None:
-            at = received + self._stamp_offset
-            self._add(self._channel_id(key, None, encoding), at, at, payload, 0)
+            self.write_raw(key, payload, encoding, received + self._stamp_offset)
             return None
         try:
             message = decode(payload, cls, key)
@@ -227,6 +256,10 @@ class RecordingWriter:
             self._stamp_offset = stamp - received
         self.write(key, message, log_time=stamp or received + self._stamp_offset)
         return message
+
+    def write_raw(self, key: str, payload: bytes, encoding: str, log_time: int) -> None:
+        """Store a sample that is not ours as it came, schemaless, under its encoding."""
+        self._add(self._channel_id(key, None, encoding), log_time, log_time, payload, 0)
 
     def _add(self, channel: int, log_time: int, publish_time: int, data: bytes, seq: int) -> None:
         self._writer.add_message(
@@ -353,6 +386,7 @@ class _Scanner:
         self.channels: dict[int, Channel] = {}
         self.types: dict[int, type[Message] | None] = {}
         self.forms: dict[int, int] = {}
+        self.views: set[int] = set()
 
     def messages(self) -> Iterator[tuple[Channel, McapMessage]]:
         info = self.info
@@ -396,6 +430,8 @@ class _Scanner:
                 if record.message_encoding == JSON and type_name in REGISTRY:
                     cls = REGISTRY[type_name]
                 self.types[record.id] = cls
+                if META_VIEW in record.metadata:
+                    self.views.add(record.id)
                 form = record.metadata.get(META_FORM, "1")
                 self.forms[record.id] = int(form) if form.isdigit() else -1
                 info.channels.append(
@@ -550,6 +586,8 @@ def read_recording(
         return keep(item.key)
 
     for counter, (channel, msg) in enumerate(scanner.messages()):
+        if channel.id in scanner.views:
+            continue  # derived for viewers; the messages it came from are replayed
         item = RecordedMessage(
             key=channel.topic,
             log_time=msg.log_time,

@@ -106,15 +106,18 @@ def test_older_recording_reads_here_and_is_what_javascript_rounds(
 
 
 async def test_beyond_record_file_is_trusted(node_modules: Path, tmp_path: Path) -> None:
-    """`beyond record` during a replay, plus what a live bus also carries: an unstamped message
-    (a service whose recording clock has not started) and a sample that is not ours."""
+    """`beyond record --foxglove` during a replay, plus what a live bus also carries: an unstamped
+    message (a service whose recording clock has not started) and a sample that is not ours."""
     config = private_config()
     out = tmp_path / "recorded.mcap"
     source = REPO / "recordings" / "touch-box.mcap"
     expected = inspect_recording(source).messages + 2
     with Bus.open(config) as bus:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "beyond", "record", "-o", str(out), "--count", str(expected)],
+            [
+                *(sys.executable, "-m", "beyond", "record", "--foxglove"),
+                *("-o", str(out), "--count", str(expected)),
+            ],
             env=env_for(config),
             stderr=subprocess.PIPE,
             text=True,
@@ -141,6 +144,10 @@ async def test_beyond_record_file_is_trusted(node_modules: Path, tmp_path: Path)
     # logged on the stamps' clock (after the replayed data), not at 0 nor at today's wall time
     assert unstamped[0].log_time == unstamped[0].publish_time >= max(stamps)
     assert unstamped[0].log_time < max(stamps) + 60 * 10**9
+    # the Foxglove views went in too, one scene per skeleton frame, and replay skips them
+    counts = {c.topic: c.count for c in inspect_recording(out).channels}
+    assert counts[f"beyond/{config.robot}/foxglove/scene"] == len(stamps) > 0
+    assert not [r for r in items if "/foxglove/" in r.key]
     (report,) = js_reports(node_modules, [out])
-    assert report["unstamped"] == 1
+    assert report["unstamped"] == 1 and report["unchecked"] == 0
     assert_trusted(report, out)

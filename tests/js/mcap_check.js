@@ -36,6 +36,7 @@ async function check(path) {
     stamp_mismatch: {},
     timestamp_mismatch: {},
     unstamped: 0,
+    unchecked: 0,
     json_errors: 0,
   };
   for await (const m of reader.readMessages({ validateCrcs: true })) {
@@ -50,15 +51,21 @@ async function check(path) {
       report.json_errors += 1;
       continue;
     }
-    const stamp = obj.header ? stampOf(obj.header.stamp) : null;
-    if (stamp === 0n) {
-      report.unstamped += 1;
-    } else if (stamp !== m.logTime) {
-      report.stamp_mismatch[channel.topic] = (report.stamp_mismatch[channel.topic] ?? 0) + 1;
+    // Our messages carry header.stamp; Foxglove views (no header) a timestamp, or one per entity.
+    if (obj.header) {
+      const stamp = stampOf(obj.header.stamp);
+      if (stamp === 0n) {
+        report.unstamped += 1;
+      } else if (stamp !== m.logTime) {
+        report.stamp_mismatch[channel.topic] = (report.stamp_mismatch[channel.topic] ?? 0) + 1;
+      }
     }
-    if (obj.timestamp !== undefined && stampOf(obj.timestamp) !== m.logTime) {
+    const stamps = obj.timestamp !== undefined ? [obj.timestamp] : [];
+    for (const entity of obj.entities ?? []) stamps.push(entity.timestamp);
+    if (stamps.some((t) => stampOf(t) !== m.logTime)) {
       report.timestamp_mismatch[channel.topic] = (report.timestamp_mismatch[channel.topic] ?? 0) + 1;
     }
+    if (!obj.header && stamps.length === 0) report.unchecked += 1;
   }
   return report;
 }
