@@ -35,6 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--export", metavar="IN.mcap", help="write IN.mcap plus its Foxglove views to -o FILE"
     )
     parser.add_argument("-o", "--output", metavar="OUT.mcap", help="file written by --export")
+    parser.add_argument(
+        "--layout",
+        metavar="FILE",
+        help="write the Foxglove layout for --robot to FILE (import it in Foxglove) and exit",
+    )
     add_bus_arguments(parser, port_flag="--bus-port")
 
 
@@ -58,6 +63,13 @@ def export(source: str, target: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     setup_logging(fmt="text")
+    if args.layout:
+        from runtime.foxglove_layout import layout_json
+
+        robot = args.robot or config_from_args(args).robot
+        Path(args.layout).write_text(layout_json(robot), encoding="utf-8")
+        print(f"wrote the Foxglove layout for robot {robot!r} to {args.layout}")
+        return 0
     if args.export or args.output:
         if not (args.export and args.output):
             raise InputError("--export IN.mcap needs -o OUT.mcap (and -o needs --export)")
