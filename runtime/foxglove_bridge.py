@@ -36,6 +36,7 @@ from schemas.keys import STREAMS, type_for_key
 
 log = logging.getLogger("beyond.foxglove")
 DEFAULT_PORT = 8765
+ALIVE_NAME = "foxglove"  # beyond/<robot>/alive/foxglove while the bridge listens
 
 
 @dataclass
@@ -139,6 +140,8 @@ class FoxgloveBridge:
     async def run(self, stop: asyncio.Event, ready: asyncio.Event | None = None) -> BridgeStats:
         """Forward until `stop` is set; `ready` is set once subscribed to the bus."""
         sub = self.bus.subscribe_raw(self.bus.keys.everything, maxsize=1 << 14)
+        # alive like a service, so tools and scripts can wait for the bridge to be listening
+        self.bus.declare_token(self.bus.keys.alive(ALIVE_NAME))
         if ready is not None:
             ready.set()
         stopper = asyncio.get_running_loop().create_task(stop.wait())
