@@ -81,10 +81,13 @@ async def test_hz_on_the_demo_skeleton_during_a_replay_is_30() -> None:
     with Bus.open(config) as bus:
         key = bus.keys.skeleton
         proc = await beyond(config, "hz", key, "--count", "60", "--json")
+        bw = await beyond(config, "bw", key, "--count", "60", "--json")
         stop = asyncio.Event()
         try:
             assert proc.stderr is not None and proc.stdout is not None
+            assert bw.stderr is not None
             await wait_line(proc.stderr, "listening on")
+            await wait_line(bw.stderr, "listening on")
             player = asyncio.create_task(
                 replay(
                     bus,
@@ -100,17 +103,23 @@ async def test_hz_on_the_demo_skeleton_during_a_replay_is_30() -> None:
             await asyncio.wait([heard, player], timeout=90, return_when="FIRST_COMPLETED")
             assert heard.done(), "beyond hz did not count 60 messages"
             out, _ = heard.result()
+            bw_out, _ = await asyncio.wait_for(bw.communicate(), 90)
         finally:
             stop.set()
-            if proc.returncode is None:
-                proc.kill()
-                await proc.wait()
+            for p in (proc, bw):
+                if p.returncode is None:
+                    p.kill()
+                    await p.wait()
         await player
     assert proc.returncode == 0
     last = json.loads(out.decode().splitlines()[-1])
     assert last["key"] == key and last["count"] >= 2
     assert 29.0 <= last["stamp_hz"] <= 31.0, last
     assert last["arrival_hz"] > 0 and last["mean_bytes"] > 0
+    band = json.loads(bw_out.decode().splitlines()[-1])
+    assert band["key"] == key and band["min_bytes"] <= band["mean_bytes"] <= band["max_bytes"]
+    per_message = band["bytes_per_s"] / band["arrival_hz"]  # = mean size of the window's gaps
+    assert band["min_bytes"] <= per_message <= band["max_bytes"]
 
 
 class Relay(Service):

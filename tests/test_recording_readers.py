@@ -151,3 +151,33 @@ async def test_beyond_record_file_is_trusted(node_modules: Path, tmp_path: Path)
     (report,) = js_reports(node_modules, [out])
     assert report["unstamped"] == 1 and report["unchecked"] == 0
     assert_trusted(report, out)
+
+
+def test_export_adds_foxglove_views_to_a_shipped_recording(
+    node_modules: Path, tmp_path: Path
+) -> None:
+    source = REPO / "recordings" / "touch-box.mcap"
+    out = tmp_path / "touch-views.mcap"
+    done = subprocess.run(
+        [sys.executable, "-m", "beyond", "foxglove", "--export", str(source), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    counts = {c.topic: c.count for c in inspect_recording(out).channels}
+    assert counts["beyond/robot/foxglove/scene"] == counts["beyond/robot/sensors/skeleton"] > 0
+    assert [r.message() for r in read_recording(out)] == [
+        r.message() for r in read_recording(source)
+    ]
+    assert inspect_recording(out).metadata == inspect_recording(source).metadata
+    (report,) = js_reports(node_modules, [out])
+    assert report["unchecked"] == 0
+    assert_trusted(report, out)
+    again = subprocess.run(
+        [sys.executable, "-m", "beyond", "foxglove", "--export", str(out), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert again.returncode == 2 and "overwrite its input" in again.stderr
