@@ -18,7 +18,9 @@ def _port(text: str) -> int:
     return value
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
+def add_bus_arguments(parser: argparse.ArgumentParser, *, port_flag: str = "--port") -> None:
+    """The bus options; `port_flag` renames `--port` for a command whose own --port is another
+    port (`beyond foxglove --port` is its WebSocket's)."""
     group = parser.add_argument_group(
         "bus",
         "how to join the Zenoh network (defaults: " + "; ".join(f"{k}" for k in ENV_VARS) + ")",
@@ -33,7 +35,10 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file")
     group.add_argument(
-        "--port", type=_port, help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)"
+        port_flag,
+        dest="port",
+        type=_port,
+        help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)",
     )
 
 

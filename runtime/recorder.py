@@ -35,10 +35,12 @@ async def record(
     flush_interval: float = 1.0,
     metadata: dict[str, str] | None = None,
     ready: asyncio.Event | None = None,
+    foxglove_views: bool = False,
 ) -> RecordStats:
     """Write every sample on `keys` to `path` until `stop` is set, `duration` s passed or `count`
     messages are written. Malformed samples on our keys are logged once per (key, reason),
-    counted and skipped. `ready` is set once the subscribers are declared."""
+    counted and skipped. `ready` is set once the subscribers are declared. `foxglove_views`:
+    also write the Foxglove views (RecordingWriter)."""
     loop = asyncio.get_running_loop()
     stop = stop or asyncio.Event()
     deadline = None if duration is None else loop.time() + duration
@@ -51,6 +53,7 @@ async def record(
         compression=compression,
         flush_interval=flush_interval,
         metadata=metadata,
+        foxglove_views=foxglove_views,
     )
     if ready is not None:
         ready.set()

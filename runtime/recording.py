@@ -5,12 +5,20 @@ Format decisions (see runtime/README.md):
   "jsonschema" schema (the msgspec schema, `$ref`s inlined), both well-known MCAP encodings, so
   any MCAP tool decodes them without this project; msgpack, the wire encoding, is converted on
   the way in and back on replay (`RecordedMessage.wire()`), losslessly (floats round-trip
-  exactly, bytes as base64). Camera frames are stored under Foxglove's schema names
-  `foxglove.RawImage` / `foxglove.CompressedImage`, whose fields they carry, so Foxglove shows
-  them. Samples on keys that are not ours are stored as they came, schemaless, with their Zenoh
-  encoding as the message encoding.
-- log_time = when the recorder received the sample; publish_time = the header stamp.
+  exactly, bytes as base64, stamps as Foxglove `Time` {sec, nsec} so that a JavaScript reader,
+  whose numbers are doubles, keeps them exact). Each channel names its JSON form in its
+  metadata (`beyond.json_form`, see `schemas.codec.RECORDING_JSON_FORM`); a channel without it
+  is form 1 (stamps as integers), read as before. Camera frames are stored under Foxglove's
+  schema names `foxglove.RawImage` / `foxglove.CompressedImage`, whose fields they carry, so
+  Foxglove shows them. Samples on keys that are not ours are stored as they came, schemaless,
+  with their Zenoh encoding as the message encoding.
+- log_time = publish_time = the header stamp (the data's time), so a viewer's timeline, the
+  message's own stamp and the camera `timestamp` agree. A sample without a stamp (0: a
+  service whose recording clock has not started yet) or not ours is logged at its receive
+  time moved onto the stamps' clock (by the offset of the last stamped sample), never at 0.
   Replay follows publish_time.
+- No attachment index and, without metadata, no metadata index: an empty index group with a
+  summary offset pointing at it is an error to `mcap doctor`. The data-section CRC is written.
 - Chunked and compressed (zstd); the file is written unbuffered and the open chunk is closed at
   least every `flush_interval` s, so a killed recorder leaves every closed chunk readable.
   The reader here reads sequentially and stops cleanly at the first damaged record.
@@ -39,18 +47,19 @@ from mcap.records import Channel, Chunk, Footer, Metadata, Schema
 from mcap.records import Header as McapHeader
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import CRCValidationError, StreamReader
-from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
+from mcap.writer import MCAP0_MAGIC, CompressionType, IndexType, Writer
 
 from cognition.errors import InputError
 from schemas.base import Message
 from schemas.codec import (
+    RECORDING_JSON_FORM,
     REGISTRY,
     SchemaError,
     decode,
     encode,
-    from_json,
-    json_schema_bytes,
-    to_json,
+    from_recording_json,
+    recording_json_schema_bytes,
+    to_recording_json,
     type_from_encoding,
     wire_encoding,
 )
@@ -60,6 +69,8 @@ JSON = "json"
 JSONSCHEMA = "jsonschema"
 META_TYPE = "beyond.type"
 META_VERSION = "beyond.version"
+META_FORM = "beyond.json_form"
+META_VIEW = "beyond.view"  # a derived Foxglove view channel (not replayed)
 DEFAULT_CHUNK_SIZE = 256 * 1024
 COMPRESSIONS = {
     "zstd": CompressionType.ZSTD,
@@ -107,7 +118,10 @@ class RecordingWriter:
 
     flush_interval: close the open chunk at least this often (seconds of wall time) so a crash
     loses at most that much; None (the default) closes chunks only when full, which keeps the
-    output byte-for-byte deterministic for a deterministic input."""
+    output byte-for-byte deterministic for a deterministic input.
+    foxglove_views: also store each message's Foxglove views (runtime.foxglove_views: skeleton
+    scene, object annotations, plottable beliefs, description log lines) on their own channels,
+    marked `beyond.view` so that replay and the readers here skip them."""
 
     def __init__(
         self,
@@ -117,6 +131,7 @@ class RecordingWriter:
         compression: str = "zstd",
         flush_interval: float | None = None,
         metadata: dict[str, str] | None = None,
+        foxglove_views: bool = False,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise InputError(
@@ -130,7 +145,16 @@ class RecordingWriter:
             stream: Any = self._file
         else:
             self._file, stream = None, target
-        self._writer = Writer(stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+        indexes = IndexType.CHUNK | IndexType.MESSAGE
+        if metadata:
+            indexes |= IndexType.METADATA
+        self._writer = Writer(
+            stream,
+            chunk_size=chunk_size,
+            compression=COMPRESSIONS[compression],
+            index_types=indexes,
+            enable_data_crcs=True,
+        )
         self._writer.start(profile="", library=_library())
         if metadata:
             self._writer.add_metadata("beyond", dict(sorted(metadata.items())))
@@ -139,6 +163,9 @@ class RecordingWriter:
         self._flush_interval = flush_interval
         self._last_flush = time.monotonic()
         self._unflushed = 0
+        self._stamp_offset = 0  # last stamp minus its receive time: the stamps' clock
+        self._views: dict[str, int] = {}  # view topic -> channel id
+        self._with_views = foxglove_views
         self.count = 0
         self.malformed = 0
         self._closed = False
@@ -147,7 +174,9 @@ class RecordingWriter:
         sid = self._schemas.get(cls)
         if sid is None:
             sid = self._schemas[cls] = self._writer.register_schema(
-                name=cls.schema_name(), encoding=JSONSCHEMA, data=json_schema_bytes(cls)
+                name=cls.schema_name(),
+                encoding=JSONSCHEMA,
+                data=recording_json_schema_bytes(cls),
             )
         return sid
 
@@ -160,7 +189,11 @@ class RecordingWriter:
                     topic=key,
                     message_encoding=JSON,
                     schema_id=self._schema_id(cls),
-                    metadata={META_TYPE: cls.type_name(), META_VERSION: str(cls.VERSION)},
+                    metadata={
+                        META_TYPE: cls.type_name(),
+                        META_VERSION: str(cls.VERSION),
+                        META_FORM: str(RECORDING_JSON_FORM),
+                    },
                 )
             else:
                 cid = self._writer.register_channel(
@@ -170,30 +203,63 @@ class RecordingWriter:
         return cid
 
     def write(self, key: str, message: Message, *, log_time: int | None = None) -> None:
-        """Store a message; log_time defaults to its stamp (deterministic recordings)."""
+        """Store a message; log_time defaults to its stamp (deterministic recordings), and the
+        publish time is the stamp, or log_time for an unstamped message."""
         stamp = message.header.stamp
+        log = log_time if log_time is not None else stamp
         self._add(
             self._channel_id(key, type(message), JSON),
-            log_time if log_time is not None else stamp,
-            stamp,
-            to_json(message),
+            log,
+            stamp or log,
+            to_recording_json(message),
             message.header.seq,
         )
+        if self._with_views:
+            self._write_views(key, message, log)
 
-    def write_wire(self, key: str, payload: bytes, encoding: str, log_time: int) -> Message | None:
-        """Store a sample as it came off the wire. Ours (by encoding or key) are decoded and
-        stored as JSON; a malformed one raises SchemaError; others are stored raw."""
+    def _write_views(self, key: str, message: Message, log_time: int) -> None:
+        from runtime.foxglove_views import VIEWS_OF, encode_view, root_of
+
+        root = root_of(key)
+        if root is None:
+            return
+        for view in VIEWS_OF.get(type(message), ()):
+            topic = view.topic(root)
+            cid = self._views.get(topic)
+            if cid is None:
+                sid = self._writer.register_schema(
+                    name=view.schema_name, encoding=JSONSCHEMA, data=view.schema()
+                )
+                cid = self._views[topic] = self._writer.register_channel(
+                    topic=topic,
+                    message_encoding=JSON,
+                    schema_id=sid,
+                    metadata={META_VIEW: view.name},
+                )
+            self._add(cid, log_time, log_time, encode_view(view, message), message.header.seq)
+
+    def write_wire(self, key: str, payload: bytes, encoding: str, received: int) -> Message | None:
+        """Store a sample as it came off the wire at `received` (ns). Ours (by encoding or key)
+        are decoded and stored as JSON at their stamp; a malformed one raises SchemaError;
+        others are stored raw at their receive time on the stamps' clock."""
         cls = type_from_encoding(encoding) or type_for_key(key)
         if cls is None:
-            self._add(self._channel_id(key, None, encoding), log_time, log_time, payload, 0)
+            self.write_raw(key, payload, encoding, received + self._stamp_offset)
             return None
         try:
             message = decode(payload, cls, key)
         except SchemaError:
             self.malformed += 1
             raise
-        self.write(key, message, log_time=log_time)
+        stamp = message.header.stamp
+        if stamp:
+            self._stamp_offset = stamp - received
+        self.write(key, message, log_time=stamp or received + self._stamp_offset)
         return message
+
+    def write_raw(self, key: str, payload: bytes, encoding: str, log_time: int) -> None:
+        """Store a sample that is not ours as it came, schemaless, under its encoding."""
+        self._add(self._channel_id(key, None, encoding), log_time, log_time, payload, 0)
 
     def _add(self, channel: int, log_time: int, publish_time: int, data: bytes, seq: int) -> None:
         self._writer.add_message(
@@ -254,12 +320,13 @@ class RecordedMessage:
     encoding: str  # MCAP message encoding of `data`
     cls: type[Message] | None
     data: bytes
+    form: int = RECORDING_JSON_FORM  # JSON form of `data` (schemas.codec), 1 in older files
 
     def message(self) -> Message:
         """The decoded message (strict); InputError if the channel is not one of ours."""
         if self.cls is None:
             raise InputError(f"channel {self.key} ({self.encoding}) is not a beyond message")
-        return from_json(self.data, self.cls, self.key)
+        return from_recording_json(self.data, self.cls, self.key, self.form)
 
     def wire(self) -> tuple[bytes, str]:
         """(payload, Zenoh encoding) to publish this message as the original sender did."""
@@ -318,6 +385,8 @@ class _Scanner:
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.types: dict[int, type[Message] | None] = {}
+        self.forms: dict[int, int] = {}
+        self.views: set[int] = set()
 
     def messages(self) -> Iterator[tuple[Channel, McapMessage]]:
         info = self.info
@@ -366,6 +435,10 @@ class _Scanner:
                 if record.message_encoding == JSON and type_name in REGISTRY:
                     cls = REGISTRY[type_name]
                 self.types[record.id] = cls
+                if META_VIEW in record.metadata:
+                    self.views.add(record.id)
+                form = record.metadata.get(META_FORM, "1")
+                self.forms[record.id] = int(form) if form.isdigit() else -1
                 info.channels.append(
                     ChannelInfo(
                         topic=record.topic,
@@ -542,6 +615,8 @@ def read_recording(
         return keep(item.key)
 
     for counter, (channel, msg) in enumerate(scanner.messages()):
+        if channel.id in scanner.views:
+            continue  # derived for viewers; the messages it came from are replayed
         item = RecordedMessage(
             key=channel.topic,
             log_time=msg.log_time,
@@ -549,6 +624,7 @@ def read_recording(
             encoding=channel.message_encoding,
             cls=scanner.types.get(channel.id),
             data=msg.data,
+            form=scanner.forms.get(channel.id, 1),
         )
         heapq.heappush(heap, (item.publish_time, counter, item))
         while heap and heap[0][0] <= msg.log_time - window:

@@ -20,6 +20,7 @@ from cognition.errors import InputError
 from runtime.bus import Bus
 from runtime.pacing import Pacer
 from runtime.recording import RecordedMessage, RecordingInfo, read_recording
+from runtime.replay_control import ReplayControl
 from schemas.codec import encode_into, wire_encoding
 from schemas.keys import with_robot
 
@@ -54,10 +55,14 @@ async def replay(
     on_message: Callable[[RecordedMessage], None] | None = None,
     stop: asyncio.Event | None = None,
     pace_for: Iterable[str] = (),
+    remap: Callable[[str], str] | None = None,
+    control: ReplayControl | None = None,
 ) -> ReplayStats:
     """Publish `path` on `bus`. rate: 2.0 = twice as fast, None = as fast as possible.
     robot: publish under this robot name instead of the recorded one. With `loop`, repeat until
-    `stop` is set (or forever). pace_for: services (by name) never to outrun."""
+    `stop` is set (or forever). pace_for: services (by name) never to outrun. remap: renames
+    each key as published (runtime.replay_control); control: pause/step (the schedule shifts by
+    the time held)."""
     if rate is not None and rate <= 0:
         raise InputError(f"replay rate {rate} must be positive (or as fast as possible)")
     if start is not None and end is not None and end < start:
@@ -72,7 +77,8 @@ async def replay(
         from runtime.recording import inspect_recording
 
         recorded = [c.topic for c in inspect_recording(path).channels]
-        pacer = Pacer(bus, pace_for, [with_robot(k, robot) if robot else k for k in recorded])
+        keys = [with_robot(k, robot) if robot else k for k in recorded]
+        pacer = Pacer(bus, pace_for, [remap(k) for k in keys] if remap else keys)
         await pacer.start()
     began = event_loop.time()
 
@@ -100,7 +106,11 @@ async def replay(
                     await asyncio.sleep(delay)
             elif stats.messages % 64 == 0:
                 await asyncio.sleep(0)  # let the loop breathe
+            if control is not None:
+                pass_start += await control.gate()
             key = with_robot(item.key, robot) if robot else item.key
+            if remap is not None:
+                key = remap(key)
             stamp = item.publish_time
             if pacer is not None:
                 if item.cls is not None:

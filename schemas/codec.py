@@ -137,6 +137,16 @@ def from_json(data: bytes | str, cls: type[M], key: str = "") -> M:
     return _check(message, cls, key)
 
 
+def from_object(obj: Any, cls: type[M], key: str = "") -> M:
+    """Strictly convert decoded JSON (dicts, lists, numbers) to `cls`, as `from_json` would;
+    for a message typed in by hand (`beyond pub`)."""
+    try:
+        message: M = msgspec.convert(obj, cls)
+    except msgspec.ValidationError as exc:
+        raise SchemaError(f"bad {_where(key, cls)}: {_version_problem(obj, cls) or exc}") from None
+    return _check(message, cls, key)
+
+
 def _inline(node: Any, defs: dict[str, Any]) -> Any:
     if isinstance(node, dict):
         ref = node.get("$ref")
@@ -150,12 +160,18 @@ def _inline(node: Any, defs: dict[str, Any]) -> Any:
     return node
 
 
-def json_schema(cls: type[Message]) -> dict[str, Any]:
-    """Self-contained JSON Schema (draft 2020-12) of a message type, `$ref`s inlined because
-    some viewers (Foxglove) do not follow them. Our types are not recursive."""
+def self_contained_schema(cls: type[Any]) -> dict[str, Any]:
+    """msgspec's JSON Schema of any Struct type with its `$ref`s inlined."""
     raw = msgspec.json.schema(cls)
     schema: dict[str, Any] = _inline(raw, raw.get("$defs", {}))
     schema.pop("$defs", None)
+    return schema
+
+
+def json_schema(cls: type[Message]) -> dict[str, Any]:
+    """Self-contained JSON Schema (draft 2020-12) of a message type, `$ref`s inlined because
+    some viewers (Foxglove) do not follow them. Our types are not recursive."""
+    schema = self_contained_schema(cls)
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = cls.schema_name()
     schema["description"] = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
@@ -167,3 +183,117 @@ def json_schema(cls: type[Message]) -> dict[str, Any]:
 def json_schema_bytes(cls: type[Message]) -> bytes:
     """The JSON Schema as canonical bytes (sorted keys), identical across runs."""
     return msgspec.json.encode(json_schema(cls), order="sorted")
+
+
+# --- The JSON form stored in recordings ------------------------------------------------------
+#
+# Form 1 (files written before it had a number) is `to_json`: stamps are JSON integers of
+# nanoseconds, above 2**53, which every JavaScript reader (Foxglove included) rounds. Form 2
+# writes every stamp (`header.stamp` and the top-level `*_stamp` fields) as Foxglove's `Time`
+# {"sec", "nsec"}, which any reader keeps exact. The bus wire format (msgpack) and the Structs
+# are unchanged; only recordings carry the form, in each channel's metadata, so older files read.
+
+RECORDING_JSON_FORM = 2
+RECORDING_JSON_FORMS = (1, 2)
+_STAMP_FIELDS: dict[type[Message], tuple[str, ...]] = {}
+_TIME_SCHEMA: dict[str, Any] = {
+    "title": "time",
+    "description": "Foxglove Time: seconds and nanoseconds since the Unix epoch",
+    "type": "object",
+    "properties": {
+        "sec": {"type": "integer", "minimum": 0},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
+    },
+    "required": ["sec", "nsec"],
+    "additionalProperties": False,
+}
+
+
+def stamp_fields(cls: type[Message]) -> tuple[str, ...]:
+    """Top-level fields of `cls` holding a nanosecond stamp (besides `header.stamp`)."""
+    names = _STAMP_FIELDS.get(cls)
+    if names is None:
+        names = _STAMP_FIELDS[cls] = tuple(
+            f.name
+            for f in msgspec.structs.fields(cls)
+            if f.name.endswith("_stamp") and f.type in (int, int | None)
+        )
+    return names
+
+
+def _to_time(ns: int) -> dict[str, int]:
+    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+
+
+def _from_time(value: Any, where: str) -> int:
+    if (
+        isinstance(value, dict)
+        and set(value) == {"sec", "nsec"}
+        and all(type(v) is int for v in value.values())
+        and value["sec"] >= 0
+        and 0 <= value["nsec"] < 1_000_000_000
+    ):
+        return int(value["sec"]) * 1_000_000_000 + int(value["nsec"])
+    raise ValueError(f"{where} is {value!r}, expected a time {{sec, nsec}}")
+
+
+def to_recording_json(message: Message) -> bytes:
+    """JSON of `message` in the current recording form (stamps as {sec, nsec})."""
+    obj: dict[str, Any] = msgspec.to_builtins(message, builtin_types=(bytes,))
+    header = obj["header"]
+    header["stamp"] = _to_time(header["stamp"])
+    for name in stamp_fields(type(message)):
+        if obj.get(name) is not None:
+            obj[name] = _to_time(obj[name])
+    return _json_encoder.encode(obj)
+
+
+def from_recording_json(
+    data: bytes | str, cls: type[M], key: str = "", form: int = RECORDING_JSON_FORM
+) -> M:
+    """Strictly decode a recorded message stored in JSON form `form` (1 or 2)."""
+    if form == 1:
+        return from_json(data, cls, key)
+    if form != RECORDING_JSON_FORM:
+        raise SchemaError(
+            f"bad {_where(key, cls)}: recording JSON form {form}, this build reads "
+            f"{', '.join(map(str, RECORDING_JSON_FORMS))}"
+        )
+    try:
+        obj = msgspec.json.decode(data)
+        if not isinstance(obj, dict) or not isinstance(obj.get("header"), dict):
+            raise ValueError("expected an object with a header")
+        problem = _version_problem(obj, cls)
+        if problem:
+            raise ValueError(problem)
+        header = obj["header"]
+        if "stamp" in header:
+            header["stamp"] = _from_time(header["stamp"], "header.stamp")
+        for name in stamp_fields(cls):
+            if obj.get(name) is not None:
+                obj[name] = _from_time(obj[name], name)
+        message: M = msgspec.convert(obj, cls)
+    except (msgspec.DecodeError, msgspec.ValidationError, ValueError) as exc:
+        raise SchemaError(f"bad {_where(key, cls)}: {exc}") from None
+    return _check(message, cls, key)
+
+
+def recording_json_schema(cls: type[Message]) -> dict[str, Any]:
+    """JSON Schema of `cls` in the current recording form: `json_schema` with every stamp a
+    {sec, nsec} object. This is what a recording's channel declares."""
+    schema = json_schema(cls)
+    props = schema["properties"]
+    props["header"]["properties"]["stamp"] = dict(_TIME_SCHEMA)
+    for name in stamp_fields(cls):
+        old = props[name]
+        time = dict(_TIME_SCHEMA)
+        props[name] = {"anyOf": [time, {"type": "null"}]} if "anyOf" in old else time
+        if "default" in old:
+            props[name]["default"] = old["default"]
+    schema["x-beyond-recording-form"] = RECORDING_JSON_FORM
+    return schema
+
+
+def recording_json_schema_bytes(cls: type[Message]) -> bytes:
+    """`recording_json_schema` as canonical bytes (sorted keys), identical across runs."""
+    return msgspec.json.encode(recording_json_schema(cls), order="sorted")

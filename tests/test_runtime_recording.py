@@ -66,7 +66,9 @@ def test_standard_mcap_reader_decodes_without_project_code(tmp_path: Path) -> No
         json.loads(schema.data)  # a valid JSON Schema document
         data = json.loads(message.data)
         assert message.publish_time == original.header.stamp
-        assert data["header"]["stamp"] == original.header.stamp
+        stamp = data["header"]["stamp"]  # a Foxglove Time: exact for any JSON reader
+        assert stamp["sec"] * 10**9 + stamp["nsec"] == original.header.stamp
+        assert message.log_time == original.header.stamp
         if isinstance(original, s.CameraFrame):
             assert schema.name == "foxglove.RawImage"
             assert (data["width"], data["height"], data["encoding"]) == (8, 6, "rgb8")
@@ -194,7 +196,11 @@ async def test_killed_recorder_leaves_readable_file(tmp_path: Path) -> None:
     damaged = []
     got = [r.message() for r in read_recording(out, on_damage=damaged.append)]
     assert got == frames and len(damaged) == 1
-    assert all(r.log_time >= r.publish_time for r in read_recording(out, on_damage=print))
+    # logged at the sender's stamp, so a viewer's timeline and the message agree
+    assert all(
+        r.log_time == r.publish_time == r.message().header.stamp
+        for r in read_recording(out, on_damage=print)
+    )
 
 
 async def test_replay_timing_filters_and_robot_rename(tmp_path: Path) -> None:

@@ -43,6 +43,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=1.0,
         help="close a chunk at least this often (s)",
     )
+    parser.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="also write the Foxglove views (3D skeleton, image annotations, plots, log)",
+    )
     add_bus_arguments(parser)
 
 
@@ -66,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
                 compression=args.compression,
                 flush_interval=args.flush_interval,
                 metadata={"robot": config.robot, "keys": " ".join(keys)},
+                foxglove_views=args.foxglove,
             )
         print(
             f"wrote {stats.messages} messages to {args.output} "

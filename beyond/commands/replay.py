@@ -1,10 +1,19 @@
-"""`beyond replay FILE.mcap`: publish a recording on the bus with its original timing."""
+"""`beyond replay FILE.mcap`: publish a recording on the bus with its original timing.
+
+From a terminal, space pauses and resumes, and `s` (or any other key but `q`) publishes the next
+message while paused; `--start-paused` waits for the first key. Keys are read from a pipe too
+when started paused (so a script can drive it)."""
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import os
 import sys
+import termios
+import tty
+from collections.abc import Iterator
 
 from beyond.commands import argtypes
 from beyond.commands.terminal import stop_on_signals
@@ -12,8 +21,9 @@ from cognition.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.log import setup_logging
-from runtime.recording import require_mcap
+from runtime.recording import RecordedMessage, require_mcap
 from runtime.replay import replay
+from runtime.replay_control import ReplayControl, remapper
 from schemas.keys import check_name
 
 HELP = "publish an MCAP recording on the bus in stamp order"
@@ -61,6 +71,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="services never to outrun (default: every service alive when the replay starts; "
         "'none' for no pacing)",
     )
+    parser.add_argument(
+        "--remap",
+        action="append",
+        default=[],
+        metavar="FROM:TO",
+        help="publish key FROM (and keys under it) as TO; repeat for several",
+    )
+    parser.add_argument(
+        "--start-paused",
+        action="store_true",
+        help="wait for a key before the first message (space: play/pause, s: step)",
+    )
     add_bus_arguments(parser)
 
 
@@ -74,14 +96,71 @@ def _names(text: str) -> list[str]:
     return names
 
 
+@contextlib.contextmanager
+def keyboard(control: ReplayControl, *, paused: bool) -> Iterator[None]:
+    """Feed key presses from stdin to `control`: a terminal in cbreak mode, or a pipe when
+    started paused (otherwise a pipe is left alone: it may belong to someone else)."""
+    fd = sys.stdin.fileno() if sys.stdin is not None else -1
+    is_tty = fd >= 0 and os.isatty(fd)
+    if fd < 0 or not (is_tty or paused):
+        yield
+        return
+    loop = asyncio.get_running_loop()
+    saved = termios.tcgetattr(fd) if is_tty else None
+
+    def on_key() -> None:
+        try:
+            data = os.read(fd, 64)
+        except OSError:
+            data = b""
+        if not data:  # end of a pipe: play on, nobody can resume us any more
+            loop.remove_reader(fd)
+            control.close()
+            return
+        for char in data.decode(errors="replace"):
+            if char == " ":
+                control.toggle()
+                state = "paused (space: play, s: step)" if control.paused else "playing"
+                print(state, file=sys.stderr, flush=True)
+            elif char == "q":
+                control.close()
+            elif char not in "\r\n":
+                control.step()
+
+    if saved is not None:
+        tty.setcbreak(fd)
+    loop.add_reader(fd, on_key)
+    try:
+        yield
+    finally:
+        loop.remove_reader(fd)
+        if saved is not None:
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
 def run(args: argparse.Namespace) -> int:
     setup_logging(fmt="text")
     config = config_from_args(args)
     require_mcap(args.file)
+    remap = remapper(args.remap)
 
     async def go() -> int:
         stop = stop_on_signals()
-        with Bus.open(config) as bus:
+        control = ReplayControl(paused=args.start_paused)
+        stop_task = asyncio.get_running_loop().create_task(stop.wait())
+        stop_task.add_done_callback(lambda _: control.close())
+        t0: list[int] = []
+
+        def shown(item: RecordedMessage) -> None:
+            if not t0:
+                t0.append(item.publish_time)
+            if control.paused:
+                at = (item.publish_time - t0[0]) / 1e9
+                print(f"step: {at:.3f} s {item.key}", file=sys.stderr, flush=True)
+
+        if args.start_paused:
+            print("paused: space plays, s steps one message", file=sys.stderr, flush=True)
+        with Bus.open(config) as bus, keyboard(control, paused=args.start_paused):
             if args.wait_for:
                 try:
                     await bus.wait_alive(args.wait_for, timeout=args.wait_timeout)
@@ -106,7 +185,11 @@ def run(args: argparse.Namespace) -> int:
                 robot=config.robot,  # $BEYOND_ROBOT too, as recordings/README.md says
                 stop=stop,
                 pace_for=pace_for,
+                remap=remap,
+                control=control,
+                on_message=shown,
             )
+        stop_task.cancel()
         print(
             f"replayed {stats.messages} messages in {stats.passes} pass(es), "
             f"{stats.span_s:.3f} s of recording in {stats.wall_s:.3f} s "

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import time
-from collections import defaultdict
 
 from beyond.commands import argtypes
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
+from runtime.rates import RateWindow
 from schemas.codec import type_from_encoding
 from schemas.keys import type_for_key
 
@@ -36,30 +35,31 @@ def run(args: argparse.Namespace) -> int:
         with Bus.open(config) as bus:
             keyexpr = args.keyexpr or bus.keys.everything
             sub = bus.subscribe_raw(keyexpr, maxsize=1 << 16)
-            counts: dict[str, int] = defaultdict(int)
-            sizes: dict[str, int] = defaultdict(int)
+            # Per key from its own first to last sample: dividing by the listening time would
+            # under-report every key that started or stopped inside it (18 Hz for a 30 Hz one).
+            windows: dict[str, RateWindow] = {}
             types: dict[str, str] = {}
             loop = asyncio.get_running_loop()
-            start = time.monotonic()
             deadline = loop.time() + args.duration
             while (remaining := deadline - loop.time()) > 0:
                 try:
                     sample = await sub.recv(remaining)
                 except TimeoutError:
                     break
-                counts[sample.key] += 1
-                sizes[sample.key] += len(sample.payload)
+                window = windows.get(sample.key)
+                if window is None:
+                    window = windows[sample.key] = RateWindow(None)
+                window.add(sample.received_ns, len(sample.payload))
                 cls = type_from_encoding(sample.encoding) or type_for_key(sample.key)
                 types[sample.key] = cls.type_name() if cls else sample.encoding
-            elapsed = time.monotonic() - start
             alive = await bus.alive(f"{bus.keys.root}/alive/**" if not args.keyexpr else "**")
-        if not counts:
+        if not windows:
             print(f"no messages on {keyexpr} in {args.duration:.1f} s")
-        width = max((len(k) for k in counts), default=0)
-        for key in sorted(counts):
-            rate = counts[key] / elapsed
-            avg = sizes[key] / counts[key]
-            print(f"{key:<{width}}  {rate:9.1f} Hz  {avg:9.0f} B  {types[key]}")
+        width = max((len(k) for k in windows), default=0)
+        for key in sorted(windows):
+            stats = windows[key].stats()
+            rate = "       - Hz" if stats.arrival_hz is None else f"{stats.arrival_hz:9.1f} Hz"
+            print(f"{key:<{width}}  {rate}  {stats.mean_bytes:9.0f} B  {types[key]}")
         for token in alive:
             print(f"alive: {token}")
         return 0

@@ -83,6 +83,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
     parser.add_argument(
+        "--foxglove",
+        nargs="?",
+        type=int,
+        const=8765,
+        metavar="PORT",
+        help="also serve the bus to Foxglove on ws://localhost:PORT (default 8765)",
+    )
+    parser.add_argument(
         "--timeout",
         type=argtypes.seconds(),
         default=None,
@@ -188,6 +196,12 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
 
     status = 1
     with Bus.open(config) as bus:
+        foxglove = None
+        if args.foxglove:  # imported only when asked for: the SDK is not free to load
+            from runtime.foxglove_bridge import start_in_background
+
+            foxglove = await start_in_background(bus, args.foxglove)
+            emit(f"Foxglove: open a WebSocket connection to ws://localhost:{args.foxglove}")
         pipeline = PipelineMonitor(bus, emit)
         pipeline.start()
         token = bus.declare_token(bus.keys.alive(monitor))
@@ -241,6 +255,8 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             token()
             pipeline.stop()
             codes = await stop_services(processes)
+            if foxglove is not None:
+                await foxglove()
     emit(pipeline.summary())
     err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
     print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)

@@ -1,0 +1,185 @@
+"""The live Foxglove bridge (`beyond foxglove`, `beyond up --foxglove`): the bus as Foxglove's
+WebSocket protocol, served by the `foxglove-sdk` package.
+
+Every key under `beyond/<robot>/` becomes a channel named after the key, carrying the message in
+the recordings' JSON form with its JSON Schema (so a live view and an MCAP file of the same run
+look the same in Foxglove), plus the derived views of `runtime.foxglove_views`. The channels of
+the known streams and the views are advertised at start, so a layout finds them before any data;
+other keys (health of each service, keys that are not ours) when first heard.
+
+Work is done only for what a client watches: a sample whose channel and views nobody subscribed
+to is not even decoded, so an idle bridge costs the pipeline one more subscriber and nothing else.
+Bad samples are counted and skipped (they are the services' problem, not the viewer's)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any
+
+import foxglove
+
+from cognition.errors import InputError
+from runtime.bus import Bus, RawSample, decode_any
+from runtime.foxglove_views import VIEWS, VIEWS_OF, View, encode_view, is_view_key
+from runtime.recording import JSON, JSONSCHEMA
+from schemas.base import Message
+from schemas.codec import (
+    SchemaError,
+    recording_json_schema_bytes,
+    to_recording_json,
+    type_from_encoding,
+)
+from schemas.keys import STREAMS, type_for_key
+
+log = logging.getLogger("beyond.foxglove")
+DEFAULT_PORT = 8765
+ALIVE_NAME = "foxglove"  # beyond/<robot>/alive/foxglove while the bridge listens
+
+
+@dataclass
+class BridgeStats:
+    received: int = 0  # samples taken off the bus
+    forwarded: int = 0  # messages handed to the server (channels and views)
+    skipped: int = 0  # samples nobody watched
+    malformed: int = 0
+
+
+class FoxgloveBridge:
+    """Serve the bus of `bus.keys.robot` on ws://host:port until `run` is stopped."""
+
+    def __init__(self, bus: Bus, *, host: str = "127.0.0.1", port: int = DEFAULT_PORT) -> None:
+        self.bus = bus
+        self.stats = BridgeStats()
+        self._context = foxglove.Context()
+        try:
+            self._server = foxglove.start_server(
+                name=f"beyond-self ({bus.keys.robot})",
+                host=host,
+                port=port,
+                context=self._context,
+            )
+        except RuntimeError as exc:
+            detail = str(exc).split(":", 1)[-1].strip()
+            raise InputError(
+                f"cannot serve Foxglove on {host}:{port} ({detail}); choose a free port with --port"
+            ) from None
+        self.port = int(self._server.port)
+        self._channels: dict[str, Any] = {}
+        self._views: dict[str, Any] = {}
+        root = bus.keys.root
+        for suffix, cls in STREAMS.values():
+            self._channel(f"{root}/{suffix}", cls, "")
+        for view in VIEWS:
+            self._views[view.name] = foxglove.Channel(
+                view.topic(root),
+                schema=foxglove.Schema(
+                    name=view.schema_name, encoding=JSONSCHEMA, data=view.schema()
+                ),
+                message_encoding=JSON,
+                context=self._context,
+            )
+
+    def _channel(self, key: str, cls: type[Message] | None, encoding: str) -> Any:
+        channel = self._channels.get(key)
+        if channel is None:
+            if cls is not None:
+                schema = foxglove.Schema(
+                    name=cls.schema_name(),
+                    encoding=JSONSCHEMA,
+                    data=recording_json_schema_bytes(cls),
+                )
+                channel = foxglove.Channel(
+                    key, schema=schema, message_encoding=JSON, context=self._context
+                )
+            else:  # not ours: as it came, schemaless
+                channel = foxglove.Channel(
+                    key,
+                    message_encoding=encoding or "application/octet-stream",
+                    context=self._context,
+                )
+            self._channels[key] = channel
+        return channel
+
+    def forward(self, sample: RawSample) -> None:
+        """One bus sample to its channel and its views, for whichever have subscribers."""
+        self.stats.received += 1
+        if is_view_key(sample.key):  # a replayed recording's own views: ours are derived here
+            self.stats.skipped += 1
+            return
+        cls = type_from_encoding(sample.encoding) or type_for_key(sample.key)
+        channel = self._channel(sample.key, cls, sample.encoding)
+        views: tuple[View, ...] = VIEWS_OF.get(cls, ()) if cls is not None else ()
+        watched = [self._views[v.name] for v in views if self._views[v.name].has_sinks()]
+        if not channel.has_sinks() and not watched:
+            self.stats.skipped += 1
+            return
+        if cls is None:
+            channel.log(sample.payload, log_time=sample.received_ns)
+            self.stats.forwarded += 1
+            return
+        try:
+            message = decode_any(sample)
+        except SchemaError as exc:
+            self.stats.malformed += 1
+            log.debug("malformed sample on %s skipped: %s", sample.key, exc)
+            return
+        assert message is not None  # cls is known
+        at = message.header.stamp or sample.received_ns
+        if channel.has_sinks():
+            channel.log(to_recording_json(message), log_time=at)
+            self.stats.forwarded += 1
+        for view in views:
+            target = self._views[view.name]
+            if target.has_sinks():
+                target.log(encode_view(view, message), log_time=at)
+                self.stats.forwarded += 1
+
+    async def run(self, stop: asyncio.Event, ready: asyncio.Event | None = None) -> BridgeStats:
+        """Forward until `stop` is set; `ready` is set once subscribed to the bus."""
+        sub = self.bus.subscribe_raw(self.bus.keys.everything, maxsize=1 << 14)
+        # alive like a service, so tools and scripts can wait for the bridge to be listening
+        self.bus.declare_token(self.bus.keys.alive(ALIVE_NAME))
+        if ready is not None:
+            ready.set()
+        stopper = asyncio.get_running_loop().create_task(stop.wait())
+        stopper.add_done_callback(lambda _: sub.close())
+        try:
+            while True:
+                try:
+                    sample = await sub.recv()
+                except EOFError:
+                    break
+                self.forward(sample)
+        finally:
+            stopper.cancel()
+            sub.close()
+        return self.stats
+
+    def close(self) -> None:
+        for channel in [*self._channels.values(), *self._views.values()]:
+            channel.close()
+        self._server.stop()
+
+
+async def start_in_background(
+    bus: Bus, port: int, *, host: str = "127.0.0.1"
+) -> Callable[[], Awaitable[BridgeStats]]:
+    """A bridge running as a task of the current loop (`beyond up --foxglove`); returns the
+    coroutine function that stops it. InputError at once if the port is taken."""
+    bridge = FoxgloveBridge(bus, host=host, port=port)
+    stop, ready = asyncio.Event(), asyncio.Event()
+    task = asyncio.get_running_loop().create_task(bridge.run(stop, ready))
+    await ready.wait()
+    log.info("serving %s to Foxglove on ws://%s:%d", bus.keys.everything, host, bridge.port)
+
+    async def finish() -> BridgeStats:
+        stop.set()
+        try:
+            return await task
+        finally:
+            bridge.close()
+
+    return finish

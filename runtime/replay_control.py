@@ -1,0 +1,78 @@
+"""Interactive replay: pause, resume, step one message, and key remapping (`beyond replay
+--start-paused --remap FROM:TO`). Kept out of `runtime/replay.py`, which only asks the control
+before each message how long it was held (and shifts its schedule by that much)."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable, Iterable
+
+from cognition.errors import InputError
+
+
+class ReplayControl:
+    """Pause state shared by the replay loop and whoever drives it (a terminal, a test)."""
+
+    def __init__(self, *, paused: bool = False) -> None:
+        self._paused = paused
+        self._steps = 0
+        self._closed = False
+        self._changed = asyncio.Event()
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    def toggle(self) -> None:
+        self._paused = not self._paused and not self._closed
+        self._changed.set()
+
+    def step(self) -> None:
+        """Let one message through while paused (no effect while playing)."""
+        if self._paused:
+            self._steps += 1
+            self._changed.set()
+
+    def close(self) -> None:
+        """Play on for good (the replay is being stopped: nothing may stay parked here)."""
+        self._closed = True
+        self._paused = False
+        self._changed.set()
+
+    async def gate(self) -> float:
+        """Wait while paused, until resumed or stepped; returns the seconds held."""
+        if not self._paused:
+            return 0.0
+        loop = asyncio.get_running_loop()
+        held_from = loop.time()
+        while self._paused and self._steps == 0:
+            self._changed.clear()
+            await self._changed.wait()
+        if self._paused:
+            self._steps -= 1
+        return loop.time() - held_from
+
+
+def remapper(rules: Iterable[str]) -> Callable[[str], str] | None:
+    """A function renaming keys by `FROM:TO` rules: a key equal to FROM, or under FROM/, is
+    published as TO (plus the rest); the first matching rule wins. None without rules."""
+    pairs: list[tuple[str, str]] = []
+    for rule in rules:
+        src, sep, dst = rule.partition(":")
+        src, dst = src.strip("/"), dst.strip("/")
+        if not sep or not src or not dst or "*" in src + dst:
+            raise InputError(
+                f"bad remap {rule!r}; use FROM:TO with two keys without wildcards, "
+                "e.g. beyond/robot/sensors/skeleton:beyond/robot/sensors/skeleton2"
+            )
+        pairs.append((src, dst))
+    if not pairs:
+        return None
+
+    def remap(key: str) -> str:
+        for src, dst in pairs:
+            if key == src or key.startswith(src + "/"):
+                return dst + key[len(src) :]
+        return key
+
+    return remap
