@@ -34,8 +34,9 @@ def _effect(**changes: object) -> s.ObjectEffect:
 
 
 def _segment(**changes: object) -> s.GestureSegment:
+    header = msgspec.structs.replace(HEADER, version=s.GestureSegment.VERSION)
     base = s.GestureSegment(
-        header=HEADER, event="end", segment_id=1, frame=10, start_stamp=5, end_stamp=9
+        header=header, event="end", segment_id=1, frame=10, start_stamp=5, end_stamp=9
     )
     return msgspec.structs.replace(base, **changes)
 
@@ -55,7 +56,8 @@ def _objects(objects: list[s.DetectedObject]) -> s.DetectedObjects:
 
 
 def _effects(effects: list[s.ObjectEffect]) -> s.ObjectEffects:
-    return s.ObjectEffects(header=HEADER, frame=1, effects=effects)
+    header = msgspec.structs.replace(HEADER, version=s.ObjectEffects.VERSION)
+    return s.ObjectEffects(header=header, frame=1, effects=effects)
 
 
 def _camera(n_bytes: int) -> s.CompressedCameraFrame:
