@@ -1,16 +1,18 @@
 """Issue 5's acceptance on a shipped recording: the gesture streamer and the affordance reasoner
 run as separate processes over Zenoh on loopback; `recordings/touch-box.mcap` is replayed into
 them twice (fresh services each time, as a replayed deployment is restarted) and every output
-stream must be byte-identical, in the same order."""
+stream must be byte-identical, in the same order (the replay paced by its consumers)."""
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 from busutil_net import private_config
 
 import schemas as s
 from runtime.bus import Bus
+from runtime.reliable import reliable_subscription
 from runtime.replay import replay
 from services.launcher import service_env, start_service, stop_services
 
@@ -20,9 +22,21 @@ RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "touch-box.m
 async def _run_once(config, env, keys: s.Keys) -> list[tuple[str, bytes]]:  # type: ignore[no-untyped-def]
     outputs: list[tuple[str, bytes]] = []
     with Bus.open(config) as bus:
-        sub = bus.subscribe_raw(
-            [keys.gesture_segment, keys.gesture_posterior, keys.affordance, keys.words]
-        )
+        # derived streams are published with a cache and never block: read them as services
+        # do, recovering what a congested moment dropped
+        streams = {
+            keys.gesture_segment: s.GestureSegment,
+            keys.gesture_posterior: s.ActionPosterior,
+            keys.affordance: s.AffordancePrediction,
+            keys.words: s.WordProbabilities,
+        }
+        arrived: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue()
+
+        async def capture(key: str, cls: type[s.Message]) -> None:
+            async for received in reliable_subscription(bus, key, cls):
+                arrived.put_nowait((key, s.encode(received.message)))
+
+        tasks = [asyncio.get_running_loop().create_task(capture(k, c)) for k, c in streams.items()]
         procs = [
             await start_service("gestures", env),
             await start_service("reasoner", env, options={"objects": False}),
@@ -30,15 +44,24 @@ async def _run_once(config, env, keys: s.Keys) -> list[tuple[str, bytes]]:  # ty
         try:
             await bus.wait_alive(keys.alive(), count=2, timeout=60)
             recorded = s.Keys("robot").skeleton  # the recording's own robot name
-            stats = await replay(bus, RECORDING, rate=None, topics=[recorded], robot=keys.robot)
+            stats = await replay(
+                bus,
+                RECORDING,
+                rate=None,
+                topics=[recorded],
+                robot=keys.robot,
+                pace_for=["gestures", "reasoner"],
+            )
             assert stats.messages > 100 and not stats.damaged
             while True:  # until the final word probabilities of the one gesture
-                sample = await sub.recv(timeout=30)
-                outputs.append((sample.key, sample.payload))
-                if sample.key == keys.words:
+                key, payload = await asyncio.wait_for(arrived.get(), 30)
+                outputs.append((key, payload))
+                if key == keys.words:
                     break
         finally:
             codes = await stop_services(procs)
+            for task in tasks:
+                task.cancel()
     assert set(codes.values()) == {0}, (codes, [p.lines[-8:] for p in procs])  # clean exits
     return outputs
 
