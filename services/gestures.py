@@ -35,6 +35,9 @@ from schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame
 
 class GestureStreamer(Service):
     name = "gestures"
+    subscribes = ("skeleton",)
+    publishes = ("gesture_posterior", "gesture_segment")
+    serves = ()
 
     def __init__(
         self,

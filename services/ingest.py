@@ -36,6 +36,9 @@ from schemas.keys import with_robot
 
 class SensorIngest(Service):
     name = "ingest"
+    subscribes = ()
+    publishes = ("skeleton", "camera", "camera_compressed", "stream_end")
+    serves = ()
 
     def __init__(
         self,

@@ -51,6 +51,9 @@ class _Pending:
 
 class ObjectSegmenter(Service):
     name = "objects"
+    subscribes = ("camera", "camera_compressed", "gesture_segment")
+    publishes = ("objects", "effects")
+    serves = ()
 
     def __init__(
         self,

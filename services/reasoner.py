@@ -47,6 +47,9 @@ class _Gesture:
 
 class AffordanceReasoner(Service):
     name = "reasoner"
+    subscribes = ("objects", "gesture_posterior", "gesture_segment", "effects")
+    publishes = ("affordance", "words")
+    serves = ("ask",)
 
     def __init__(
         self, *, model: str | None = None, keep: int = 64, effects_wait_s: float = 3.0, **base: Any

@@ -98,7 +98,22 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.profile == "workstation" and _mode_unset(args, config):
         config = config.with_(mode="client")
+    if config.secure is not None and config.identity is None:  # the monitor is the side's
+        config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
     return asyncio.run(up(args, local_group(config)))
+
+
+def secure_router(config: BusConfig, names: list[str]) -> list[str] | None:
+    """On a secure bus: check every certificate this side needs (one line naming the file,
+    before anything starts), and the command of the side's own router, unless the side
+    connects to one elsewhere (then None)."""
+    from runtime import keystore
+
+    assert config.secure is not None
+    local = config.connect is None and not config.routers
+    for identity in [*names, str(config.identity)] + (["router"] if local else []):
+        keystore.check(config.secure, identity)
+    return ["router", "--secure", str(config.secure)] if local else None
 
 
 def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:
@@ -173,7 +188,16 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             print(line, flush=True)
 
     status = 1
-    with Bus.open(config) as bus:
+    router: ServiceProcess | None = None
+    command = secure_router(config, names) if config.secure is not None else None
+    if command is not None:
+        router = await start_service("router", env, command=command, sink=log_line)
+    try:
+        bus = Bus.open(config)  # a secure client waits here for its router
+    except BaseException:
+        await stop_services([router] if router else [])
+        raise
+    with bus:
         pipeline = PipelineMonitor(bus, emit)
         pipeline.start()
         token = bus.declare_token(bus.keys.alive(monitor))
@@ -200,7 +224,9 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
                 if finite and pipeline.done():
                     status = 0
                     break
-                crashed = [p.name for p in processes if not p.running]
+                crashed = [
+                    p.name for p in processes + ([router] if router else []) if not p.running
+                ]
                 if crashed:
                     emit(f"service(s) exited early: {', '.join(crashed)}")
                     break
@@ -221,6 +247,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             token()
             pipeline.stop()
             codes = await stop_services(processes)
+            codes.update(await stop_services([router] if router else []))  # the router last
     emit(pipeline.summary())
     err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
     print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)
