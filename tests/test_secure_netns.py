@@ -1,0 +1,114 @@
+"""The secure bus for real, inside a network namespace (as root; skipped with the reason
+otherwise): `beyond up --secure` describes the demo recording, and a secure router's rules hold
+against intruders and against services and tools reaching beyond their declarations.
+
+The namespace is the test's own (tests/netns_util.py), so the router's TLS port 7447 is private
+to it and nothing else on the machine can interfere.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from netns_util import REPO, TwoHosts, unavailable
+
+from runtime import acl, keystore
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(170)]
+DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
+DESCRIPTIONS = [
+    'gesture 1: "the robot tapped the yellow ball and the yellow ball rolls"',
+    'gesture 2: "the robot grasped the blue cube and the blue cube is rising"',
+]
+
+
+@pytest.fixture
+def hosts() -> Any:
+    reason = unavailable()
+    if reason is not None:
+        pytest.skip(reason)
+    h = TwoHosts()
+    try:
+        yield h
+    finally:
+        h.close()
+        assert h.namespaces_left() == [], "namespaces left behind"
+        assert all(p.popen.poll() is not None for p in h.procs), "processes left behind"
+
+
+@pytest.fixture
+def stores(tmp_path: Path) -> tuple[Path, Path]:
+    ours, theirs = tmp_path / "keys", tmp_path / "other-keys"
+    keystore.init(ours, acl.identities())
+    keystore.init(theirs, ["describer"])
+    return ours, theirs
+
+
+def clean_env() -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("BEYOND_")}
+    return {**env, "BEYOND_LOG_FORMAT": "text", "PYTHONPATH": str(REPO)}
+
+
+def wait_exit(proc: Any, timeout: float) -> int:
+    deadline = time.monotonic() + timeout
+    while proc.popen.poll() is None:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{proc.name} still running after {timeout} s\n{proc.text()}")
+        time.sleep(0.2)  # polling the exit status; the reader thread keeps the lines
+    if proc.reader is not None:
+        proc.reader.join(5)
+    return int(proc.popen.returncode)
+
+
+def test_secure_up_describes_the_demo_recording(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
+    ours, _ = stores
+    argv = [str(REPO / ".venv/bin/python"), "-m", "beyond", "up", "--secure", str(ours),
+            "--recording", str(DEMO), "--no-live", "--timeout", "100"]  # fmt: skip
+    up = hosts.start(hosts.ws, "up", argv, clean_env())
+    code = wait_exit(up, 150)
+    text = up.text()
+    assert code == 0, text[-4000:]
+    for line in DESCRIPTIONS:
+        assert line in text, text[-4000:]
+    assert "zenoh router" in text and "secure=" in text  # the services went through the router
+    assert "router 0" in text  # and it stopped cleanly
+
+
+def test_router_rules_hold(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
+    ours, theirs = stores
+    python = str(REPO / ".venv/bin/python")
+    router = hosts.start(
+        hosts.ws, "router", [python, "-m", "beyond", "router", "--secure", str(ours)], clean_env()
+    )
+    deadline = time.monotonic() + 60
+    while not any("zenoh router" in line for _, line in router.lines):
+        assert router.popen.poll() is None and time.monotonic() < deadline, router.text()
+        time.sleep(0.1)
+    probe = hosts.start(
+        hosts.ws, "probe", [python, str(REPO / "tests" / "secure_probe.py"), str(ours), str(theirs)],
+        clean_env(),
+    )  # fmt: skip
+    assert wait_exit(probe, 120) == 0, probe.text()[-3000:]
+    result = json.loads(next(line for _, line in probe.lines if line.startswith("{")))
+    print(json.dumps(result))
+    cameras = {f"camera-{i}" for i in range(20)}
+    real = {"real-skeleton", "real-description", "real-description-2", "real-words"}
+    # the counting subscriber (tools) sees what the owners put, nothing anyone else put
+    assert real | cameras <= set(result["counter"])
+    assert not [p for p in result["counter"] if p.startswith("fake")]
+    # the describer's certificate: no put on sensors/** or affordance/**, no camera frames
+    assert set(result["describer"]) & cameras == set()
+    assert "real-words" in result["describer"]
+    # a tools certificate reads (the counter is one) and asks, but its put reached nobody
+    assert result["health_reply"] == ["ok"]
+    assert result["speech"] == ["real-description", "real-description-2"]
+    # intruders never got a link: they heard only their own local puts
+    for name, heard in result["intruders"].items():
+        assert set(heard) == {f"fake-{name}"}, (name, heard)
+        assert result["intruder_links"][name] == 0
+    hosts.stop(router)
