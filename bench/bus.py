@@ -595,8 +595,7 @@ def main() -> int:
         print(json.dumps(result))
         return 0
     if args.only_secure:
-        figures = secure_path()
-        print(json.dumps(figures))
+        print(json.dumps(secure_path()))
         return 0
     if args.receive:
         mode, kind, port, robot = args.receive

@@ -102,7 +102,7 @@ def main(keystore: Path, foreign: Path) -> int:
     describer.declare_subscriber(f"{ROOT}/language/words", describer_seen)
     describer.declare_subscriber(f"{ROOT}/sensors/camera/raw", describer_seen)
 
-    intruders = {
+    intruders: dict[str, dict[str, Any]] = {
         "no-certificate": {"root_ca_certificate": str(keystore / "ca.crt")},
         "other-ca": {
             "root_ca_certificate": str(foreign / "ca.crt"),

@@ -89,10 +89,8 @@ def test_router_rules_hold(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
     while not any("zenoh router" in line for _, line in router.lines):
         assert router.popen.poll() is None and time.monotonic() < deadline, router.text()
         time.sleep(0.1)
-    probe = hosts.start(
-        hosts.ws, "probe", [python, str(REPO / "tests" / "secure_probe.py"), str(ours), str(theirs)],
-        clean_env(),
-    )  # fmt: skip
+    argv = [python, str(REPO / "tests" / "secure_probe.py"), str(ours), str(theirs)]
+    probe = hosts.start(hosts.ws, "probe", argv, clean_env())
     assert wait_exit(probe, 120) == 0, probe.text()[-3000:]
     result = json.loads(next(line for _, line in probe.lines if line.startswith("{")))
     print(json.dumps(result))
