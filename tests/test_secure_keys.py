@@ -180,3 +180,35 @@ def test_bad_certificate_is_one_line_exit_2(
         problem
     ] in lines[0]
     assert result.stdout == ""
+
+
+def test_secure_deploy_files_load_and_refuse_plain_endpoints(store: Path) -> None:
+    secure = REPO / "deploy" / "zenoh" / "secure"
+    env = {
+        "BEYOND_ZENOH_SECURE": str(store),
+        "BEYOND_ZENOH_CONFIG": str(secure / "client.json5"),
+        "BEYOND_ZENOH_ROUTER": "tls/10.0.0.2:7447",
+    }
+    zc = zenoh_config(load_config(env).with_(identity="gestures"))
+    assert "tls/10.0.0.2:7447" in zc.get_json("connect/endpoints")
+    with pytest.raises(InputError, match="links only over TLS"):
+        zenoh_config(load_config({**env, "BEYOND_ZENOH_ROUTER": "tcp/10.0.0.2:7447"}))
+    router = load_config({**env, "BEYOND_ZENOH_CONFIG": str(secure / "router.json5")})
+    zc = zenoh_config(router.with_(mode="router"))
+    assert '"default_permission":"deny"' in zc.get_json("access_control").replace(" ", "")
+    with pytest.raises(InputError, match="links only over TLS"):
+        plain = load_config({**env, "BEYOND_ZENOH_CONFIG": str(REPO / "deploy/zenoh/router.json5")})
+        zenoh_config(plain.with_(mode="router"))
+
+
+def test_secure_compose_override_covers_every_service() -> None:
+    yaml = pytest.importorskip("yaml")
+    base = yaml.safe_load((REPO / "docker-compose.yml").read_text())["services"]
+    override = yaml.safe_load((REPO / "docker-compose.secure.yml").read_text())["services"]
+    assert set(override) == set(base)
+    assert "--secure" in override["router"]["command"]
+    for name in set(base) - {"router"}:
+        env = override[name]["environment"]
+        assert env["BEYOND_ZENOH_SECURE"] == "/etc/beyond/keys", name
+        assert env["BEYOND_ZENOH_ROUTER"].split(":-")[-1].startswith("tls/"), name
+        assert any(v.endswith(":/etc/beyond/keys:ro") for v in override[name]["volumes"]), name
