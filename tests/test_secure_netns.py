@@ -1,6 +1,7 @@
-"""The secure bus for real, inside a network namespace (as root; skipped with the reason
-otherwise): `beyond up --secure` describes the demo recording, and a secure router's rules hold
-against intruders and against services and tools reaching beyond their declarations.
+"""The secure bus for real, inside network namespaces (as root; skipped with the reason
+otherwise): `beyond up --secure` describes the demo recording on one host and six gestures
+split across two, and a secure router's rules hold against intruders and against services and
+tools reaching beyond their declarations.
 
 The namespace is the test's own (tests/netns_util.py), so the router's TLS port 7447 is private
 to it and nothing else on the machine can interfere.
@@ -10,17 +11,25 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
+from busutil_net import skeleton_recording
 from netns_util import REPO, TwoHosts, unavailable
 
 from runtime import acl, keystore
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(170)]
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
+SIX = ["tap", "grasp", "touch", "tap", "grasp", "touch"]
+VERBS = {
+    "tap": r"\b(taps|tapped|tapping|pushes|pushed|pushing|pokes|poked|poking)\b",
+    "grasp": r"\b(grasps|grasped|grasping|picks|picked|picking)\b",
+    "touch": r"\b(touches|touched|touching|pokes|poked|poking)\b",
+}
 DESCRIPTIONS = [
     'gesture 1: "the robot tapped the yellow ball and the yellow ball rolls"',
     'gesture 2: "the robot grasped the blue cube and the blue cube is rising"',
@@ -110,3 +119,30 @@ def test_router_rules_hold(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
         assert set(heard) == {f"fake-{name}"}, (name, heard)
         assert result["intruder_links"][name] == 0
     hosts.stop(router)
+
+
+def test_secure_split_across_two_hosts_describes_every_gesture(
+    hosts: TwoHosts, stores: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """The workstation's `up` runs the router (TLS 7447, the rules); the robot's connects to it
+    across the link. Six gestures replayed on the robot are all described on the workstation."""
+    ours, _ = stores
+    recording = tmp_path / "six.mcap"
+    skeleton_recording(recording, SIX, seed=3, robot="robot")
+    up = [str(REPO / ".venv/bin/python"), "-m", "beyond", "up", "--secure", str(ours), "--no-live",
+          "--timeout", "100"]  # fmt: skip
+    ws = hosts.start(hosts.ws, "ws", [*up, "--profile", "workstation", "--until-stream-end"],
+                     clean_env())  # fmt: skip
+    robot = hosts.start(
+        hosts.robot, "robot",
+        [*up, "--profile", "robot", "--connect", f"tls/{hosts.ws_ip}:7447", "--recording",
+         str(recording), "--rate", "2", "--wait-for", "reasoner,describer"],
+        clean_env(),
+    )  # fmt: skip
+    assert wait_exit(ws, 150) == 0, ws.text()[-4000:]
+    assert wait_exit(robot, 60) == 0, robot.text()[-4000:]
+    text = ws.text()
+    assert "6 of 6 gesture(s) described" in text, text[-4000:]
+    for i, action in enumerate(SIX, start=1):
+        line = next((x for x in text.splitlines() if x.startswith(f'gesture {i}: "')), "")
+        assert re.search(VERBS[action], line), (action, line, text[-3000:])
