@@ -200,10 +200,10 @@ def zenoh_config(config: BusConfig) -> Any:
     if config.secure is not None:
         from runtime.secure import check_endpoints, default_identity, tls_settings
 
-        listed = config.config_file is not None  # the file's own endpoints count too
+        from_file = config.config_file is not None  # the file's own endpoints count too
         check_endpoints(
-            listen or (_file_endpoints(zc, "listen/endpoints") if listed else []),
-            connect or (_file_endpoints(zc, "connect/endpoints") if listed else []),
+            listen or (_file_endpoints(zc, "listen/endpoints") if from_file else []),
+            connect or (_file_endpoints(zc, "connect/endpoints") if from_file else []),
         )
         identity = config.identity or default_identity(config.mode)
         sets.update(tls_settings(config.secure, identity, config.mode))
