@@ -8,7 +8,10 @@ From them, `access_control()` builds the block of a Zenoh router's configuration
 - default deny; a subject is a certificate's common name (runtime/keystore.py);
 - a service may put only on its outputs (and its own health), declare subscribers only on its
   inputs and receive only those, serve only its queryables (and its health), declare only its
-  own liveliness token, and watch the others' (ingest waits for its consumers);
+  own liveliness token, and watch the others' (ingest waits for its consumers). It hears of
+  every subscription and query, wildcards included: a client publishes only what it knows
+  someone subscribes to, so a reader of `beyond/robot/**` must be announced to every publisher;
+  hearing of an interest reveals no data, and the put and reply rules are unchanged;
 - `tools` (`beyond echo`, `topics`, `ask`, `record`) may read everything and ask the queryables,
   but put, serve and declare nothing;
 - the sides' identities (`robot`, `workstation`: `beyond up`'s monitor on that side) read like
@@ -133,7 +136,7 @@ def _reader_grants(declarations: list[Declaration]) -> list[tuple[str, list[str]
     streams = sorted({s for d in declarations for s in d.publishes})
     read = everything + _stream_keys(streams)
     ask = [_key(QUERYABLES[q]) for d in declarations for q in d.serves] + [_key(f"{HEALTH}/*")]
-    alive = [_key(f"{ALIVE}/*")]
+    alive = [_key(f"{ALIVE}/**")]
     return [
         ("read", _IN_IN, "ingress", read),
         ("read", _IN_EG, "egress", read),
@@ -160,7 +163,7 @@ def access_control(declarations: list[Declaration] | None = None) -> dict[str, A
                     f"published: {', '.join(sorted(published))}"
                 )
     rules = _Rules()
-    alive = [_key(f"{ALIVE}/*")]
+    alive = [_key(f"{ALIVE}/**")]
     for d in declarations:
         health = [_key(f"{HEALTH}/{d.name}")]
         outputs = _stream_keys(d.publishes) + health
@@ -170,7 +173,10 @@ def access_control(declarations: list[Declaration] | None = None) -> dict[str, A
             d.name,
             [
                 ("out", _OUT_IN, "ingress", outputs),
-                ("out", _OUT_EG, "egress", outputs),
+                # whoever subscribes or asks, with whatever wildcard: a publisher must hear of
+                # it to send at all (clients filter on the writer's side); it learns only what
+                # others ask for, and still puts and replies on nothing but its own keys
+                ("out", _OUT_EG, "egress", [_key("**"), *outputs]),
                 ("in", _IN_IN, "ingress", inputs),
                 ("in", _IN_EG, "egress", inputs),
                 ("serve", ["declare_queryable", "reply"], "ingress", serves),

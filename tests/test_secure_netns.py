@@ -146,3 +146,42 @@ def test_secure_split_across_two_hosts_describes_every_gesture(
     for i, action in enumerate(SIX, start=1):
         line = next((x for x in text.splitlines() if x.startswith(f'gesture {i}: "')), "")
         assert re.search(VERBS[action], line), (action, line, text[-3000:])
+
+
+def test_tools_read_and_ask_a_secure_pipeline(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
+    """`echo`, `topics`, `ask` and `record` with the tools' certificate against a running secure
+    pipeline (no source: it runs until stopped)."""
+    ours, _ = stores
+    python = str(REPO / ".venv/bin/python")
+    up = hosts.start(
+        hosts.ws, "up",
+        [python, "-m", "beyond", "up", "--secure", str(ours), "--skip", "ingest", "--no-live"],
+        clean_env(),
+    )  # fmt: skip
+    deadline = time.monotonic() + 90
+    while not any(line.startswith("pipeline up:") for _, line in up.lines):
+        assert up.popen.poll() is None and time.monotonic() < deadline, up.text()[-3000:]
+        time.sleep(0.2)
+    secure = ["--secure", str(ours)]
+    mcap = str(ours.parent / "health.mcap")
+    commands = {  # all at once: they are independent readers
+        "echo": ["echo", "beyond/robot/health/describer", "--count", "1", "--json"],
+        "topics": ["topics", "--duration", "2"],
+        "ask": ["ask", "--query", "Action", "--evidence", "Shape=circle", "--json"],
+        "record": ["record", "-o", mcap, "--count", "3", "beyond/robot/health/*"],
+    }
+    procs = {
+        name: hosts.start(hosts.ws, name, [python, "-m", "beyond", *argv, *secure], clean_env())
+        for name, argv in commands.items()
+    }
+    out = {}
+    for name, proc in procs.items():
+        assert wait_exit(proc, 60) == 0, proc.text()[-2000:]
+        out[name] = proc.text()
+    assert '"service":"describer"' in out["echo"].replace(" ", ""), out["echo"]
+    topics = out["topics"]  # a wildcard reader hears every publisher
+    assert "beyond/robot/health/reasoner" in topics, topics
+    assert "alive: beyond/robot/alive/reasoner" in topics, topics
+    assert "tap" in out["ask"] and "grasp" in out["ask"], out["ask"]
+    assert "wrote 3 messages" in out["record"], out["record"]
+    assert hosts.stop(up) == 0, up.text()[-3000:]
