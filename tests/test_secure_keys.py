@@ -183,7 +183,7 @@ def test_bad_certificate_is_one_line_exit_2(
 
 
 def test_secure_deploy_files_load_and_refuse_plain_endpoints(store: Path) -> None:
-    secure = REPO / "deploy" / "zenoh" / "secure"
+    secure = REPO / "deploy" / "zenoh-secure"
     env = {
         "BEYOND_ZENOH_SECURE": str(store),
         "BEYOND_ZENOH_CONFIG": str(secure / "client.json5"),
