@@ -36,9 +36,8 @@ DEFAULT_DAYS = 365
 CA_DAYS = 3650
 _KEY_MODE = 0o600
 _DIR_MODE = 0o700
-# Every certificate names the hosts it may serve on a router's listener; the routers'
-# certificates are checked against the name clients connect to only when asked (see
-# runtime/secure.py: identities are common names, not host names).
+# TLS wants a subject alternative name on a listener's certificate; host names are not verified
+# on this bus (runtime/secure.py: identities are common names), so any certificate may serve.
 _SAN = ["localhost"]
 
 

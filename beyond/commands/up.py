@@ -190,8 +190,9 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     status = 1
     router: ServiceProcess | None = None
     command = secure_router(config, names) if config.secure is not None else None
-    if command is not None:
-        router = await start_service("router", env, command=command, sink=log_line)
+    if command is not None:  # the side's own router: the secure defaults, whatever the clients'
+        own = BusConfig(robot=config.robot, mode="router", secure=config.secure)
+        router = await start_service("router", service_env(own), command=command, sink=log_line)
     try:
         bus = Bus.open(config)  # a secure client waits here for its router
     except BaseException:
