@@ -14,8 +14,11 @@ From them, `access_control()` builds the block of a Zenoh router's configuration
   hearing of an interest reveals no data, and the put and reply rules are unchanged;
 - `tools` (`beyond echo`, `topics`, `ask`, `record`) may read everything and ask the queryables,
   but put, serve and declare nothing;
-- the sides' identities (`robot`, `workstation`: `beyond up`'s monitor on that side) read like
-  tools and declare their monitor's liveliness token.
+- the sides' identities (`robot`, `workstation`, and `router`, the workstation's router) read
+  like tools, declare their monitor's liveliness token, and may do whatever the services of their
+  side may: a side's router links to the other side's router with that certificate and carries
+  its services' traffic (on a secure split each machine runs a router, so the robot's own
+  pipeline keeps running through its router when the network between the machines fails).
 
 Recovering streams (runtime/reliable.py) carry zenoh-ext's own traffic under `<key>/@adv/...`:
 the publisher's cache answers history queries there, declares a liveliness token there (how
@@ -29,7 +32,7 @@ or a subscription to a stream no service publishes, is an InputError at generati
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,7 +44,9 @@ TOOLS_ROLE = "tools"
 SIDE_MONITORS: dict[str, tuple[str, ...]] = {  # side identity -> its monitors' liveliness names
     "robot": ("monitor-robot",),
     "workstation": ("monitor", "monitor-workstation"),
+    "router": ("monitor", "monitor-workstation"),  # the workstation's router, seen from the robot's
 }
+SIDE_PROFILES = {"robot": "robot", "workstation": "workstation", "router": "workstation"}
 _ANY_ROBOT = f"{PREFIX}/*"
 _OUT_IN = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
 _OUT_EG = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
@@ -109,9 +114,15 @@ class _Rules:
     subjects: list[dict[str, Any]] = field(default_factory=list)
     policies: list[dict[str, Any]] = field(default_factory=list)
 
-    def role(self, subject: str, grants: list[tuple[str, list[str], str, list[str]]]) -> None:
-        """One subject (certificate common name) and its rules: (what, messages, flow, keys)."""
-        ids = []
+    def role(
+        self,
+        subject: str,
+        grants: list[tuple[str, list[str], str, list[str]]],
+        also: Sequence[str] = (),
+    ) -> list[str]:
+        """One subject (certificate common name) and its rules: (what, messages, flow, keys),
+        plus rules already made for others (`also`, by id). Returns the ids of its own."""
+        ids: list[str] = []
         for what, messages, flow, keys in grants:
             if not keys:
                 continue
@@ -127,7 +138,8 @@ class _Rules:
             )
             ids.append(rule_id)
         self.subjects.append({"id": subject, "cert_common_names": [subject]})
-        self.policies.append({"id": subject, "rules": ids, "subjects": [subject]})
+        self.policies.append({"id": subject, "rules": ids + list(also), "subjects": [subject]})
+        return ids
 
 
 def _reader_grants(declarations: list[Declaration]) -> list[tuple[str, list[str], str, list[str]]]:
@@ -164,12 +176,13 @@ def access_control(declarations: list[Declaration] | None = None) -> dict[str, A
                 )
     rules = _Rules()
     alive = [_key(f"{ALIVE}/**")]
+    own: dict[str, list[str]] = {}
     for d in declarations:
         health = [_key(f"{HEALTH}/{d.name}")]
         outputs = _stream_keys(d.publishes) + health
         inputs = _stream_keys(d.subscribes)
         serves = [_key(QUERYABLES[q]) for q in d.serves] + health
-        rules.role(
+        own[d.name] = rules.role(
             d.name,
             [
                 ("out", _OUT_IN, "ingress", outputs),
@@ -187,11 +200,15 @@ def access_control(declarations: list[Declaration] | None = None) -> dict[str, A
             ],
         )
     rules.role(TOOLS_ROLE, _reader_grants(declarations))
+    from services.registry import PROFILES
+
     for side, monitors in SIDE_MONITORS.items():
         tokens = [_key(f"{ALIVE}/{m}") for m in monitors]
+        services = [n for n in PROFILES[SIDE_PROFILES[side]] if n in own]
         rules.role(
             side,
             [*_reader_grants(declarations), ("alive", ["liveliness_token"], "ingress", tokens)],
+            also=[rule for n in services for rule in own[n]],
         )
     return {
         "enabled": True,

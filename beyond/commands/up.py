@@ -50,6 +50,7 @@ from services.options import check_options, load_options
 from services.registry import PROFILES, service_class
 
 HELP = "start the pipeline's services as separate processes and watch them"
+SECURE_LOCAL_ROUTER = "tls/127.0.0.1:7447"  # a side's own router, when it links to another
 DEMO_RECORDING = REPO_ROOT / "recordings" / "tap-ball-grasp-box.mcap"
 DEFAULT_TIMEOUT = 120.0
 
@@ -103,17 +104,23 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(up(args, local_group(config)))
 
 
-def secure_router(config: BusConfig, names: list[str]) -> list[str] | None:
-    """On a secure bus: check every certificate this side needs (one line naming the file,
-    before anything starts), and the command of the side's own router, unless the side
-    connects to one elsewhere (then None)."""
+def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str]:
+    """On a secure bus every side runs its own router: check every certificate this side needs
+    (one line naming the file, before anything starts) and return the router's command. Given
+    endpoints elsewhere (the workstation's router), this side's router links to them with the
+    side's certificate, and this side's processes stay on their own router, so a robot's
+    pipeline keeps running when the network between the machines fails."""
     from runtime import keystore
 
     assert config.secure is not None
-    local = config.connect is None and not config.routers
-    for identity in [*names, str(config.identity)] + (["router"] if local else []):
-        keystore.check(config.secure, identity)
-    return ["router", "--secure", str(config.secure)] if local else None
+    remote = list(config.connect or ()) + list(config.routers)
+    identity = ("robot" if profile == "robot" else "workstation") if remote else "router"
+    for name in [*names, str(config.identity), identity]:
+        keystore.check(config.secure, name)
+    command = ["router", "--secure", str(config.secure), "--identity", identity]
+    if remote:
+        command += ["--listen", SECURE_LOCAL_ROUTER] + [a for e in remote for a in ("--connect", e)]
+    return command
 
 
 def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:
@@ -168,6 +175,10 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     for name in names:
         check_options(name, service_class(name), options[name])
     out = Console()
+    router_command = None
+    if config.secure is not None:
+        router_command = secure_router(config, names, args.profile)
+        config = config.with_(connect=None, routers=())  # this side's router links elsewhere
     extra = {"BEYOND_CLOCK": "recording"} if replayed else {}
     env = service_env(config, extra)
     processes: list[ServiceProcess] = []
@@ -189,10 +200,10 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
 
     status = 1
     router: ServiceProcess | None = None
-    command = secure_router(config, names) if config.secure is not None else None
-    if command is not None:  # the side's own router: the secure defaults, whatever the clients'
+    if router_command is not None:  # secure defaults and its own endpoints, not the clients'
         own = BusConfig(robot=config.robot, mode="router", secure=config.secure)
-        router = await start_service("router", service_env(own), command=command, sink=log_line)
+        env_router = service_env(own)
+        router = await start_service("router", env_router, command=router_command, sink=log_line)
     try:
         bus = Bus.open(config)  # a secure client waits here for its router
     except BaseException:
