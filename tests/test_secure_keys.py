@@ -205,10 +205,15 @@ def test_secure_compose_override_covers_every_service() -> None:
     yaml = pytest.importorskip("yaml")
     base = yaml.safe_load((REPO / "docker-compose.yml").read_text())["services"]
     override = yaml.safe_load((REPO / "docker-compose.secure.yml").read_text())["services"]
-    assert set(override) == set(base)
+    assert set(override) == set(base) | {"robot-router"}
     assert "--secure" in override["router"]["command"]
+    robot_router = override["robot-router"]
+    assert robot_router["profiles"] == ["robot"] and "--secure" in robot_router["command"]
+    local = robot_router["command"][robot_router["command"].index("--listen") + 1]
     for name in set(base) - {"router"}:
         env = override[name]["environment"]
         assert env["BEYOND_ZENOH_SECURE"] == "/etc/beyond/keys", name
-        assert env["BEYOND_ZENOH_ROUTER"].split(":-")[-1].startswith("tls/"), name
+        assert env["BEYOND_ZENOH_ROUTER"].startswith("tls/"), name
         assert any(v.endswith(":/etc/beyond/keys:ro") for v in override[name]["volumes"]), name
+        if "robot" in base[name]["profiles"]:  # the robot's services use the robot's router
+            assert env["BEYOND_ZENOH_ROUTER"] == local, name
