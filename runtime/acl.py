@@ -222,7 +222,7 @@ def access_control(declarations: list[Declaration] | None = None) -> dict[str, A
 def identities(declarations: list[Declaration] | None = None) -> list[str]:
     """Every identity the rules know: the services, the tools, the sides (and the router)."""
     declarations = registry_declarations() if declarations is None else declarations
-    return [d.name for d in declarations] + [TOOLS_ROLE, "router", *SIDE_MONITORS]
+    return [d.name for d in declarations] + [TOOLS_ROLE, *SIDE_MONITORS]
 
 
 def declared_keys(declaration: Declaration, robot_root: str) -> Mapping[str, set[str]]:

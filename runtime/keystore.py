@@ -30,7 +30,6 @@ from cognition.errors import InputError
 from schemas.keys import check_name
 
 CA = "ca"
-SIDES = ("router", "robot", "workstation")
 TOOLS = "tools"
 DEFAULT_DAYS = 365
 CA_DAYS = 3650

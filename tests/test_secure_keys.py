@@ -92,7 +92,10 @@ def test_rules_follow_the_declarations() -> None:
         if r["flows"] == ["ingress"]
     )
     policies = {p["id"]: p for p in rules["policies"]}
-    assert set(policies) == {*SERVICES, "tools", "robot", "workstation"}
+    assert set(policies) == {*SERVICES, "tools", "robot", "workstation", "router"}
+    # a side may do what its services may: the robot's router carries the robot's traffic
+    assert set(by_id) >= set(policies["robot"]["rules"]) >= set(policies["gestures"]["rules"])
+    assert not set(policies["robot"]["rules"]) & set(policies["describer"]["rules"])
 
 
 def test_a_rule_naming_an_undeclared_key_is_an_error() -> None:

@@ -21,6 +21,11 @@ may start first: the source waits only for this machine's services (plus `--wait
 cross-link streams are recovered from publisher caches when the other side joins late or a link
 fails. The workstation side runs until stopped, or with `--until-stream-end` until the robot's
 source has ended and every gesture it showed is described.
+
+`--secure DIR` (README, "Securing a deployment"): every certificate the side needs is checked
+first, then the side starts its own router (TLS, the generated access rules; linked with the
+side's certificate to the endpoints given with `--connect`, if any) and its processes join it
+as clients, each with its own certificate.
 """
 
 from __future__ import annotations
