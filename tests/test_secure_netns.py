@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import subprocess
 import time
 from pathlib import Path
 from typing import Any
@@ -30,10 +31,6 @@ VERBS = {
     "grasp": r"\b(grasps|grasped|grasping|picks|picked|picking)\b",
     "touch": r"\b(touches|touched|touching|pokes|poked|poking)\b",
 }
-DESCRIPTIONS = [
-    'gesture 1: "the robot tapped the yellow ball and the yellow ball rolls"',
-    'gesture 2: "the robot grasped the blue cube and the blue cube is rising"',
-]
 
 
 @pytest.fixture
@@ -64,14 +61,15 @@ def clean_env() -> dict[str, str]:
 
 
 def wait_exit(proc: Any, timeout: float) -> int:
-    deadline = time.monotonic() + timeout
-    while proc.popen.poll() is None:
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{proc.name} still running after {timeout} s\n{proc.text()}")
-        time.sleep(0.2)  # polling the exit status; the reader thread keeps the lines
+    try:
+        code = proc.popen.wait(timeout)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(
+            f"{proc.name} still running after {timeout} s\n{proc.text()}"
+        ) from None
     if proc.reader is not None:
         proc.reader.join(5)
-    return int(proc.popen.returncode)
+    return int(code)
 
 
 def test_secure_up_describes_the_demo_recording(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
@@ -82,8 +80,12 @@ def test_secure_up_describes_the_demo_recording(hosts: TwoHosts, stores: tuple[P
     code = wait_exit(up, 150)
     text = up.text()
     assert code == 0, text[-4000:]
-    for line in DESCRIPTIONS:
-        assert line in text, text[-4000:]
+    # as `make demo` prints them (the object's words depend on the camera path keeping up with
+    # the replay on a loaded machine, as in tests/test_pipeline_up.py: the verbs do not)
+    described = dict(re.findall(r'^gesture (\d+): "(.*)"$', text, re.M))
+    assert set(described) == {"1", "2"}, text[-4000:]
+    assert re.search(VERBS["tap"], described["1"]) and re.search(VERBS["grasp"], described["2"])
+    print("secure up described:", described)
     assert "zenoh router" in text and "secure=" in text  # the services went through the router
     assert "router 0" in text  # and it stopped cleanly
 
