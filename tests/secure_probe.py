@@ -1,4 +1,6 @@
-"""Probe of a secure router's rules: `python tests/secure_probe.py KEYSTORE FOREIGN_KEYSTORE`.
+"""Probe of a secure router's rules: `python tests/secure_probe.py KEYSTORE FOREIGN_KEYSTORE`;
+`python tests/secure_probe.py watch KEY` prints `present` or `absent` every 0.2 s: whether a
+liveliness token matches KEY, as the router the bus (from the environment) joins knows it now.
 
 Run inside the namespace of a running `beyond router --secure KEYSTORE`. It opens sessions with
 several identities and prints one JSON line of what each received. Denials are judged by order,
@@ -180,5 +182,18 @@ def main(keystore: Path, foreign: Path) -> int:
     return 0
 
 
+def watch(key: str) -> int:
+    from runtime.config import load_config
+
+    zenoh.init_log_from_env_or("error")
+    bus = zenoh.open(zenoh_config(load_config()))
+    while True:
+        replies = [r for r in bus.liveliness().get(key, timeout=1.0) if r.ok is not None]
+        print("present" if replies else "absent", flush=True)
+        time.sleep(0.2)
+
+
 if __name__ == "__main__":
+    if sys.argv[1] == "watch":
+        raise SystemExit(watch(sys.argv[2]))
     raise SystemExit(main(Path(sys.argv[1]), Path(sys.argv[2])))

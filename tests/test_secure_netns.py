@@ -123,31 +123,82 @@ def test_router_rules_hold(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
     hosts.stop(router)
 
 
-def test_secure_split_across_two_hosts_describes_every_gesture(
+def wait_for(what: str, condition: Any, timeout: float, procs: list[Any]) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        dead = [p.name for p in procs if p.popen.poll() is not None]
+        if dead or time.monotonic() > deadline:
+            logs = "\n".join(f"--- {p.name}\n{p.text()[-2500:]}" for p in procs)
+            raise AssertionError(f"waiting for {what}: {dead or 'timed out'}\n{logs}")
+        time.sleep(0.1)
+
+
+def test_secure_split_survives_a_cut_link(
     hosts: TwoHosts, stores: tuple[Path, Path], tmp_path: Path
 ) -> None:
-    """The workstation's `up` runs the router (TLS 7447, the rules); the robot's connects to it
-    across the link. Six gestures replayed on the robot are all described on the workstation."""
+    """Two hosts: the workstation's `up` runs its router (TLS 7447, the rules); the robot's runs
+    its own, linked to it with the robot's certificate. Six gestures are replayed on the robot;
+    after the first is described on the workstation the link goes down until the workstation's
+    router has given up on it (the robot's tokens are gone there) and two more gestures have
+    ended on the robot (its pipeline runs on through its own router). Back up, every
+    gesture is described on the workstation, those of the outage recovered from the robot's
+    publisher caches through the rules."""
     ours, _ = stores
     recording = tmp_path / "six.mcap"
     skeleton_recording(recording, SIX, seed=3, robot="robot")
-    up = [str(REPO / ".venv/bin/python"), "-m", "beyond", "up", "--secure", str(ours), "--no-live",
-          "--timeout", "100"]  # fmt: skip
+    python = str(REPO / ".venv/bin/python")
+    up = [python, "-m", "beyond", "up", "--secure", str(ours), "--no-live", "--timeout", "120"]
     ws = hosts.start(hosts.ws, "ws", [*up, "--profile", "workstation", "--until-stream-end"],
                      clean_env())  # fmt: skip
+    wait_for("the workstation", lambda: "pipeline up:" in ws.text(), 90, [ws])
+    env = {**clean_env(), "BEYOND_ZENOH_SECURE": str(ours)}  # read-only: the tools' certificate
+    watch = [
+        python,
+        str(REPO / "tests" / "secure_probe.py"),
+        "watch",
+        "beyond/robot/alive/gestures",
+    ]
+    watcher = hosts.start(hosts.ws, "watch", watch, env)
     robot = hosts.start(
         hosts.robot, "robot",
         [*up, "--profile", "robot", "--connect", f"tls/{hosts.ws_ip}:7447", "--recording",
          str(recording), "--rate", "2", "--wait-for", "reasoner,describer"],
         clean_env(),
     )  # fmt: skip
-    assert wait_exit(ws, 150) == 0, ws.text()[-4000:]
+    procs = [ws, watcher, robot]
+    wait_for("gesture 1 described on the workstation", lambda: 'gesture 1: "' in ws.text(), 90,
+             procs)  # fmt: skip
+
+    probe = [python, str(REPO / "tests" / "netns_util.py"), "probe"]  # through the robot's router
+    seen = hosts.start(hosts.robot, "probe", probe, env)
+    procs.append(seen)
+
+    def ended() -> int:  # gesture ends the robot's own pipeline published, as they happened
+        events = [json.loads(x) for _, x in list(seen.lines) if x.startswith("{")]
+        return sum(e.get("event") == "end" and e.get("via") == "live" for e in events)
+
+    before = ended()
+    t_down = time.monotonic()
+    hosts.link(up=False)
+    wait_for(
+        "the workstation giving up on the link, and two more gestures ended on the robot",
+        lambda: any(t > t_down and line == "absent" for t, line in list(watcher.lines))
+        and ended() >= before + 2,
+        60, procs,
+    )  # fmt: skip
+    hosts.link(up=True)
+    print(f"link down {time.monotonic() - t_down:.1f} s ({before} gesture end(s) probed before)")
+    assert wait_exit(ws, 90) == 0, ws.text()[-4000:]
     assert wait_exit(robot, 60) == 0, robot.text()[-4000:]
     text = ws.text()
     assert "6 of 6 gesture(s) described" in text, text[-4000:]
+    described = dict(re.findall(r'^gesture (\d+): "(.*)"$', text, re.M))
+    assert sorted(described, key=int) == [str(i) for i in range(1, 7)], text[-3000:]
     for i, action in enumerate(SIX, start=1):
-        line = next((x for x in text.splitlines() if x.startswith(f'gesture {i}: "')), "")
-        assert re.search(VERBS[action], line), (action, line, text[-3000:])
+        assert re.search(VERBS[action], described[str(i)]), (action, described)
+    recovered = [int(n) for n in re.findall(r"reasoner: stopped .* recovered=(\d+)", text)]
+    print(f"reasoner recovered {recovered} message(s) from the robot's caches")
+    assert recovered and recovered[-1] > 0, text[-3000:]
 
 
 def test_tools_read_and_ask_a_secure_pipeline(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
