@@ -75,7 +75,7 @@ import zenoh  # noqa: E402
 
 import schemas as s  # noqa: E402
 from runtime.bus import Bus  # noqa: E402
-from runtime.config import BusConfig, zenoh_config  # noqa: E402
+from runtime.config import BusConfig, load_config, zenoh_config  # noqa: E402
 
 KINDS = {
     # kind: (latency messages, pacing Hz, throughput messages)
@@ -165,15 +165,17 @@ def receive_raw(config: BusConfig, kind: str, decode: bool) -> dict[str, object]
     return {"latency_ns": lat, "times_ns": times}
 
 
-def receive_typed(config: BusConfig, kind: str) -> dict[str, object]:
+def receive_typed(
+    config: BusConfig, kind: str, key: str | None = None, ready: str | None = None
+) -> dict[str, object]:
     n_lat, _, n_thr = KINDS[kind]
     n = n_lat + n_thr
     cls = message_class(kind)
 
     async def go() -> dict[str, object]:
         with Bus.open(config) as bus:
-            sub = bus.subscribe(f"bench/{config.robot}/{kind}", cls, maxsize=1 << 17)
-            bus.declare_token(f"bench/{config.robot}/ready")
+            sub = bus.subscribe(key or f"bench/{config.robot}/{kind}", cls, maxsize=1 << 17)
+            bus.declare_token(ready or f"bench/{config.robot}/ready")
             lat: list[int] = []
             times: list[int] = []
             while len(lat) + len(times) < n:
@@ -443,10 +445,158 @@ def replay_speed() -> dict[str, float]:
     return figures
 
 
+# --- the secure path: mutual TLS through a router with the generated access rules ----------------
+# Next to the default path (peers on loopback, linked directly) and a plain TCP router (the hop
+# alone), the path `beyond up --secure` runs: both ends clients of a router over TLS with client
+# certificates, the router checking every message against the access rules. The keys and
+# identities are the pipeline's own (ingest puts skeleton and camera frames; gestures and objects
+# receive them), since the rules admit nothing else. Typed pub/sub on every path, same pacing and
+# burst as above; the secure/plain ratios are the goals (latency <= 1.3x, throughput >= 0.7x).
+
+PATHS = ("plain", "router", "secure")
+RECEIVER = {"skeleton": "gestures", "camera": "objects"}
+
+
+def start_router(path: str, port: int, keys_dir: Path) -> subprocess.Popen[str] | None:
+    if path == "plain":
+        return None
+    listen = f"{'tls' if path == 'secure' else 'tcp'}/127.0.0.1:{port}"
+    secure = ["--secure", str(keys_dir)] if path == "secure" else []
+    return subprocess.Popen(
+        [sys.executable, "-m", "beyond", "router", "--listen", listen, *secure],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+
+
+def run_path(path: str, kind: str, keys_dir: Path) -> dict[str, float]:
+    from services.launcher import service_env
+
+    n_lat, hz, n_thr = KINDS[kind]
+    port = free_port()
+    robot = f"b{os.getpid()}{path}{kind}"
+    endpoint = f"{'tls' if path == 'secure' else 'tcp'}/127.0.0.1:{port}"
+    config = (
+        BusConfig(robot=robot, port=port)
+        if path == "plain"
+        else BusConfig(robot=robot, mode="client", connect=(endpoint,))
+    )
+    if path == "secure":
+        config = config.with_(secure=keys_dir, identity="ingest")
+    router = start_router(path, port, keys_dir)
+    keys = s.Keys(robot)
+    receiver = RECEIVER[kind]
+    env = {**service_env(config), "BEYOND_ZENOH_IDENTITY": receiver}
+    child = subprocess.Popen(
+        [sys.executable, __file__, "--receive-path", kind, receiver],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        bus = Bus.open(config)  # a client waits here for its router
+        ready = bus.session.liveliness().declare_subscriber(keys.alive(receiver), history=True)
+        deadline = time.monotonic() + 60
+        while ready.handler.try_recv() is None:
+            if child.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"{path} receiver failed (exit status {child.poll()})")
+            time.sleep(0.005)
+        ready.undeclare()
+        typed = bus.publisher(keys.stream(kind), message_class(kind))
+        wait_matching(typed._pub)
+        template = make_message(kind, 0, 0)
+        period = 1.0 / hz
+        next_at = time.perf_counter()
+        for seq in range(n_lat):
+            typed.put(restamp(template, seq, time.monotonic_ns()))
+            next_at += period
+            while (delay := next_at - time.perf_counter()) > 0:
+                time.sleep(delay)
+        burst_message = restamp(template, n_lat, 0)
+        t0 = time.monotonic_ns()
+        for _ in range(n_thr):
+            typed.put(burst_message)
+        out, _ = child.communicate(timeout=180)
+        bus.close()
+    finally:
+        if child.poll() is None:
+            child.kill()
+        if router is not None:
+            router.terminate()
+            router.wait(10)
+    result = json.loads(out.strip().splitlines()[-1])
+    lat, times = result["latency_ns"], result["times_ns"]
+    span = (max(times) - t0) / 1e9 if times else float("nan")
+    return {
+        "latency_median_us": statistics.median(lat) / 1e3,
+        "latency_p99_us": quantile(lat, 0.99) / 1e3,
+        "throughput_msgs_per_s": len(times) / span,
+    }
+
+
+def secure_path() -> dict[str, float]:
+    """Plain, router and secure paths, interleaved REPEATS times, medians and ratios."""
+    from runtime import acl, keystore
+
+    figures: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        keys_dir = Path(tmp) / "keys"
+        keystore.init(keys_dir, acl.identities())
+        for kind in KINDS:
+            runs: dict[str, list[dict[str, float]]] = {p: [] for p in PATHS}
+            for _ in range(REPEATS):
+                for path in PATHS:
+                    runs[path].append(run_path(path, kind, keys_dir))
+            row = {p: median_run(runs[p]) for p in PATHS}
+            for p in PATHS:
+                for name, value in row[p].items():
+                    figures[f"path_{kind}_{p}_{name}"] = round(value, 3)
+            plain, hop, secure = row["plain"], row["router"], row["secure"]
+            lat = secure["latency_median_us"] / plain["latency_median_us"]
+            thr = secure["throughput_msgs_per_s"] / plain["throughput_msgs_per_s"]
+            tls_lat = secure["latency_median_us"] / hop["latency_median_us"]
+            tls_thr = secure["throughput_msgs_per_s"] / hop["throughput_msgs_per_s"]
+            figures[f"path_{kind}_secure_latency_ratio"] = round(lat, 3)
+            figures[f"path_{kind}_secure_throughput_ratio"] = round(thr, 3)
+            figures[f"path_{kind}_secure_vs_router_latency_ratio"] = round(tls_lat, 3)
+            figures[f"path_{kind}_secure_vs_router_throughput_ratio"] = round(tls_thr, 3)
+            print(f"{kind}: plain peers / plain router / secure router (mTLS + rules):", flush=True)
+            for p in PATHS:
+                r = row[p]
+                print(
+                    f"  {p:7s} latency median {r['latency_median_us']:7.1f} us, p99 "
+                    f"{r['latency_p99_us']:8.1f} us | throughput "
+                    f"{r['throughput_msgs_per_s']:8.0f}/s",
+                    flush=True,
+                )
+            print(
+                f"  secure/plain: latency x{lat:.2f} (goal <= 1.3), throughput x{thr:.2f} "
+                f"(goal >= 0.7); secure/plain router: latency x{tls_lat:.2f}, throughput "
+                f"x{tls_thr:.2f}",
+                flush=True,
+            )
+    return figures
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--receive", nargs=4, metavar=("MODE", "KIND", "PORT", "ROBOT"))
+    parser.add_argument("--receive-path", nargs=2, metavar=("KIND", "IDENTITY"))
+    parser.add_argument(
+        "--only-secure", action="store_true", help="only the secure-path section (quicker)"
+    )
     args = parser.parse_args()
+    if args.receive_path:  # config from the environment, as a service's
+        kind, identity = args.receive_path
+        config = load_config()
+        keys = s.Keys(config.robot)
+        result = receive_typed(config, kind, keys.stream(kind), keys.alive(identity))
+        print(json.dumps(result))
+        return 0
+    if args.only_secure:
+        print(json.dumps(secure_path()))
+        return 0
     if args.receive:
         mode, kind, port, robot = args.receive
         config = BusConfig(robot=robot, port=int(port))
@@ -515,6 +665,7 @@ def main() -> int:
         f"{replay_figures['replay_all_reference_speed_x_realtime']:.0f} (goal >= 50)",
         flush=True,
     )
+    figures.update(secure_path())
     print(json.dumps(figures))
     return 0
 

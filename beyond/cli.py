@@ -48,6 +48,7 @@ COMMANDS: dict[str, str] = {
     "up": "up",
     "analyse": "analyse",
     "ask": "ask",
+    "keys": "keys",
 }
 
 

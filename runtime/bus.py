@@ -505,6 +505,8 @@ class Bus:
         self.keys = Keys(config.robot)
         self._closers: list[Callable[[], None]] = []
         self._tasks: set[asyncio.Task[None]] = set()
+        # set by a Service: refuses (raises) a queryable key its class did not declare
+        self.guard: Callable[[str], object] | None = None
 
     @classmethod
     def open(cls, config: BusConfig | None = None) -> Bus:

@@ -40,6 +40,17 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, port_flag: str = "--po
         type=_port,
         help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)",
     )
+    group.add_argument(
+        "--secure",
+        metavar="DIR",
+        help="keystore (`beyond keys init DIR`): mutual TLS via a router with access rules "
+        "($BEYOND_ZENOH_SECURE)",
+    )
+    group.add_argument(
+        "--identity",
+        metavar="NAME",
+        help="whose certificate in the keystore to present ($BEYOND_ZENOH_IDENTITY)",
+    )
 
 
 def config_from_args(args: argparse.Namespace) -> BusConfig:
@@ -50,4 +61,6 @@ def config_from_args(args: argparse.Namespace) -> BusConfig:
         listen=getattr(args, "listen", None),
         config_file=getattr(args, "zenoh_config", None),
         port=getattr(args, "port", None),
+        secure=getattr(args, "secure", None),
+        identity=getattr(args, "identity", None),
     )

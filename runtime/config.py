@@ -14,6 +14,10 @@ BEYOND_ZENOH_ROUTER=tcp/<router-host>:7447 instead *adds* the router to the endp
 the config file connects to, so a machine's processes stay one local peer group (their traffic
 stays local) that is also linked to the router (deploy/ uses this).
 
+Secure bus (`--secure DIR`, BEYOND_ZENOH_SECURE=DIR): every process is a client of a router
+(or the router), every link mutual TLS with the certificates of the keystore in DIR, and the
+router enforces access rules generated from the services' declarations (runtime/secure.py).
+
 Precedence: built-in defaults < config file (BEYOND_ZENOH_CONFIG) < environment < arguments.
 """
 
@@ -45,6 +49,9 @@ ENV_VARS: dict[str, str] = {
     "BEYOND_ZENOH_PORT": f"rendezvous port of the default local group (default {DEFAULT_PORT})",
     "BEYOND_ZENOH_ROUTER": "comma-separated router endpoints connected to in addition to the "
     "mode's or config file's, e.g. tcp/10.0.0.2:7447",
+    "BEYOND_ZENOH_SECURE": "keystore directory: mutual TLS and the router's access rules",
+    "BEYOND_ZENOH_IDENTITY": "whose certificate of the keystore to use (default: the service's "
+    "name, 'router' for a router, else 'tools')",
 }
 
 
@@ -60,11 +67,18 @@ class BusConfig:
     config_file: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict)  # zenoh config path -> JSON value
     routers: tuple[str, ...] = ()  # connected to in addition to the mode's or file's endpoints
+    secure: Path | None = None  # keystore directory: mutual TLS and access rules
+    identity: str | None = None  # certificate name in the keystore (None: by mode)
 
     def __post_init__(self) -> None:
         check_name("robot", self.robot)
         if self.mode not in MODES:
             raise InputError(f"unknown Zenoh mode {self.mode!r}; valid: {', '.join(MODES)}")
+        if self.secure is not None and self.mode == "peer":
+            raise InputError(
+                "a secure bus has no peers (they would bypass the router's access rules); "
+                "valid modes with --secure: client, router"
+            )
         if not 0 < self.port < 65536:
             raise InputError(f"port {self.port} out of range; valid: 1-65535")
 
@@ -74,7 +88,15 @@ class BusConfig:
     def endpoints(self) -> tuple[list[str], list[str]]:
         """(listen, connect) endpoints actually used."""
         rendezvous = f"tcp/127.0.0.1:{self.port}"
-        if self.mode == "peer":
+        if self.secure is not None:
+            from runtime.secure import SECURE_ROUTER_CONNECT, SECURE_ROUTER_LISTEN
+
+            listen, connect = (
+                ([SECURE_ROUTER_LISTEN], [])
+                if self.mode == "router"
+                else ([], [SECURE_ROUTER_CONNECT])
+            )
+        elif self.mode == "peer":
             listen = [rendezvous, "tcp/127.0.0.1:0"]
             connect = [rendezvous]
         elif self.mode == "client":
@@ -106,6 +128,8 @@ def load_config(
     config_file: str | Path | None = None,
     port: int | None = None,
     routers: list[str] | None = None,
+    secure: str | Path | None = None,
+    identity: str | None = None,
 ) -> BusConfig:
     """The bus configuration from the environment, overridden by the given arguments."""
     env = os.environ if env is None else env
@@ -122,9 +146,12 @@ def load_config(
     path = Path(file) if file else None
     if path is not None and not path.is_file():
         raise InputError(f"Zenoh config file {path} does not exist")
+    keystore = secure or env.get("BEYOND_ZENOH_SECURE") or None
     return BusConfig(
         robot=robot or env.get("BEYOND_ROBOT") or DEFAULT_ROBOT,
-        mode=mode or env.get("BEYOND_ZENOH_MODE") or "peer",
+        mode=mode or env.get("BEYOND_ZENOH_MODE") or ("client" if keystore else "peer"),
+        secure=Path(keystore) if keystore else None,
+        identity=identity or env.get("BEYOND_ZENOH_IDENTITY") or None,
         connect=tuple(connect) if connect else (_split(env_connect) if env_connect else None),
         listen=tuple(listen) if listen else (_split(env_listen) if env_listen else None),
         port=port or DEFAULT_PORT,
@@ -178,6 +205,16 @@ def zenoh_config(config: BusConfig) -> Any:
         connect = listed + [r for r in config.routers if r not in listed]
     if connect or config.connect is not None:
         sets["connect/endpoints"] = connect
+    if config.secure is not None:
+        from runtime.secure import check_endpoints, default_identity, tls_settings
+
+        from_file = config.config_file is not None  # the file's own endpoints count too
+        check_endpoints(
+            listen or (_file_endpoints(zc, "listen/endpoints") if from_file else []),
+            connect or (_file_endpoints(zc, "connect/endpoints") if from_file else []),
+        )
+        identity = config.identity or default_identity(config.mode)
+        sets.update(tls_settings(config.secure, identity, config.mode))
     sets.update(config.extra)
     for key, value in sets.items():
         try:
@@ -203,6 +240,8 @@ def describe(config: BusConfig) -> str:
     """One line for logs: mode, robot and endpoints."""
     listen, connect = config.endpoints()
     source = f" file={config.config_file}" if config.config_file else ""
+    if config.secure is not None:
+        source += f" secure={config.secure} identity={config.identity or '-'}"
     return (
         f"mode={config.mode} robot={config.robot} listen={','.join(listen) or '-'} "
         f"connect={','.join(connect) or '-'}{source}"

@@ -1,7 +1,11 @@
 """The base every service stands on: lifecycle, liveliness, health, counting, logging.
 
-A service subclasses `Service`, declares its inputs and outputs in `setup()` with
-`self.subscribe(key, Type, handler)` and `self.publisher(key, Type)`, and is run with
+A service subclasses `Service`, names the streams it touches in class attributes (`subscribes`,
+`publishes`, `serves`: stream and queryable names of schemas/keys.py, from which runtime/acl.py
+generates a secure router's access rules), opens them in `setup()` with
+`self.subscribe(key, Type, handler)`, `self.publisher(key, Type)` and `self.bus.queryable(...)`
+(a key the class did not declare is refused there, so the rules cannot drift from the code;
+a class that declares nothing is not checked, and has no place on a secure bus), and is run with
 `asyncio.run(service.run())` (or `Service.main()`). It stops cleanly on SIGINT/SIGTERM:
 consumers are cancelled, subscribers, publishers, queryables and the liveliness token are
 undeclared, then the session closes.
@@ -36,7 +40,7 @@ from runtime.reliable import (
 )
 from schemas.base import Header, Message
 from schemas.codec import SchemaError
-from schemas.keys import check_name
+from schemas.keys import PROGRESS, check_name
 from schemas.messages import Progress, ServiceHealth
 
 M = TypeVar("M", bound=Message)
@@ -61,6 +65,9 @@ class Service:
 
     name: str = "service"
     health_period: float = 1.0
+    subscribes: tuple[str, ...] | None = None  # stream names (schemas.keys.STREAMS)
+    publishes: tuple[str, ...] | None = None
+    serves: tuple[str, ...] | None = None  # queryable names (runtime.acl.QUERYABLES)
 
     def __init__(
         self,
@@ -72,6 +79,8 @@ class Service:
         health_period: float | None = None,
     ) -> None:
         self.name = check_name("service", name or self.name)
+        if config is not None and config.secure is not None and config.identity is None:
+            config = config.with_(identity=self.name)  # on a secure bus a service is its name
         self.config = config
         self._bus = bus
         self._owns_bus = bus is None
@@ -151,6 +160,7 @@ class Service:
         messages lost while a link was down come back from the publishers' caches (in order,
         once each; see runtime.reliable). With `paced` (sensor inputs), the stamp of every
         message handled is published as `Progress`, so a player never outruns this service."""
+        self._check_declared("subscribe", key)
         sub: Subscription[M] | ReliableSubscription[M]
         if recover:
             policy = recover if isinstance(recover, RecoveryPolicy) else None
@@ -184,6 +194,7 @@ class Service:
         that recover (`subscribe(..., recover=True)`) after a link failure or a late start.
         A cached publisher never blocks (`reliable` is ignored): what a congested or dead link
         drops comes back from the cache (runtime.reliable.ReliablePublisher)."""
+        self._check_declared("publish", key)
         pub: Publisher[M] | ReliablePublisher[M]
         if cache is not None:
             pub = reliable_publisher(self.bus, key, cls, cache=cache)
@@ -191,6 +202,22 @@ class Service:
             pub = self.bus.publisher(key, cls, reliable=reliable)
         self._publishers.append(pub)
         return pub
+
+    def _check_declared(self, kind: str, key: str) -> None:
+        """Refuse a key the class did not declare (when it declares anything)."""
+        if all(getattr(self, a) is None for a in ("subscribes", "publishes", "serves")):
+            return
+        if kind == "subscribe" and key.startswith(f"{self.bus.keys.root}/{PROGRESS}/"):
+            return  # how far others have got: every service may read it (runtime.acl)
+        from runtime.acl import declaration_of, declared_keys
+
+        allowed = declared_keys(declaration_of(self.name, type(self)), self.bus.keys.root)[kind]
+        if key not in allowed:
+            raise InputError(
+                f"service {self.name!r} may {kind} only on the keys its class declares "
+                f"({', '.join(sorted(allowed)) or 'none'}), not {key}; add it to "
+                f"{type(self).__qualname__}'s declarations"
+            )
 
     def derive(self, source: Header, cls: type[Message]) -> Header:
         """Header of a `cls` output computed from `source`: same stamp, same sequence number and the
@@ -361,8 +388,19 @@ class Service:
         """Open the bus (unless given one), set up, serve until stopped, clean up."""
         loop = asyncio.get_running_loop()
         if self._bus is None:
-            self._bus = Bus.open(self.config or load_config())
+            config = self.config or load_config()
+            if config.secure is not None and config.identity is None:
+                config = config.with_(identity=self.name)
+            self._bus = Bus.open(config)
             self._owns_bus = True
+        if self._owns_bus:
+            own_health = self.bus.keys.health(self.name)
+
+            def guard(key: str) -> None:
+                if key != own_health:
+                    self._check_declared("serve", key)
+
+            self.bus.guard = guard
         installed: list[signal.Signals] = []
         if install_signals:
             for sig in (signal.SIGINT, signal.SIGTERM):

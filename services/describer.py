@@ -16,6 +16,9 @@ from schemas import Description, Evidence, ScoredSentence, WordProbabilities
 
 class DescriptionGenerator(Service):
     name = "describer"
+    subscribes = ("words",)
+    publishes = ("description",)
+    serves = ()
 
     def __init__(
         self, *, nbest: int = 5, legacy_offset: bool = False, unfolding: bool = False, **base: Any

@@ -26,6 +26,9 @@ from schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, Stre
 
 class GestureStreamer(Service):
     name = "gestures"
+    subscribes = ("skeleton", "stream_end")
+    publishes = ("gesture_posterior", "gesture_segment")
+    serves = ()
 
     def __init__(
         self,

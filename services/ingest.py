@@ -48,6 +48,9 @@ CAMERA_CACHE = 300  # frames: 20 s at 15 fps, longer than a gesture and its lead
 
 class SensorIngest(Service):
     name = "ingest"
+    subscribes = ()
+    publishes = ("skeleton", "camera", "camera_compressed", "stream_end")
+    serves = ("progress",)  # the pacer answers restarted consumers
 
     def __init__(
         self,

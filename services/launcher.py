@@ -70,6 +70,10 @@ def service_env(config: BusConfig, extra: Mapping[str, str] | None = None) -> di
         env["BEYOND_ZENOH_CONFIG"] = str(config.config_file)
     if config.routers:
         env["BEYOND_ZENOH_ROUTER"] = ",".join(config.routers)
+    env.pop("BEYOND_ZENOH_SECURE", None)
+    env.pop("BEYOND_ZENOH_IDENTITY", None)  # each child presents its own certificate
+    if config.secure is not None:
+        env["BEYOND_ZENOH_SECURE"] = str(config.secure)
     env.update(extra or {})
     return env
 
@@ -81,10 +85,12 @@ async def start_service(
     config_file: str | None = None,
     options: Mapping[str, Any] | None = None,
     sink: LogSink | None = None,
+    command: list[str] | None = None,
 ) -> ServiceProcess:
+    """Start service `name` (or, with `command`, `beyond COMMAND...` under that name)."""
     import json
 
-    cmd = [sys.executable, "-m", "beyond", "service", name]
+    cmd = [sys.executable, "-m", "beyond", *(command or ["service", name])]
     if config_file:
         cmd += ["--config", config_file]
     for key, value in (options or {}).items():

@@ -40,6 +40,9 @@ from schemas import (
 
 class ObjectSegmenter(Service):
     name = "objects"
+    subscribes = ("camera", "camera_compressed", "gesture_segment", "stream_end")
+    publishes = ("objects", "gesture_object", "effects")
+    serves = ()
 
     def __init__(
         self,

@@ -40,6 +40,9 @@ from schemas import (
 
 class AffordanceReasoner(Service):
     name = "reasoner"
+    subscribes = ("gesture_object", "gesture_posterior", "gesture_segment", "effects")
+    publishes = ("affordance", "words")
+    serves = ("ask",)
 
     def __init__(
         self,

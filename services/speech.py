@@ -22,6 +22,9 @@ from schemas import Description
 
 class SpeechSynthesizer(Service):
     name = "speech"
+    subscribes = ("description",)
+    publishes = ()
+    serves = ()
 
     def __init__(
         self,

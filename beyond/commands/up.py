@@ -21,6 +21,11 @@ may start first: the source waits only for this machine's services (plus `--wait
 cross-link streams are recovered from publisher caches when the other side joins late or a link
 fails. The workstation side runs until stopped, or with `--until-stream-end` until the robot's
 source has ended and every gesture it showed is described.
+
+`--secure DIR` (README, "Securing a deployment"): every certificate the side needs is checked
+first, then the side starts its own router (TLS, the generated access rules; linked with the
+side's certificate to the endpoints given with `--connect`, if any) and its processes join it
+as clients, each with its own certificate.
 """
 
 from __future__ import annotations
@@ -57,6 +62,7 @@ from services.options import check_options, load_options
 from services.registry import PROFILES, service_class
 
 HELP = "start the pipeline's services as separate processes and watch them"
+SECURE_LOCAL_ROUTER = "tls/127.0.0.1:7447"  # a side's own router, when it links to another
 DEMO_RECORDING = REPO_ROOT / "recordings" / "tap-ball-grasp-box.mcap"
 DEFAULT_TIMEOUT = 120.0
 
@@ -116,7 +122,28 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.profile == "workstation" and _mode_unset(args, config):
         config = config.with_(mode="client")
+    if config.secure is not None and config.identity is None:  # the monitor is the side's
+        config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
     return asyncio.run(up(args, local_group(config)))
+
+
+def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str]:
+    """On a secure bus every side runs its own router: check every certificate this side needs
+    (one line naming the file, before anything starts) and return the router's command. Given
+    endpoints elsewhere (the workstation's router), this side's router links to them with the
+    side's certificate, and this side's processes stay on their own router, so a robot's
+    pipeline keeps running when the network between the machines fails."""
+    from runtime import keystore
+
+    assert config.secure is not None
+    remote = list(config.connect or ()) + list(config.routers)
+    identity = ("robot" if profile == "robot" else "workstation") if remote else "router"
+    for name in [*names, str(config.identity), identity]:
+        keystore.check(config.secure, name)
+    command = ["router", "--secure", str(config.secure), "--identity", identity]
+    if remote:
+        command += ["--listen", SECURE_LOCAL_ROUTER] + [a for e in remote for a in ("--connect", e)]
+    return command
 
 
 def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:
@@ -174,6 +201,10 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     for name in names:
         check_options(name, service_class(name), options[name])
     out = Console()
+    router_command = None
+    if config.secure is not None:
+        router_command = secure_router(config, names, args.profile)
+        config = config.with_(connect=None, routers=())  # this side's router links elsewhere
     extra = {"BEYOND_CLOCK": "recording"} if replayed else {}
     env = service_env(config, extra)
     processes: list[ServiceProcess] = []
@@ -195,7 +226,17 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             print(line, flush=True)
 
     status = 1
-    with Bus.open(config) as bus:
+    router: ServiceProcess | None = None
+    if router_command is not None:  # secure defaults and its own endpoints, not the clients'
+        own = BusConfig(robot=config.robot, mode="router", secure=config.secure)
+        env_router = service_env(own)
+        router = await start_service("router", env_router, command=router_command, sink=log_line)
+    try:
+        bus = Bus.open(config)  # a secure client waits here for its router
+    except BaseException:
+        await stop_services([router] if router else [])
+        raise
+    with bus:
         foxglove = None
         if args.foxglove:  # imported only when asked for: the SDK is not free to load
             from runtime.foxglove_bridge import start_in_background
@@ -232,7 +273,9 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
                 if finite and pipeline.done():
                     status = 0
                     break
-                crashed = [p.name for p in processes if not p.running]
+                crashed = [
+                    p.name for p in processes + ([router] if router else []) if not p.running
+                ]
                 if crashed:
                     emit(f"service(s) exited early: {', '.join(crashed)}")
                     break
@@ -257,6 +300,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             codes = await stop_services(processes)
             if foxglove is not None:
                 await foxglove()
+            codes.update(await stop_services([router] if router else []))  # the router last
     emit(pipeline.summary())
     err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
     print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)

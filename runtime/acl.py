@@ -1,0 +1,238 @@
+"""The router's access rules, generated from what the services declare, never written by hand.
+
+Every service class states the streams it subscribes to and publishes and the queryables it
+serves (`subscribes`, `publishes`, `serves`: names from schemas/keys.py), and the Service base
+refuses at run time any key it did not declare, so these rules and the code cannot drift apart.
+From them, `access_control()` builds the block of a Zenoh router's configuration:
+
+- default deny; a subject is a certificate's common name (runtime/keystore.py);
+- a service may put only on its outputs (and its own health), declare subscribers only on its
+  inputs and receive only those, serve only its queryables (and its health), declare only its
+  own liveliness token, and watch the others' (ingest waits for its consumers). It hears of
+  every subscription and query, wildcards included: a client publishes only what it knows
+  someone subscribes to, so a reader of `beyond/robot/**` must be announced to every publisher;
+  hearing of an interest reveals no data, and the put and reply rules are unchanged;
+- `tools` (`beyond echo`, `topics`, `ask`, `record`) may read everything and ask the queryables,
+  but put, serve and declare nothing;
+- the sides' identities (`robot`, `workstation`, and `router`, the workstation's router) read
+  like tools, declare their monitor's liveliness token, and may do whatever the services of their
+  side may: a side's router links to the other side's router with that certificate and carries
+  its services' traffic (on a secure split each machine runs a router, so the robot's own
+  pipeline keeps running through its router when the network between the machines fails).
+
+Recovering streams (runtime/reliable.py) carry zenoh-ext's own traffic under `<key>/@adv/...`:
+the publisher's cache answers history queries there, declares a liveliness token there (how
+subscribers detect it) and puts its heartbeat there; the subscriber subscribes, queries and
+watches liveliness there. `@adv` is a verbatim chunk, which no wildcard matches, so every stream
+key comes with its own `<key>/@adv/**` in the same rules as the key itself.
+
+A rule naming a key no service declares is an error: a declaration that names an unknown stream,
+or a subscription to a stream no service publishes, is an InputError at generation time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from cognition.errors import InputError, unknown
+from schemas.keys import ALIVE, ASK, HEALTH, PREFIX, PROGRESS, STREAMS
+
+# queryable name -> key suffix after beyond/<robot>/; "progress": a player answering restarted
+# services with their predecessor's last Progress (runtime/pacing.py)
+QUERYABLES: dict[str, str] = {"ask": ASK, "progress": f"{PROGRESS}/*"}
+TOOLS_ROLE = "tools"
+SIDE_MONITORS: dict[str, tuple[str, ...]] = {  # side identity -> its monitors' liveliness names
+    "robot": ("monitor-robot",),
+    "workstation": ("monitor", "monitor-workstation"),
+    "router": ("monitor", "monitor-workstation"),  # the workstation's router, seen from the robot's
+}
+SIDE_PROFILES = {"robot": "robot", "workstation": "workstation", "router": "workstation"}
+_ANY_ROBOT = f"{PREFIX}/*"
+_OUT_IN = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
+_OUT_EG = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
+_IN_IN = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
+_IN_EG = ["put", "delete", "reply", "liveliness_token", "declare_queryable"]
+
+
+@dataclass(frozen=True)
+class Declaration:
+    """What one service touches, by stream and queryable name."""
+
+    name: str
+    subscribes: tuple[str, ...] = ()
+    publishes: tuple[str, ...] = ()
+    serves: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        for kind, names in (("stream", self.subscribes + self.publishes),):
+            for stream in names:
+                if stream not in STREAMS:
+                    raise unknown(
+                        f"{kind} declared by service {self.name!r}", stream, list(STREAMS)
+                    )
+        for queryable in self.serves:
+            if queryable not in QUERYABLES:
+                raise unknown(
+                    f"queryable declared by service {self.name!r}", queryable, list(QUERYABLES)
+                )
+
+
+def declaration_of(name: str, cls: type) -> Declaration:
+    """A service class's declaration; a class that declares nothing has no place in the rules."""
+    parts = [getattr(cls, a, None) for a in ("subscribes", "publishes", "serves")]
+    if all(p is None for p in parts):
+        raise InputError(
+            f"service {name!r} ({cls.__module__}.{cls.__qualname__}) declares no streams; "
+            "give it `subscribes`, `publishes` and `serves` class attributes"
+        )
+    subscribes, publishes, serves = (tuple(p or ()) for p in parts)
+    return Declaration(name, subscribes, publishes, serves)
+
+
+def registry_declarations() -> list[Declaration]:
+    """The declarations of every service `beyond up` starts."""
+    from services.registry import SERVICES, service_class
+
+    return [declaration_of(n, service_class(n)) for n in SERVICES]
+
+
+def _key(suffix: str) -> str:
+    return f"{_ANY_ROBOT}/{suffix}"
+
+
+def _stream_keys(streams: Iterable[str]) -> list[str]:
+    keys = []
+    for stream in streams:
+        key = _key(STREAMS[stream][0])
+        keys += [key, f"{key}/@adv/**"]
+    return keys
+
+
+@dataclass
+class _Rules:
+    rules: list[dict[str, Any]] = field(default_factory=list)
+    subjects: list[dict[str, Any]] = field(default_factory=list)
+    policies: list[dict[str, Any]] = field(default_factory=list)
+
+    def role(
+        self,
+        subject: str,
+        grants: list[tuple[str, list[str], str, list[str]]],
+        also: Sequence[str] = (),
+    ) -> list[str]:
+        """One subject (certificate common name) and its rules: (what, messages, flow, keys),
+        plus rules already made for others (`also`, by id). Returns the ids of its own."""
+        ids: list[str] = []
+        for what, messages, flow, keys in grants:
+            if not keys:
+                continue
+            rule_id = f"{subject}-{what}-{flow}"
+            self.rules.append(
+                {
+                    "id": rule_id,
+                    "messages": list(messages),
+                    "flows": [flow],
+                    "permission": "allow",
+                    "key_exprs": sorted(set(keys)),
+                }
+            )
+            ids.append(rule_id)
+        self.subjects.append({"id": subject, "cert_common_names": [subject]})
+        self.policies.append({"id": subject, "rules": ids + list(also), "subjects": [subject]})
+        return ids
+
+
+def _reader_grants(declarations: list[Declaration]) -> list[tuple[str, list[str], str, list[str]]]:
+    """Read everything, ask every queryable, watch liveliness: no put, no serving."""
+    everything = [f"{_ANY_ROBOT}/**"]
+    streams = sorted({s for d in declarations for s in d.publishes})
+    read = everything + _stream_keys(streams)
+    ask = [_key(QUERYABLES[q]) for d in declarations for q in d.serves] + [_key(f"{HEALTH}/*")]
+    alive = [_key(f"{ALIVE}/**")]
+    return [
+        ("read", _IN_IN, "ingress", read),
+        ("read", _IN_EG, "egress", read),
+        ("ask", ["query"], "ingress", ask),
+        ("ask", ["reply"], "egress", ask),
+        ("watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", alive),
+        ("watch", ["liveliness_token"], "egress", alive),
+    ]
+
+
+def access_control(declarations: list[Declaration] | None = None) -> dict[str, Any]:
+    """The `access_control` block of the router's Zenoh configuration."""
+    declarations = registry_declarations() if declarations is None else declarations
+    published = {s: d.name for d in declarations for s in d.publishes}
+    names = [d.name for d in declarations]
+    reserved = [TOOLS_ROLE, *SIDE_MONITORS]
+    for d in declarations:
+        if names.count(d.name) > 1 or d.name in reserved:
+            raise InputError(f"service name {d.name!r} is used twice or reserved ({reserved})")
+        for stream in d.subscribes:
+            if stream not in published:
+                raise InputError(
+                    f"service {d.name!r} subscribes to {stream!r}, which no service publishes; "
+                    f"published: {', '.join(sorted(published))}"
+                )
+    rules = _Rules()
+    alive = [_key(f"{ALIVE}/**")]
+    own: dict[str, list[str]] = {}
+    for d in declarations:
+        health = [_key(f"{HEALTH}/{d.name}")]
+        # every service reports its own Progress and may read and ask everyone's (pacing,
+        # resuming): how far each stream is handled, never any data
+        outputs = _stream_keys(d.publishes) + health + [_key(f"{PROGRESS}/{d.name}")]
+        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*")]
+        serves = [_key(QUERYABLES[q]) for q in d.serves] + health
+        own[d.name] = rules.role(
+            d.name,
+            [
+                ("out", _OUT_IN, "ingress", outputs),
+                # whoever subscribes or asks, with whatever wildcard: a publisher must hear of
+                # it to send at all (clients filter on the writer's side); it learns only what
+                # others ask for, and still puts and replies on nothing but its own keys
+                ("out", _OUT_EG, "egress", [_key("**"), *outputs]),
+                ("in", _IN_IN, "ingress", inputs),
+                ("in", _IN_EG, "egress", inputs),
+                ("serve", ["declare_queryable", "reply"], "ingress", serves),
+                ("serve", ["query"], "egress", serves),
+                ("alive", ["liveliness_token"], "ingress", [_key(f"{ALIVE}/{d.name}")]),
+                ("watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", alive),
+                ("watch", ["liveliness_token"], "egress", alive),
+            ],
+        )
+    rules.role(TOOLS_ROLE, _reader_grants(declarations))
+    from services.registry import PROFILES
+
+    for side, monitors in SIDE_MONITORS.items():
+        tokens = [_key(f"{ALIVE}/{m}") for m in monitors]
+        services = [n for n in PROFILES[SIDE_PROFILES[side]] if n in own]
+        rules.role(
+            side,
+            [*_reader_grants(declarations), ("alive", ["liveliness_token"], "ingress", tokens)],
+            also=[rule for n in services for rule in own[n]],
+        )
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules.rules,
+        "subjects": rules.subjects,
+        "policies": rules.policies,
+    }
+
+
+def identities(declarations: list[Declaration] | None = None) -> list[str]:
+    """Every identity the rules know: the services, the tools, the sides (and the router)."""
+    declarations = registry_declarations() if declarations is None else declarations
+    return [d.name for d in declarations] + [TOOLS_ROLE, *SIDE_MONITORS]
+
+
+def declared_keys(declaration: Declaration, robot_root: str) -> Mapping[str, set[str]]:
+    """The concrete keys of one robot a declaration allows, by kind (for the Service guard)."""
+    return {
+        "subscribe": {f"{robot_root}/{STREAMS[s][0]}" for s in declaration.subscribes},
+        "publish": {f"{robot_root}/{STREAMS[s][0]}" for s in declaration.publishes},
+        "serve": {f"{robot_root}/{QUERYABLES[q]}" for q in declaration.serves},
+    }

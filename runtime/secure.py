@@ -1,0 +1,61 @@
+"""Zenoh settings of a secure bus: mutual TLS on every link, the access rules on the router.
+
+`--secure DIR` (BEYOND_ZENOH_SECURE) names the keystore (runtime/keystore.py). Every process is
+then a client of a router, or the router itself: peers would meet each other directly and their
+traffic would never pass the router's access rules, so a secure bus has no peers. Every endpoint
+is `tls/`, the only CA trusted is the deployment's own (`root_ca_certificate`), and the router
+requires a client certificate (`enable_mtls`): a process without a certificate from that CA opens
+no session at all. Who a client is comes from its certificate's common name, which the router's
+rules (runtime/acl.py) name; host names are not checked (`verify_name_on_connect` off) because
+robots and workstations are reached by address, and trust rests on the pinned CA, not on DNS.
+
+Certificates are checked before Zenoh sees them (keystore.check): a missing, expired or foreign
+certificate is one line naming the file, not a handshake Zenoh retries forever.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from cognition.errors import InputError
+from runtime import keystore
+
+SECURE_ROUTER_LISTEN = "tls/[::]:7447"
+SECURE_ROUTER_CONNECT = "tls/127.0.0.1:7447"
+
+
+def default_identity(mode: str) -> str:
+    """Who a process is when nobody said: the router, or a read-only tool."""
+    return "router" if mode == "router" else keystore.TOOLS
+
+
+def check_endpoints(listen: list[str], connect: list[str]) -> None:
+    plain = [e for e in listen + connect if not e.startswith("tls/")]
+    if plain:
+        raise InputError(
+            f"a secure bus links only over TLS; endpoints {', '.join(plain)} are not tls/ "
+            "(valid: tls/HOST:PORT)"
+        )
+
+
+def tls_settings(directory: Path, identity: str, mode: str) -> dict[str, Any]:
+    """Zenoh config entries (path -> value) for `identity` from the keystore in `directory`."""
+    ca, cert, key = keystore.check(directory, identity)
+    tls: dict[str, Any] = {
+        "root_ca_certificate": str(ca),
+        "enable_mtls": True,
+        "verify_name_on_connect": False,
+        "close_link_on_expiration": True,
+        "connect_certificate": str(cert),
+        "connect_private_key": str(key),
+    }
+    if mode == "router":
+        tls["listen_certificate"] = str(cert)
+        tls["listen_private_key"] = str(key)
+    sets: dict[str, Any] = {"transport/link/tls": tls}
+    if mode == "router":
+        from runtime.acl import access_control
+
+        sets["access_control"] = access_control()
+    return sets
