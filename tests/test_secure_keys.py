@@ -82,7 +82,7 @@ def test_rules_follow_the_declarations() -> None:
     assert "beyond/*/language/description" in describer_puts
     assert not any("sensors" in k or "affordance" in k for k in describer_puts)
     assert by_id["describer-in-ingress"]["key_exprs"] == sorted(
-        ["beyond/*/language/words", "beyond/*/language/words/@adv/**"]
+        ["beyond/*/language/words", "beyond/*/language/words/@adv/**", "beyond/*/progress/*"]
     )
     assert "beyond/*/affordance/ask" in by_id["reasoner-serve-ingress"]["key_exprs"]
     tools = [r for r in rules["rules"] if r["id"].startswith("tools-")]
