@@ -160,10 +160,48 @@ def load_config(
     )
 
 
+MAX_CONFIG_NESTING = 64
+
+
+def _refuse_deep_nesting(path: Path) -> None:
+    """Zenoh parses its config in native code, where a file nested thousands deep overflows the
+    stack and kills the process (no error to catch): refuse it first. Counting brackets outside
+    strings is enough; comments with brackets only make the count safer."""
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise InputError(f"Zenoh config file {path} cannot be read: {exc.strerror}") from None
+    depth = deepest = 0
+    quote = ""
+    escaped = False
+    for ch in text:
+        if quote:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == quote:
+                quote = ""
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth -= 1
+    if deepest > MAX_CONFIG_NESTING:
+        raise InputError(
+            f"Zenoh config file {path} nests {deepest} levels deep "
+            f"(valid: at most {MAX_CONFIG_NESTING})"
+        )
+
+
 def zenoh_config(config: BusConfig) -> Any:
     """A zenoh.Config for this BusConfig (imported lazily: zenoh is slow to import)."""
     import zenoh
 
+    if config.config_file:
+        _refuse_deep_nesting(Path(config.config_file))
     try:
         zc = (
             zenoh.Config.from_file(str(config.config_file))

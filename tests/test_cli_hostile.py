@@ -181,10 +181,10 @@ CORPUS: list[tuple[str, list[str], str]] = [
     ("describe --samples 1e12", ["describe", "MODEL", "--samples", "10**12"], "integer"),
     (
         "service --set of the wrong type",
-        ["service", "reasoner", "--set", 'effects_wait_s="abc"'],
+        ["service", "reasoner", "--set", 'deadline_s="abc"'],
         "must be float",
     ),
-    ("service --set nan", ["service", "reasoner", "--set", "effects_wait_s=NaN"], "finite"),
+    ("service --set nan", ["service", "reasoner", "--set", "deadline_s=NaN"], "finite"),
     ("service --set negative", ["service", "objects", "--set", "buffer_frames=-1"], ">= 0"),
     ("--port out of range", ["topics", "--port", "70000"], "TCP port"),
     ("--zenoh-config garbage", ["topics", "--zenoh-config", "garbage.bin"], "Zenoh config"),

@@ -8,6 +8,7 @@ import asyncio
 import json
 from pathlib import Path
 
+import msgspec
 import pytest
 from busutil_net import private_config, skeleton_frames
 
@@ -39,7 +40,7 @@ async def test_a_late_subscriber_gets_the_cached_history_in_order_and_counts_it(
         # Samples may be on their way to `ws` already (sent before the publisher knew nobody
         # listens there): data behind them on the same link arrives after them, so once it is
         # in, they are gone, and the subscriber can only get them from the cache.
-        header = frames[0].header
+        header = msgspec.structs.replace(frames[0].header, version=s.StreamEnd.VERSION)
         barrier_out.put(s.StreamEnd(header=header, source="barrier", messages=len(frames)))
         await barrier_in.recv(timeout=10)
         sub = reliable_subscription(ws, ws.keys.skeleton, s.SkeletonFrame)

@@ -12,6 +12,8 @@ Identities are the services' names, the sides' (`router`, `robot`, `workstation`
 
 from __future__ import annotations
 
+from beyond.commands import argtypes
+
 import argparse
 import json
 import os
@@ -26,10 +28,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="keys_command", metavar="ACTION", required=True)
     init = sub.add_parser("init", help="a new CA and one certificate per identity")
     init.add_argument("dir", type=Path)
-    init.add_argument("--days", type=int, default=365, help="validity of the certificates")
+    days = argtypes.count(1, 36500, "days")
+    init.add_argument("--days", type=days, default=365, help="validity of the certificates")
     add = sub.add_parser("add", help="a certificate for one more identity (or renew one)")
     add.add_argument("name")
-    add.add_argument("--days", type=int, default=365, help="validity of the certificate")
+    add.add_argument("--days", type=days, default=365, help="validity of the certificate")
     show = sub.add_parser("show", help="the certificates in the keystore and their expiry")
     for p in (add, show):
         p.add_argument("--dir", type=Path, help="keystore directory ($BEYOND_ZENOH_SECURE)")

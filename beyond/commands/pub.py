@@ -7,6 +7,8 @@ message refused here would have been refused by the services too."""
 
 from __future__ import annotations
 
+from beyond.commands import argtypes
+
 import argparse
 import asyncio
 import contextlib
@@ -32,8 +34,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", help="key, e.g. beyond/robot/language/description")
     parser.add_argument("type", help="message type, e.g. Description (see `beyond schemas`)")
     parser.add_argument("json", help="the message as JSON ('-' reads it from stdin)")
-    parser.add_argument("--rate", type=float, help="publish repeatedly at this rate (Hz)")
-    parser.add_argument("--count", type=int, default=None, help="messages to send (default 1)")
+    parser.add_argument(
+        "--rate",
+        type=argtypes.number(float, lo=0.0, hi=1e6, lo_open=True, what="Hz"),
+        help="publish repeatedly at this rate (Hz)",
+    )
+    parser.add_argument(
+        "--count", type=argtypes.count(), default=None, help="messages to send (default 1)"
+    )
     parser.add_argument(
         "--wait",
         type=float,

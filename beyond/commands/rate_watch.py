@@ -3,6 +3,8 @@ per key every second and a last one when stopped (by --count, --duration or Ctrl
 
 from __future__ import annotations
 
+from beyond.commands import argtypes
+
 import argparse
 import asyncio
 import json
@@ -24,10 +26,13 @@ Show = Callable[[str, RateStats], str]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", help="key (e.g. beyond/robot/sensors/skeleton) or pattern with *")
     parser.add_argument(
-        "--window", type=float, default=5.0, help="sliding window in seconds (default 5)"
+        "--window",
+        type=argtypes.seconds(),
+        default=5.0,
+        help="sliding window in seconds (default 5)",
     )
-    parser.add_argument("--count", type=int, help="stop after this many messages")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--count", type=argtypes.count(), help="stop after this many messages")
+    parser.add_argument("--duration", type=argtypes.seconds(), help="stop after this many seconds")
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
     add_bus_arguments(parser)
 
