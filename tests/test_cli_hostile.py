@@ -185,7 +185,7 @@ CORPUS: list[tuple[str, list[str], str]] = [
         "must be float",
     ),
     ("service --set nan", ["service", "reasoner", "--set", "deadline_s=NaN"], "finite"),
-    ("service --set negative", ["service", "objects", "--set", "buffer_frames=-1"], ">= 0"),
+    ("service --set negative", ["service", "objects", "--set", "onset_s=-1"], ">= 0"),
     ("--port out of range", ["topics", "--port", "70000"], "TCP port"),
     ("--zenoh-config garbage", ["topics", "--zenoh-config", "garbage.bin"], "Zenoh config"),
 ]
@@ -407,7 +407,8 @@ def test_no_command_line_crashes_or_hangs(
 
     check()
     print(f"{' '.join(path)}: {ran} generated cases, {len(failures)} failed")
-    assert ran >= PER_COMMAND // 2  # hypothesis may stop early only on a tiny space
+    # hypothesis stops early only on a tiny space (a command with one option or none)
+    assert ran >= (PER_COMMAND // 2 if len(slots) > 1 else 1)
     assert not failures, "\n".join(failures[:20])
 
 

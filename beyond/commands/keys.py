@@ -12,13 +12,12 @@ Identities are the services' names, the sides' (`router`, `robot`, `workstation`
 
 from __future__ import annotations
 
-from beyond.commands import argtypes
-
 import argparse
 import json
 import os
 from pathlib import Path
 
+from beyond.commands import argtypes
 from cognition.errors import InputError
 
 HELP = "make the secure bus's keystore (CA, certificates) and show its access rules"

@@ -7,8 +7,6 @@ message refused here would have been refused by the services too."""
 
 from __future__ import annotations
 
-from beyond.commands import argtypes
-
 import argparse
 import asyncio
 import contextlib
@@ -18,6 +16,7 @@ from typing import Any
 
 import msgspec
 
+from beyond.commands import argtypes
 from beyond.commands.bus_keys import check_key
 from beyond.commands.terminal import stop_on_signals
 from cognition.errors import InputError

@@ -3,8 +3,6 @@ per key every second and a last one when stopped (by --count, --duration or Ctrl
 
 from __future__ import annotations
 
-from beyond.commands import argtypes
-
 import argparse
 import asyncio
 import json
@@ -12,6 +10,7 @@ import sys
 import time
 from collections.abc import Callable
 
+from beyond.commands import argtypes
 from beyond.commands.bus_keys import check_key
 from beyond.commands.terminal import stop_on_signals
 from cognition.errors import InputError
