@@ -248,6 +248,9 @@ async def vision_latency(config: BusConfig, repeats: int) -> tuple[list[float], 
         last_input = max(sent_at[trigger], sent_at[first_cam])
         from_last.append((arrived[segment_id] - last_input) * 1e3)
         from_trigger.append((arrived[segment_id] - sent_at[trigger]) * 1e3)
+    if os.environ.get("BENCH_VERBOSE"):
+        for segment_id in sorted(needs):
+            print(f"gesture {segment_id}: from last input {from_last[segment_id - 1]:.1f} ms")
     return from_last, from_trigger
 
 
