@@ -40,6 +40,7 @@ COMMANDS: dict[str, str] = {
     "service": "service",
     "up": "up",
     "ask": "ask",
+    "health": "health",
 }
 
 
