@@ -9,6 +9,18 @@
 ARG BASE=python:3.11-slim
 FROM ${BASE}
 
+# The image's settings come first: with podman's vfs storage every step after a big layer
+# copies that layer again, even when cached.
+ENV PYTHONUNBUFFERED=1 \
+    BEYOND_LOG_FORMAT=json
+EXPOSE 7447
+# Healthy while the container's service answers a health query on the bus, or its router
+# accepts a session: `beyond health` finds which from the container's own processes.
+HEALTHCHECK --interval=30s --timeout=15s --start-period=120s --retries=3 \
+    CMD ["beyond", "health", "--timeout", "10"]
+ENTRYPOINT ["beyond"]
+CMD ["--help"]
+
 # espeak-ng: the speech service's synthesizer (without it, speech prints the sentences); the
 # local base has it already
 RUN if ! command -v espeak-ng >/dev/null; then \
@@ -20,7 +32,8 @@ RUN if ! command -v espeak-ng >/dev/null; then \
     && mkdir -p /data/speech && chown -R beyond /data
 
 # Dependencies first, from pyproject.toml alone (and the build backend, so that installing the
-# project itself needs no network): a change to the code reuses this layer.
+# project itself needs no network): a change to the code reuses this layer. The packages' own
+# test suites are left out (a quarter of the files).
 # CA_BUNDLE: a CA file for pip behind a TLS-inspecting proxy, mounted into the build, e.g.
 #   podman build -v /etc/ssl/certs/ca-certificates.crt:/run/ca.crt:ro --build-arg CA_BUNDLE=/run/ca.crt
 ARG CA_BUNDLE=
@@ -29,23 +42,17 @@ COPY pyproject.toml ./
 RUN if [ -n "$CA_BUNDLE" ]; then export PIP_CERT="$CA_BUNDLE"; fi \
     && python -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" > /tmp/requirements.txt \
     && python -m pip install --no-cache-dir -r /tmp/requirements.txt "setuptools>=68" wheel \
-    && rm /tmp/requirements.txt
+    && rm /tmp/requirements.txt \
+    && find "$(python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" \
+        -mindepth 2 -type d -name tests -prune -exec rm -rf {} +
 
-# The project (.dockerignore lets only its packages, README and deploy/ in); deploy/ is also
-# baked in as /etc/beyond, the defaults that compose mounts ./deploy over.
+# The project (.dockerignore lets only its packages, README and deploy configs in); the
+# configs are also baked in as /etc/beyond, the defaults that compose mounts ./deploy over.
 COPY . ./
+COPY deploy /etc/beyond
 RUN python -m pip install --no-cache-dir --no-deps --no-build-isolation . \
     && python -c "import zenoh.ext, beyond.cli, services.registry" \
-    && cp -r deploy /etc/beyond && rm -rf build *.egg-info
+    && rm -rf build *.egg-info
 
 USER beyond
 WORKDIR /data
-ENV PYTHONUNBUFFERED=1 \
-    BEYOND_LOG_FORMAT=json
-EXPOSE 7447
-# Healthy while the bus sees the container's service (its liveliness token) or its router
-# accepts a session: `beyond health` finds which from the container's own processes.
-HEALTHCHECK --interval=30s --timeout=15s --start-period=120s --retries=3 \
-    CMD ["beyond", "health", "--timeout", "10"]
-ENTRYPOINT ["beyond"]
-CMD ["--help"]
