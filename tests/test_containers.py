@@ -106,8 +106,11 @@ def unavailable() -> str | None:
     return None
 
 
-def show(text: str) -> None:
-    print(text, file=sys.__stdout__, flush=True)  # in CI's log even when the test passes
+def show(request: pytest.FixtureRequest, text: str) -> None:
+    """Print to CI's log, even when the test passes."""
+    capture = request.config.pluginmanager.getplugin("capturemanager")
+    with capture.global_and_fixture_disabled() if capture else contextlib.nullcontext():
+        print(text, flush=True)
 
 
 @dataclass
@@ -134,7 +137,7 @@ def build_image() -> tuple[float, bool]:
 
 
 @pytest.fixture(scope="module")
-def built() -> Built:
+def built(request: pytest.FixtureRequest) -> Built:
     reason = unavailable()
     if reason is not None:
         pytest.skip(reason)
@@ -159,9 +162,10 @@ def built() -> Built:
     result = Built(base_s, build_s, cold, cached_s, size / 1e6)
     base = f"{base_s:.0f} s (built)" if base_s is not None else "cached"
     show(
+        request,
         f"\nbase image: {base}; image build {build_s:.0f} s "
         f"({'cold' if cold else 'every step cached'}), cached build {cached_s:.0f} s; "
-        f"image size {result.size_mb:.0f} MB"
+        f"image size {result.size_mb:.0f} MB",
     )
     return result
 
@@ -313,6 +317,12 @@ class Deployment:
         self.podman("rm", "-f", "-t", "2", self.container("probe"), check=False)
         with contextlib.suppress(Exception):
             self.compose("down", "-v", "-t", "2", timeout=240)
+        label = f"label=io.podman.compose.project={self.project}"  # whatever down left
+        for kind in ("container", "network", "volume"):
+            listed = self.podman(kind, "ls", "-q", *(["-a"] if kind == "container" else []),
+                                 "--filter", label, check=False).stdout.split()  # fmt: skip
+            if listed:
+                self.podman(kind, "rm", "-f", *listed, check=False)
         for proc in self.procs:
             try:
                 proc.popen.wait(15)
@@ -331,7 +341,9 @@ def deployment(built: Built, request: pytest.FixtureRequest) -> Iterator[Deploym
         d.close()
 
 
-def test_the_deployment_describes_restarts_and_cleans_up(deployment: Deployment) -> None:
+def test_the_deployment_describes_restarts_and_cleans_up(
+    deployment: Deployment, request: pytest.FixtureRequest
+) -> None:
     d = deployment
     t_up = time.monotonic()
     d.compose("up", "-d", "--no-build")
@@ -340,8 +352,9 @@ def test_the_deployment_describes_restarts_and_cleans_up(deployment: Deployment)
         event="described"))[0][0]  # fmt: skip
     described = d.all_described()
     show(
+        request,
         f"\nup -> first description {first - t_up:.1f} s; gestures described: "
-        + "; ".join(f'{g}: "{s}"' for g, s in sorted(described.items()))
+        + "; ".join(f'{g}: "{s}"' for g, s in sorted(described.items())),
     )
 
     # SIGKILL a container's init: the restart policy brings it back, the bus sees it again
@@ -362,12 +375,17 @@ def test_the_deployment_describes_restarts_and_cleans_up(deployment: Deployment)
     assert back["State"]["Pid"] != state["Pid"]
     health = d.podman("healthcheck", "run", name, check=False)
     assert health.returncode == 0, health.stdout + health.stderr
-    show(f"describer SIGKILLed: back on the bus {time.monotonic() - t_kill:.1f} s later, healthy")
+    show(
+        request,
+        f"describer SIGKILLed: back on the bus {time.monotonic() - t_kill:.1f} s later, healthy",
+    )
 
     assert d.down() == []
 
 
-def test_the_deployment_survives_a_cut_link(deployment: Deployment) -> None:
+def test_the_deployment_survives_a_cut_link(
+    deployment: Deployment, request: pytest.FixtureRequest
+) -> None:
     d = deployment
     d.compose("up", "-d", "--no-build")
     d.start_probes()
@@ -392,8 +410,9 @@ def test_the_deployment_survives_a_cut_link(deployment: Deployment) -> None:
     assert 2 not in live  # it ended during the outage: it reached the workstation from the cache
     after = min(t for t, e in d.ws_events.where(event="described") if e["segment"] == 2)
     show(
+        request,
         f"\nlink cut {t_up - t_down:.1f} s; gesture 2 described {after - t_up:.1f} s after it "
         "came back; gestures described: "
-        + "; ".join(f'{g}: "{s}"' for g, s in sorted(described.items()))
+        + "; ".join(f'{g}: "{s}"' for g, s in sorted(described.items())),
     )
     assert d.down() == []
