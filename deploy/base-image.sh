@@ -37,6 +37,7 @@ fi
 command -v debootstrap >/dev/null || { echo "base-image.sh: install debootstrap first" >&2; exit 2; }
 
 root=$(mktemp -d /var/tmp/beyond-base.XXXXXX)
+chmod 755 "$root"  # it becomes the image's /: mktemp made it 0700, closed to non-root users
 trap 'rm -rf "$root"' EXIT
 debootstrap --variant=minbase bookworm "$root" "$mirror"
 # apt inside, not debootstrap --include: debootstrap's resolver misses python3.11-venv's deps

@@ -142,13 +142,18 @@ def built(request: pytest.FixtureRequest) -> Built:
     if reason is not None:
         pytest.skip(reason)
     base_s = None
-    if run(["podman", "image", "exists", BASE], check=False).returncode != 0:
+    # a non-root user runs Python in the base (as the image's user will), or the base is rebuilt
+    probe = ["podman", "run", "--rm", "--user", "65534", BASE, "python", "-c", "print(1)"]
+    exists = run(["podman", "image", "exists", BASE], check=False).returncode == 0
+    ran = run(probe, check=False) if exists else None
+    if ran is None or ran.returncode != 0 or ran.stdout.strip() != "1":
         t0 = time.monotonic()
-        run(["bash", str(REPO / "deploy/base-image.sh"), "--tag", BASE], timeout=900)
+        force = ["--force"] if exists else []
+        run(["bash", str(REPO / "deploy/base-image.sh"), "--tag", BASE, *force], timeout=900)
         base_s = time.monotonic() - t0
-    probe = run(["podman", "run", "--rm", BASE, "python", "-c", "print(1)"], check=False)
-    if probe.returncode != 0 or probe.stdout.strip() != "1":
-        pytest.skip(f"podman cannot run a container here: {probe.stderr.strip()[-500:]}")
+        ran = run(probe, check=False)
+        if ran.returncode != 0 or ran.stdout.strip() != "1":
+            pytest.skip(f"podman cannot run a container here: {ran.stderr.strip()[-500:]}")
     build_s, cold = build_image()
     cached_s, again = build_image() if cold else (build_s, False)
     assert not again, "a second build with nothing changed ran steps again"
