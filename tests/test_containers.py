@@ -374,19 +374,28 @@ def test_the_deployment_describes_restarts_and_cleans_up(
     count0 = int(json.loads(d.podman("inspect", name).stdout)[0].get("RestartCount", 0))
     t_kill = time.monotonic()
     os.kill(int(state["Pid"]), signal.SIGKILL)
-    d.wait(
-        d.ws_events, "the killed describer's token back on the bus",
-        lambda: any(
-            t > t_kill and e["key"].endswith("/alive/describer") and "PUT" in e["kind"]
-            for t, e in d.ws_events.where(event="alive")
-        ),
-    )  # fmt: skip
+
+    def token(kind: str, after: float) -> float | None:
+        times = [
+            t for t, e in d.ws_events.where(event="alive")
+            if t > after and e["key"].endswith("/alive/describer") and kind in e["kind"]
+        ]  # fmt: skip
+        return min(times) if times else None
+
+    t_gone = d.wait(d.ws_events, "the killed describer's token gone",
+                    lambda: token("DELETE", t_kill))  # fmt: skip
+    d.wait(d.ws_events, "the describer's token back on the bus",
+           lambda: token("PUT", t_gone))  # fmt: skip
     back_s = time.monotonic() - t_kill
     back = json.loads(d.podman("inspect", name).stdout)[0]
     assert back["State"]["Running"] and int(back.get("RestartCount", 0)) > count0, back["State"]
     assert back["State"]["Pid"] != state["Pid"]
     health = d.podman("healthcheck", "run", name, check=False)
     assert health.returncode == 0, health.stdout + health.stderr
+    # the service answering on the bus is the new process: it has been up since the kill only
+    answer = d.podman("exec", name, "beyond", "health", "describer").stdout
+    uptime = float(re.search(r"describer up (\d+) s", answer).group(1))  # type: ignore[union-attr]
+    assert uptime <= time.monotonic() - t_kill + 1, answer
     show(
         request,
         f"describer SIGKILLed: restarted and back on the bus {back_s:.1f} s later, healthy",
