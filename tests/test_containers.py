@@ -368,6 +368,10 @@ def test_the_deployment_describes_restarts_and_cleans_up(
         + "; ".join(f'{g}: "{s}"' for g, s in sorted(described.items())),
     )
 
+    for service in ("router", "gestures", "reasoner"):  # the image's health check, each kind
+        health = d.podman("healthcheck", "run", d.container(service), check=False)
+        assert health.returncode == 0, (service, health.stdout + health.stderr)
+
     # SIGKILL a container's init: the restart policy brings it back, the bus sees it again
     name = d.container("describer")
     state = json.loads(d.podman("inspect", name).stdout)[0]["State"]

@@ -78,9 +78,13 @@ def run(args: argparse.Namespace) -> int:
         return 1
     with bus:
         found = asyncio.run(_ask(bus, names, args.timeout))
+        linked = not router or _router_linked(bus, args.timeout)
     missing = [n for n in names if n not in found]
     if missing:
         print(f"unhealthy: no health reply from {', '.join(missing)}", file=sys.stderr)
+        return 1
+    if not linked:
+        print("unhealthy: no router at tcp/127.0.0.1:7447", file=sys.stderr)
         return 1
     for name in names:
         h = found[name]
@@ -102,3 +106,13 @@ async def _ask(bus: Bus, names: list[str], timeout: float) -> dict[str, ServiceH
         if len(found) == len(names) or time.monotonic() > deadline:
             return found
         await asyncio.sleep(0.2)
+
+
+def _router_linked(bus: Bus, timeout: float) -> bool:
+    """Whether the session reached a router (a client session opens without one, and retries)."""
+    deadline = time.monotonic() + timeout
+    while not list(bus.session.info.routers_zid()):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.1)
+    return True
