@@ -49,6 +49,7 @@ COMMANDS: dict[str, str] = {
     "analyse": "analyse",
     "ask": "ask",
     "keys": "keys",
+    "health": "health",
 }
 
 

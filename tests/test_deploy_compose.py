@@ -164,14 +164,34 @@ class Checker:
             if words[0] == "COPY":
                 sources = [w for w in words[1:-1] if not w.startswith("--")]
                 for src in sources:
-                    if not (ctx / src).exists():
-                        self.bad(name, f"{path.name} copies {src}, which does not exist")
+                    for each in self.context_files(ctx, src):
+                        if not (ctx / each).exists():
+                            self.bad(name, f"{path.name} copies {each}, which does not exist")
                 if len(sources) == 1:
                     info["copies"][words[-1].rstrip("/")] = ctx / sources[0]
+            elif words[0] == "HEALTHCHECK" and "CMD" in words:
+                check = yaml.safe_load(line.split("CMD", 1)[1].strip())
+                if not isinstance(check, list) or check[:1] != ["beyond"]:
+                    self.bad(name, f"{path.name} health check {check} is not a beyond command")
+                else:
+                    self.parse(name, [str(a) for a in check[1:]])
             elif words[0] == "ENTRYPOINT":
                 info["entrypoint"] = yaml.safe_load(line.split(None, 1)[1])
         self._dockerfiles[path] = info
         return info
+
+    @staticmethod
+    def context_files(ctx: Path, src: str) -> list[str]:
+        """What `COPY src` takes: the whole context is what .dockerignore lets in, when it
+        excludes everything (`*`) and names each path allowed (`!path`)."""
+        ignore = ctx / ".dockerignore"
+        if src not in (".", "./") or not ignore.is_file():
+            return [src]
+        lines = [x.strip() for x in ignore.read_text(encoding="utf-8").splitlines()]
+        lines = [x for x in lines if x and not x.startswith("#")]
+        if lines[:1] != ["*"]:
+            return [src]
+        return [x[1:] for x in lines if x.startswith("!")]
 
     def check_volumes(self, name: str, s: dict[str, Any]) -> dict[str, Path]:
         """Container directory -> host path of every bind mount."""
@@ -473,7 +493,7 @@ def test_the_checker_reads_the_files_on_disk(tmp_path: Path) -> None:
     """A copy of the tree with one config and one recording removed: both are reported."""
     for name in ("beyond", "cognition", "runtime", "schemas", "services", "recordings"):
         (tmp_path / name).symlink_to(REPO / name)
-    for name in ("pyproject.toml", "README.md", "Dockerfile"):
+    for name in ("pyproject.toml", "README.md", "Dockerfile", ".dockerignore"):
         shutil.copy(REPO / name, tmp_path / name)
     shutil.copytree(REPO / "deploy", tmp_path / "deploy")
     assert check_compose(load_compose(), tmp_path) == []
@@ -489,3 +509,18 @@ def test_the_checker_reads_the_files_on_disk(tmp_path: Path) -> None:
     assert any("ingest: option recording=/recordings/missing.mcap" in p for p in problems)
     assert any("describer: service config" in p and "nbest_sentences" in p for p in problems)
     assert any("copies README.md, which does not exist" in p for p in problems)
+
+
+def test_the_checker_reads_the_dockerfile(tmp_path: Path) -> None:
+    """A health check the CLI refuses, and a context file .dockerignore lets in that is gone."""
+    for name in ("beyond", "cognition", "runtime", "schemas", "services", "recordings", "deploy"):
+        (tmp_path / name).symlink_to(REPO / name)
+    for name in ("pyproject.toml", "README.md", ".dockerignore"):
+        shutil.copy(REPO / name, tmp_path / name)
+    text = (REPO / "Dockerfile").read_text(encoding="utf-8")
+    assert '"beyond", "health"' in text
+    (tmp_path / "Dockerfile").write_text(text.replace('"beyond", "health"', '"beyond", "helth"'))
+    (tmp_path / "schemas").unlink()
+    problems = check_compose(load_compose(), tmp_path)
+    assert any("command ['helth'] is not a beyond command" in p for p in problems), problems
+    assert any("copies schemas, which does not exist" in p for p in problems), problems
