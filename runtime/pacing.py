@@ -30,9 +30,9 @@ about the machine, not the data.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections.abc import Iterable
+from typing import Any
 
 from runtime.bus import Bus
 from schemas.messages import Progress, ServiceHealth
@@ -40,6 +40,7 @@ from schemas.messages import Progress, ServiceHealth
 log = logging.getLogger("beyond.pacing")
 DEFAULT_WINDOW_S = 0.5
 _CHECK_ALIVE_S = 2.0  # waiting this long on a consumer: is it still there?
+HEALTH_WAIT_S = 60.0  # asking a live consumer what it takes
 
 
 class Pacer:
@@ -89,14 +90,27 @@ class Pacer:
 
         self._close_queryable = self.bus.queryable(self.bus.keys.progress("*"), answer)
         for name in self.names:
-            with contextlib.suppress(Exception):
-                for reply in await self.bus.query(self.bus.keys.health(name), ServiceHealth):
-                    health = reply.message
-                    taken = set(health.inputs) & self.keys
-                    if taken:
-                        self.takes[name] = taken
-                    if self.bus.keys.progress(name) in health.outputs:
-                        self.handled.setdefault(name, {})  # it reports: wait for it from now
+            for reply in await self._health(name):
+                health = reply.message
+                taken = set(health.inputs) & self.keys
+                if taken:
+                    self.takes[name] = taken
+                if self.bus.keys.progress(name) in health.outputs:
+                    self.handled.setdefault(name, {})  # it reports: wait for it from now
+
+    async def _health(self, name: str) -> list[Any]:
+        """The health reply of a consumer, asked again while it times out: on a busy machine
+        one query can, and giving up would leave that consumer unpaced. An answer with no
+        reply means nothing serves its health (a monitor): nothing to pace on."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + HEALTH_WAIT_S
+        while True:
+            try:
+                return await self.bus.query(self.bus.keys.health(name), ServiceHealth, timeout=5.0)
+            except Exception as exc:  # Zenoh's timeout comes back as an error reply
+                if loop.time() > deadline or not await self.bus.alive(self.bus.keys.alive(name)):
+                    log.warning("consumer %s never answered its health query (%s)", name, exc)
+                    return []
 
     def stop(self) -> None:
         if self._task is not None:

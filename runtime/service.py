@@ -21,10 +21,12 @@ import asyncio
 import contextlib
 import inspect
 import logging
+import os
 import signal
+import sys
 import time
 from collections.abc import Awaitable, Callable
-from typing import Any, Literal, TypeVar, overload
+from typing import Any, Literal, NoReturn, TypeVar, overload
 
 from cognition.errors import InputError
 from runtime.bus import Bus, Publisher, Subscription
@@ -489,3 +491,14 @@ class Service:
             logging.getLogger("beyond").error(str(exc))
             return 2
         return 0
+
+    @classmethod
+    def main_and_exit(cls, *args: Any, **kwargs: Any) -> NoReturn:
+        """`main`, then leave at once: the bus is closed and the logs flushed by then, and the
+        interpreter's own teardown of native threads (Zenoh's, BLAS's) has been seen to abort
+        a process that had stopped cleanly ("exception not rethrown", SIGABRT)."""
+        code = cls.main(*args, **kwargs)
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)

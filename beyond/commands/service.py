@@ -50,4 +50,4 @@ def service_options(name: str, config: str | None, sets: list[str]) -> dict[str,
 def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
-    return cls.main(config=config_from_args(args), **options)
+    cls.main_and_exit(config=config_from_args(args), **options)
