@@ -11,6 +11,7 @@ import asyncio
 import sys
 from pathlib import Path
 
+from beyond.commands import argtypes
 from beyond.commands.terminal import stop_on_signals
 from cognition.errors import InputError
 from runtime.bus import Bus
@@ -26,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--port",
         dest="ws_port",
-        type=int,
+        type=argtypes.number(int, lo=0, hi=65535, what="TCP port, 0: any free one"),
         default=DEFAULT_PORT,
         help=f"WebSocket port (default {DEFAULT_PORT})",
     )

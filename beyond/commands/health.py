@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from beyond.commands import argtypes
 from cognition.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
@@ -26,7 +27,9 @@ HELP = "exit 0 when the named (default: locally running) services are alive on t
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("services", nargs="*", metavar="SERVICE", help="service names")
-    parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait (default 5)")
+    parser.add_argument(
+        "--timeout", type=argtypes.seconds(), default=5.0, help="seconds to wait (default 5)"
+    )
     add_bus_arguments(parser)
 
 

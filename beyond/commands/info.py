@@ -15,6 +15,7 @@ from typing import Any
 
 import zenoh
 
+from beyond.commands import argtypes
 from beyond.commands.bus_keys import check_key
 from runtime.bus import Bus, decode_any
 from runtime.cliargs import add_bus_arguments, config_from_args
@@ -28,7 +29,10 @@ HELP = "publishers, subscribers, type and traffic of a key"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", help="key, e.g. beyond/robot/sensors/skeleton")
     parser.add_argument(
-        "--duration", type=float, default=2.0, help="seconds to listen for traffic (default 2)"
+        "--duration",
+        type=argtypes.seconds(),
+        default=2.0,
+        help="seconds to listen for traffic (default 2)",
     )
     parser.add_argument("--json", action="store_true", help="one JSON object")
     add_bus_arguments(parser)

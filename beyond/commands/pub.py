@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--wait",
-        type=float,
+        type=argtypes.seconds(zero=True),
         default=2.0,
         help="seconds to wait for a subscriber before sending (default 2; 0: do not wait)",
     )

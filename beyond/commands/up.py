@@ -91,7 +91,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--foxglove",
         nargs="?",
-        type=int,
+        type=argtypes.port,
         const=8765,
         metavar="PORT",
         help="also serve the bus to Foxglove on ws://localhost:PORT (default 8765)",
