@@ -53,11 +53,21 @@ async def _run_once(config, env, keys: s.Keys) -> list[tuple[str, bytes]]:  # ty
                 pace_for=["gestures", "reasoner"],
             )
             assert stats.messages > 100 and not stats.damaged
-            while True:  # until the final word probabilities of the one gesture
+            # until every stream's last message of the one gesture is in: its words, its end
+            # event, its final posterior and final prediction (they travel on different keys,
+            # so the words may well come before the end event)
+            last = {
+                keys.words: lambda m: True,
+                keys.gesture_segment: lambda m: m.event == "end",
+                keys.gesture_posterior: lambda m: m.final,
+                keys.affordance: lambda m: m.final,
+            }
+            done: set[str] = set()
+            while done != set(last):
                 key, payload = await asyncio.wait_for(arrived.get(), 30)
                 outputs.append((key, payload))
-                if key == keys.words:
-                    break
+                if last[key](s.decode(payload, streams[key])):
+                    done.add(key)
         finally:
             codes = await stop_services(procs)
             for task in tasks:
@@ -77,7 +87,7 @@ async def test_shipped_recording_replays_to_identical_bytes() -> None:
         assert [p for k, p in first if k == key] == [p for k, p in second if k == key], key
     kinds = {key for key, _ in first}
     assert kinds == {keys.gesture_segment, keys.gesture_posterior, keys.affordance, keys.words}
-    words = s.decode(first[-1][1], s.WordProbabilities)
+    words = s.decode(next(p for k, p in first if k == keys.words), s.WordProbabilities)
     assert words.final and words.segment_id == 1
     belief = words.action_belief
     assert max(belief, key=belief.__getitem__) == "touch"  # the recording shows a touch
