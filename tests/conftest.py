@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -44,3 +46,44 @@ def node_modules(tmp_path_factory: pytest.TempPathFactory) -> Path:
         last = (done.stderr.strip().splitlines() or ["?"])[-1]
         pytest.skip(f"npm install {' '.join(NODE_PACKAGES)} failed: {last}")
     return folder / "node_modules"
+
+
+# -- figures a passing test shows in CI's log ---------------------------------------------------
+# Tests run in two pytest-xdist workers (Makefile): the container test in one, everything else in
+# the other, in file order as before. A worker's output never reaches the terminal, so a figure a
+# test wants seen in CI's log (build times, outage timelines) goes through its report instead.
+
+SHOWN = "shown"
+
+
+@pytest.fixture
+def show(request: pytest.FixtureRequest) -> Callable[[str], None]:
+    """Call it with text to print in the run's summary, even when the test passes."""
+
+    def add(text: str) -> None:
+        request.node.user_properties.append((SHOWN, text))
+
+    return add
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The container test is mostly waiting on podman, leases and a replay in real time: it runs
+    beside the rest of the suite, in a worker of its own, rather than after it."""
+    for item in items:
+        group = "containers" if item.get_closest_marker("containers") else "suite"
+        item.add_marker(pytest.mark.xdist_group(group))
+
+
+def pytest_terminal_summary(terminalreporter: Any) -> None:
+    shown: dict[str, list[str]] = {}  # each phase's report carries all the test showed so far
+    for reports in terminalreporter.stats.values():
+        for report in reports:
+            texts = [t for k, t in getattr(report, "user_properties", ()) if k == SHOWN]
+            if len(texts) > len(shown.get(report.nodeid, [])):
+                shown[report.nodeid] = texts
+    if shown:
+        terminalreporter.section("figures shown by the tests")
+        for nodeid, texts in shown.items():
+            terminalreporter.write_line(f"{nodeid}:")
+            for text in texts:
+                terminalreporter.write_line(text.strip("\n"))

@@ -9,14 +9,16 @@ and the workstation services on the compose bridge network, the robot services o
 network, replaying recordings/tap-ball-grasp-box.mcap. Two probes (tests/netns_util.py) watch
 the bus: one in a container on the workstation's network, one on the robot's loopback.
 
-- described: every gesture of the recording gets its final description on the workstation, with
-  the verb of its action (tap, then grasp); a container killed with SIGKILL is restarted by its
-  restart policy, its service comes back on the bus and passes its health check; `down -v`
-  leaves no container, network or volume.
+One deployment is checked in stages (each compose cycle costs most of a minute):
 - cut link: once the robot's first gesture has ended, the robot-to-router link is dropped
-  (iptables in the namespace, on connections to the router's published port) until the robot
-  has given up on it and the next gesture has ended; then it comes back, and every gesture is
-  still described, the one that ended during the outage from the robot's publisher caches.
+  (iptables in the namespace, on connections to the router's published port) until both ends
+  have given up on it and the next gesture has ended; then it comes back;
+- described: every gesture of the recording gets its final description on the workstation, with
+  the verb of its action (tap, then grasp), the one that ended during the outage recovered from
+  the robot's publisher caches;
+- restarted: a container killed with SIGKILL is restarted by its restart policy, its service
+  comes back on the bus and passes its health check;
+- cleaned up: `down -v` leaves no container, network or volume.
 
 Skipped, with the reason, where podman cannot run (not root, no podman, no runc...).
 """
@@ -33,7 +35,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -106,13 +108,6 @@ def unavailable() -> str | None:
     return None
 
 
-def show(request: pytest.FixtureRequest, text: str) -> None:
-    """Print to CI's log, even when the test passes."""
-    capture = request.config.pluginmanager.getplugin("capturemanager")
-    with capture.global_and_fixture_disabled() if capture else contextlib.nullcontext():
-        print(text, flush=True)
-
-
 @dataclass
 class Built:
     base_s: float | None  # None: the base was there already
@@ -120,6 +115,7 @@ class Built:
     steps_run: int  # of its steps, how many were not from the cache (all of them: cold)
     cached_s: float  # a build with every step from the cache
     size_mb: float
+    summary: str
 
 
 def build_image() -> tuple[float, int, int]:
@@ -138,7 +134,7 @@ def build_image() -> tuple[float, int, int]:
 
 
 @pytest.fixture(scope="module")
-def built(request: pytest.FixtureRequest) -> Built:
+def built() -> Built:
     reason = unavailable()
     if reason is not None:
         pytest.skip(reason)
@@ -165,15 +161,13 @@ def built(request: pytest.FixtureRequest) -> Built:
     assert inspect["Config"].get("User") == "beyond", inspect["Config"]  # never root
     check = inspect.get("Healthcheck") or inspect["Config"].get("Healthcheck") or {}
     assert "beyond health" in " ".join(check.get("Test", [])), check
-    result = Built(base_s, build_s, built_steps, cached_s, size / 1e6)
     base = f"{base_s:.0f} s (built)" if base_s is not None else "cached"
-    show(
-        request,
-        f"\nbase image: {base}; image build {build_s:.0f} s "
+    summary = (
+        f"base image: {base}; image build {build_s:.0f} s "
         f"({built_steps} of {steps - 1} steps built), cached build {cached_s:.0f} s; "
-        f"image size {result.size_mb:.0f} MB",
+        f"image size {size / 1e6:.0f} MB"
     )
-    return result
+    return Built(base_s, build_s, built_steps, cached_s, size / 1e6, summary)
 
 
 @dataclass
@@ -353,19 +347,48 @@ def deployment(built: Built, request: pytest.FixtureRequest) -> Iterator[Deploym
         d.close()
 
 
-def test_the_deployment_describes_restarts_and_cleans_up(
-    deployment: Deployment, request: pytest.FixtureRequest
+def test_the_deployment_describes_survives_a_cut_link_restarts_and_cleans_up(
+    deployment: Deployment, built: Built, show: Callable[[str], None]
 ) -> None:
+    """One deployment, checked in stages (one `up` and one `down` instead of one per stage: the
+    compose cycle is most of this test's time)."""
+    show(built.summary)
     d = deployment
-    t_up = time.monotonic()
+    t_start = time.monotonic()
     d.compose("up", "-d", "--no-build")
     d.start_probes()
-    first = d.wait(d.ws_events, "the first description", lambda: d.ws_events.where(
-        event="described"))[0][0]  # fmt: skip
+
+    # the cut link: gesture 1 ends with the link up, gesture 2 while it is down
+    d.wait(d.robot_events, "gesture 1 ending on the robot",
+           lambda: d.robot_events.where(event="end", via="live"))  # fmt: skip
+    t_down = time.monotonic()
+    d.link(up=False)
+    d.wait(
+        d.robot_events, "the robot giving up on the cut link",
+        lambda: gone(d.robot_events, "reasoner", t_down), 60,
+    )  # fmt: skip
+    d.wait(
+        d.robot_events, "gesture 2 ending on the robot while the link is down",
+        lambda: len(d.robot_events.where(event="end", via="live")) >= 2, 120,
+    )  # fmt: skip
+    # Each robot process gives up on its own link at its own lease's end: until the router has
+    # dropped the gestures service's session too, TCP would still retransmit gesture 2's end
+    # on the old connection once the link is back, and it would arrive live, not from a cache.
+    d.wait(
+        d.ws_events, "the router giving up on the robot's gestures service",
+        lambda: gone(d.ws_events, "gestures", t_down), 60,
+    )  # fmt: skip
+    t_up = time.monotonic()
+    d.link(up=True)
     described = d.all_described()
+    live = {e["segment"] for _, e in d.ws_events.where(event="end", via="live")}
+    recovering = {e["segment"] for _, e in d.ws_events.where(event="end", via="recovering")}
+    assert recovering == {1, 2}
+    assert 2 not in live  # it ended during the outage: it reached the workstation from the cache
+    times = {e["segment"]: t for t, e in reversed(d.ws_events.where(event="described"))}
     show(
-        request,
-        f"\nup -> first description {first - t_up:.1f} s; gestures described: "
+        f"up -> first description {times[1] - t_start:.1f} s; link cut {t_up - t_down:.1f} s; "
+        f"gesture 2 described {times[2] - t_up:.1f} s after it came back; gestures described: "
         + "; ".join(f'{g}: "{s}"' for g, s in sorted(described.items())),
     )
 
@@ -402,43 +425,7 @@ def test_the_deployment_describes_restarts_and_cleans_up(
     uptime = float(re.search(r"describer up (\d+) s", answer).group(1))  # type: ignore[union-attr]
     assert uptime <= time.monotonic() - t_kill + 1, answer
     show(
-        request,
         f"describer SIGKILLed: restarted and back on the bus {back_s:.1f} s later, healthy",
     )
 
-    assert d.down() == []
-
-
-def test_the_deployment_survives_a_cut_link(
-    deployment: Deployment, request: pytest.FixtureRequest
-) -> None:
-    d = deployment
-    d.compose("up", "-d", "--no-build")
-    d.start_probes()
-    d.wait(d.robot_events, "gesture 1 ending on the robot",
-           lambda: d.robot_events.where(event="end", via="live"))  # fmt: skip
-    t_down = time.monotonic()
-    d.link(up=False)
-    d.wait(
-        d.robot_events, "the robot giving up on the cut link",
-        lambda: gone(d.robot_events, "reasoner", t_down), 60,
-    )  # fmt: skip
-    d.wait(
-        d.robot_events, "gesture 2 ending on the robot while the link is down",
-        lambda: len(d.robot_events.where(event="end", via="live")) >= 2, 120,
-    )  # fmt: skip
-    t_up = time.monotonic()
-    d.link(up=True)
-    described = d.all_described()
-    live = {e["segment"] for _, e in d.ws_events.where(event="end", via="live")}
-    recovering = {e["segment"] for _, e in d.ws_events.where(event="end", via="recovering")}
-    assert recovering == {1, 2}
-    assert 2 not in live  # it ended during the outage: it reached the workstation from the cache
-    after = min(t for t, e in d.ws_events.where(event="described") if e["segment"] == 2)
-    show(
-        request,
-        f"\nlink cut {t_up - t_down:.1f} s; gesture 2 described {after - t_up:.1f} s after it "
-        "came back; gestures described: "
-        + "; ".join(f'{g}: "{s}"' for g, s in sorted(described.items())),
-    )
     assert d.down() == []

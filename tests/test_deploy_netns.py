@@ -24,6 +24,7 @@ import re
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -229,7 +230,7 @@ class Sides:
 
 @pytest.mark.parametrize("configs", ["deploy", "defaults"])
 def test_split_deployment_survives_a_cut_link(
-    hosts: TwoHosts, tmp_path: Path, configs: str, capsys: pytest.CaptureFixture[str]
+    hosts: TwoHosts, tmp_path: Path, configs: str, show: Callable[[str], None]
 ) -> None:
     """`deploy`: the sides run with deploy/zenoh/*.json5; `defaults`: with the built-in bus
     settings and only `--connect` (the workstation side then joins as clients by itself)."""
@@ -307,9 +308,7 @@ def test_split_deployment_survives_a_cut_link(
            for t, e in robot_events.where(event="alive") if e["key"].endswith("/alive/reasoner")]
         + [(0.0, "link down"), (outage, "link up")]
     )  # fmt: skip
-    with capsys.disabled():  # shown in CI's log even when the test passes
-        print(summary)
-        print("\n".join(f"  {t:+7.2f} s  {what}" for t, what in timeline))
+    show(summary + "\n" + "\n".join(f"  {t:+7.2f} s  {what}" for t, what in timeline))
     assert delay < RECONNECT_GOAL_S, f"first description {delay:.2f} s after the link came back"
     assert stats and int(stats[-1][0]) > 0 and int(stats[-1][1]) == 0, stats
 

@@ -17,7 +17,7 @@ import contextlib
 import random
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -148,7 +148,7 @@ MATRIX: list[tuple[str, float, int | None]] = [
 @pytest.mark.slow
 @pytest.mark.timeout(900)
 async def test_replays_equal_the_offline_analysis_at_any_rate_under_load(
-    busy_machine: None,
+    busy_machine: None, show: Callable[[str], None]
 ) -> None:
     expected = {name: offline_lines(name) for name in SHIPPED}
     first: dict[str, dict[str, list[bytes]]] = {}
@@ -163,5 +163,4 @@ async def test_replays_equal_the_offline_analysis_at_any_rate_under_load(
         table.append((name, rate or "max", kill, len(lines), count, same))
         assert same, (name, rate, {k: (len(captured[k]), len(reference[k])) for k in DERIVED})
     assert all(expected[n] for n in SHIPPED)  # every recording has described gestures
-    for row in table:
-        print("event-time matrix:", *row)
+    show("\n".join(" ".join(["event-time matrix:", *map(str, row)]) for row in table))
