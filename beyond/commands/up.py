@@ -48,6 +48,7 @@ from cognition.paths import REPO_ROOT
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig
+from runtime.service import exit_process
 from schemas.keys import check_name
 from services.launcher import (
     HealthWatch,
@@ -124,7 +125,10 @@ def run(args: argparse.Namespace) -> int:
         config = config.with_(mode="client")
     if config.secure is not None and config.identity is None:  # the monitor is the side's
         config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
-    return asyncio.run(up(args, local_group(config)))
+    status = asyncio.run(up(args, local_group(config)))
+    # every service is stopped and the session closed: leave before the interpreter's teardown,
+    # which aborted `up` now and then (SIGABRT) after a run that had succeeded
+    exit_process(status)
 
 
 def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str]:
