@@ -168,12 +168,15 @@ async def _fuzz(config: BusConfig, seconds: float, sent: list[int]) -> None:
         sent.append(n)
 
 
-async def _health_of_all(config: BusConfig) -> dict[str, s.ServiceHealth | None]:
+Health = dict[str, s.ServiceHealth | None]
+
+
+async def _health_of_all(config: BusConfig) -> Health:
     """Each service's answer to one health query (None: no answer within 10 s)."""
     with Bus.open(config) as bus:
         for name in SERVICES:  # routes to every peer known (see the module's docstring)
             await bus.wait_alive(bus.keys.alive(name), timeout=10)
-        answered: dict[str, s.ServiceHealth | None] = {}
+        answered: Health = {}
         for name in SERVICES:
             try:
                 replies = await bus.query(bus.keys.health(name), s.ServiceHealth, timeout=10)
@@ -181,9 +184,6 @@ async def _health_of_all(config: BusConfig) -> dict[str, s.ServiceHealth | None]
                 replies = []
             answered[name] = replies[0].message if replies else None
         return answered
-
-
-Health = dict[str, s.ServiceHealth | None]
 
 
 async def _run_up(fuzz: bool) -> tuple[str, Health, float, int]:
