@@ -494,11 +494,16 @@ class Service:
 
     @classmethod
     def main_and_exit(cls, *args: Any, **kwargs: Any) -> NoReturn:
-        """`main`, then leave at once: the bus is closed and the logs flushed by then, and the
-        interpreter's own teardown of native threads (Zenoh's, BLAS's) has been seen to abort
-        a process that had stopped cleanly ("exception not rethrown", SIGABRT)."""
-        code = cls.main(*args, **kwargs)
-        logging.shutdown()
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
+        """`main`, then leave at once (`exit_process`)."""
+        exit_process(cls.main(*args, **kwargs))
+
+
+def exit_process(code: int) -> NoReturn:
+    """Leave the process at once with `code`, logs and output flushed: for a process whose
+    Zenoh session is closed and whose work is done (a service, `beyond up`). The interpreter's
+    own teardown of native threads (Zenoh's, BLAS's) has been seen to abort such a process
+    ("FATAL: exception not rethrown", SIGABRT) after it had stopped cleanly."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

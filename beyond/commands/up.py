@@ -48,6 +48,7 @@ from cognition.paths import REPO_ROOT
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig
+from runtime.service import exit_process
 from schemas.keys import check_name
 from services.launcher import (
     HealthWatch,
@@ -124,7 +125,10 @@ def run(args: argparse.Namespace) -> int:
         config = config.with_(mode="client")
     if config.secure is not None and config.identity is None:  # the monitor is the side's
         config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
-    return asyncio.run(up(args, local_group(config)))
+    status = asyncio.run(up(args, local_group(config)))
+    # every service is stopped and the session closed: leave before the interpreter's teardown,
+    # which aborted `up` now and then (SIGABRT) after a run that had succeeded
+    exit_process(status)
 
 
 def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str]:
@@ -256,10 +260,13 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             for name in [n for n in names if n != "ingest"] + [monitor]:
                 await bus.wait_alive(bus.keys.alive(name), timeout=60)
             if "ingest" in names:
-                processes.append(
-                    await start_service("ingest", env, options=options["ingest"], sink=log_line)
+                source_sp = await start_service(
+                    "ingest", env, options=options["ingest"], sink=log_line
                 )
-            emit(f"pipeline up: {', '.join(names)} on robot {config.robot!r}")
+                processes.append(source_sp)
+                await alive_or_exited(bus, source_sp, timeout=60)
+            if all(p.running for p in processes):
+                emit(f"pipeline up: {', '.join(names)} on robot {config.robot!r}")
             watch = HealthWatch(
                 bus, processes, lambda n, why: emit(f"service {n} is stuck ({why}); stopping it")
             )
@@ -309,6 +316,24 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         emit(f"services that did not stop cleanly: {failed}")
         status = status or 1
     return status
+
+
+async def alive_or_exited(bus: Bus, sp: ServiceProcess, timeout: float) -> None:
+    """Until `sp`'s liveliness token is seen (declared after its health queryable, so it now
+    answers health), or until it exited (the watch loop then reports it). "pipeline up" used to
+    be printed as soon as the source's process was spawned: whoever took the line at its word
+    and asked the source for its health found nothing serving yet."""
+    alive = asyncio.ensure_future(bus.wait_alive(bus.keys.alive(sp.name), timeout=timeout))
+    exited = asyncio.ensure_future(sp.process.wait())
+    try:
+        await asyncio.wait({alive, exited}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        alive.cancel()
+        exited.cancel()
+    if alive.done() and not alive.cancelled():
+        error = alive.exception()  # no token in time: a TimeoutError, as for the others
+        if error is not None and not (exited.done() and not exited.cancelled()):
+            raise error
 
 
 def _source(args: argparse.Namespace) -> dict[str, str]:
