@@ -49,9 +49,10 @@ def node_modules(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 # -- figures a passing test shows in CI's log ---------------------------------------------------
-# Tests run in two pytest-xdist workers (Makefile): the container test in one, everything else in
-# the other, in file order as before. A worker's output never reaches the terminal, so a figure a
-# test wants seen in CI's log (build times, outage timelines) goes through its report instead.
+# Tests run in two pytest-xdist workers (Makefile): the container test and the event-time matrix
+# in one, everything else in the other, in file order. A worker's output never reaches the
+# terminal, so a figure a test wants seen in CI's log (build times, outage timelines) goes through
+# its report instead.
 
 SHOWN = "shown"
 
@@ -68,10 +69,12 @@ def show(request: pytest.FixtureRequest) -> Callable[[str], None]:
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The container test is mostly waiting on podman, leases and a replay in real time: it runs
-    beside the rest of the suite, in a worker of its own, rather than after it."""
+    beside the rest of the suite, in a worker of its own, followed by the event-time matrix (the
+    longest test, which loads the machine on purpose) so that the two workers take about as
+    long as each other."""
     for item in items:
-        group = "containers" if item.get_closest_marker("containers") else "suite"
-        item.add_marker(pytest.mark.xdist_group(group))
+        long = item.get_closest_marker("containers") or item.path.name == "test_event_time.py"
+        item.add_marker(pytest.mark.xdist_group("long" if long else "suite"))
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:

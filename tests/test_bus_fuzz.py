@@ -20,6 +20,7 @@ import random
 import re
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -230,7 +231,7 @@ async def _run_up(fuzz: bool) -> tuple[str, Health, float, int]:
 
 
 @pytest.mark.slow
-async def test_fuzz_on_every_key_changes_no_description() -> None:
+async def test_fuzz_on_every_key_changes_no_description(show: Callable[[str], None]) -> None:
     calm_out, calm_health, calm_peak, _ = await _run_up(fuzz=False)
     fuzz_out, fuzz_health, fuzz_peak, sent = await _run_up(fuzz=True)
     calm = DESCRIBED.findall(calm_out)
@@ -242,5 +243,5 @@ async def test_fuzz_on_every_key_changes_no_description() -> None:
     for name, health in fuzz_health.items():
         assert health is not None
         assert health.malformed > 0 or not health.inputs, (name, health)  # counted, and alive
-    print(f"fuzz: {sent} messages; peak service RSS {calm_peak:.0f} MB calm, {fuzz_peak:.0f} fuzz")
+    show(f"fuzz: {sent} messages; peak service RSS {calm_peak:.0f} MB calm, {fuzz_peak:.0f} fuzz")
     assert fuzz_peak < RSS_CAP_MB, (calm_peak, fuzz_peak)
