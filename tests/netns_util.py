@@ -255,7 +255,7 @@ class TwoHosts:
 
 
 def probe() -> int:
-    """Print a JSON line for every gesture "start" and "end" event and final description.
+    """Print a JSON line for every gesture "end" event and final description on the bus.
 
     Gesture events are watched twice: by a plain subscriber (what arrives live) and by a
     recovering one (what the pipeline's services get, live or recovered from the robot's
@@ -305,8 +305,8 @@ def probe() -> int:
                 async for received in sub:  # type: ignore[attr-defined]
                     msg = received.message
                     if isinstance(msg, GestureSegment):
-                        if msg.event in ("start", "end"):
-                            say(event=msg.event, via=via, segment=msg.segment_id)
+                        if msg.event == "end":
+                            say(event="end", via=via, segment=msg.segment_id)
                     elif msg.final and msg.sentences:
                         say(event="described", segment=msg.segment_id, text=msg.sentences[0].text)
 
