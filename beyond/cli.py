@@ -7,7 +7,7 @@ quick `beyond inspect` should not pay for what it does not use.
 A command module exposes two functions:
     add_arguments(parser: argparse.ArgumentParser) -> None
     run(args: argparse.Namespace) -> int
-and may expose `HELP` (one line). Errors meant for the user are `cognition.errors.InputError`:
+and may expose `HELP` (one line). Errors meant for the user are `core.errors.InputError`:
 the dispatcher prints them as one line on stderr and exits with status 2.
 """
 
@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from types import ModuleType
 from typing import NoReturn
 
-from cognition.errors import InputError
+from core.errors import InputError
 
 # command name -> module under beyond.commands. One table, so `beyond --help` lists everything.
 COMMANDS: dict[str, str] = {

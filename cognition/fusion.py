@@ -22,7 +22,7 @@ import numpy as np
 
 from cognition.bn.inference import Posterior
 from cognition.bn.model import BayesNet
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 
 ACTION = "Action"
 Method = Literal["soft", "formula"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from cognition.errors import InputError
+from core.errors import InputError
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SOURCES = (

@@ -19,11 +19,11 @@ from cognition.bn.bag import load_bag
 from cognition.bn.definition import load_definition
 from cognition.bn.model import BayesNet, learn_network
 from cognition.descriptions import ScoredSentence, nbest_exact, nbest_from_file, plot_nbest
-from cognition.errors import InputError
 from cognition.fusion import ACTION, fuse, fuse_words
 from cognition.gestures.hmm import GestureModels, load_models
 from cognition.gestures.log_evidence import recognize_log
 from cognition.paths import SOURCES
+from core.errors import InputError
 
 EXP1_OBSERVED = {"Size": "small", "Shape": "circle", "ObjVel": "slow"}
 EXP2_MIXES = ((1.0, 0.0), (0.75, 0.25), (0.5, 0.5), (0.25, 0.75), (0.0, 1.0))  # touch : tap

@@ -42,7 +42,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cognition.errors import InputError, unknown
 from cognition.gestures.synthetic import GestureBounds, SkeletonStream, synthesize_continuous
 from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
 from cognition.vision.tabletop import (
@@ -54,6 +53,7 @@ from cognition.vision.tabletop import (
     render_frame,
     simulate_experiment,
 )
+from core.errors import InputError, unknown
 
 # Every recording starts at this instant (2019-01-01T00:00:00Z), so files are deterministic.
 EPOCH_NS = 1_546_300_800 * 1_000_000_000

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cognition.errors import unknown
 from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+from core.errors import unknown
 
 # Base object speed (m/s) by (action, shape); size scales it.
 _OBJECT_SPEED = {

@@ -36,7 +36,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 from schemas.keys import ALIVE, ASK, HEALTH, PREFIX, PROGRESS, STREAMS
 
 # queryable name -> key suffix after beyond/<robot>/; "progress": a player answering restarted

@@ -32,7 +32,7 @@ from typing import Any, Generic, TypeVar
 
 import zenoh
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.config import BusConfig, describe, load_config, zenoh_config
 from schemas.base import Message
 from schemas.codec import (

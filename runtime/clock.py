@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import time
 
-from cognition.errors import InputError
+from core.errors import InputError
 
 CLOCK_MODES = ("wall", "recording")
 

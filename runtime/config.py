@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from cognition.errors import InputError
+from core.errors import InputError
 from schemas.keys import DEFAULT_ROBOT, check_name
 
 MODES = ("peer", "client", "router")

@@ -21,7 +21,7 @@ from typing import Any
 
 import foxglove
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus, RawSample, decode_any
 from runtime.foxglove_views import VIEWS, VIEWS_OF, View, encode_view, is_view_key
 from runtime.recording import JSON, JSONSCHEMA

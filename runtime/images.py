@@ -11,7 +11,7 @@ import io
 
 import numpy as np
 
-from cognition.errors import InputError
+from core.errors import InputError
 from schemas.base import Header
 from schemas.messages import RAW_ENCODINGS, CameraFrame, CompressedCameraFrame, Time
 

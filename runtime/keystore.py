@@ -26,7 +26,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from cognition.errors import InputError
+from core.errors import InputError
 from schemas.keys import check_name
 
 CA = "ca"

@@ -49,7 +49,7 @@ from mcap.records import Message as McapMessage
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import MCAP0_MAGIC, CompressionType, IndexType, Writer
 
-from cognition.errors import InputError
+from core.errors import InputError
 from schemas.base import Message
 from schemas.codec import (
     RECORDING_JSON_FORM,

@@ -40,7 +40,7 @@ from typing import Any, Generic, TypeVar
 import zenoh
 from zenoh import ext
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import DecodedStream, Inbox
 from schemas.base import Message
 from schemas.codec import SchemaError, encode, wire_encoding

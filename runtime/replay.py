@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus
 from runtime.pacing import Pacer
 from runtime.recording import RecordedMessage, RecordingInfo, read_recording

@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable, Iterable
 
-from cognition.errors import InputError
+from core.errors import InputError
 
 
 class ReplayControl:

@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime import keystore
 
 SECURE_ROUTER_LISTEN = "tls/[::]:7447"

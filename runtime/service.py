@@ -28,7 +28,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any, Literal, NoReturn, TypeVar, overload
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus, Publisher, Subscription
 from runtime.clock import Clock
 from runtime.config import BusConfig, load_config

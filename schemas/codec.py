@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 
 import msgspec
 
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 from schemas.base import Message
 from schemas.messages import ALL_MESSAGES
 

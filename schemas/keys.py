@@ -10,7 +10,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from cognition.errors import InputError
+from core.errors import InputError
 from schemas import messages as m
 from schemas.base import Message
 
@@ -68,7 +68,7 @@ class Keys:
 
     def stream(self, name: str) -> str:
         if name not in STREAMS:
-            from cognition.errors import unknown
+            from core.errors import unknown
 
             raise unknown("stream", name, list(STREAMS))
         return f"{self.root}/{STREAMS[name][0]}"

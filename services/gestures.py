@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
-from cognition.errors import InputError
 from cognition.gestures import GestureModels, extract_features, load_models
 from cognition.gestures.default_models import default_models
+from core.errors import InputError
 from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
 from schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd

@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from cognition.errors import InputError
 from cognition.gestures.logs import read_hand_log
+from core.errors import InputError
 from runtime.bus import Publisher
 from runtime.images import message_from_image
 from runtime.log import event

@@ -19,8 +19,8 @@ from typing import Any
 from cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
 from cognition.episodes import Anticipation, FusionJoin, Outcome
 from cognition.episodes.fusion import Prediction
-from cognition.errors import InputError, unknown
 from cognition.fusion import ACTION, action_vector
+from core.errors import InputError, unknown
 from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
 from schemas import (

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import importlib
 
-from cognition.errors import unknown
+from core.errors import unknown
 from runtime.service import Service
 
 SERVICES: dict[str, str] = {

@@ -20,7 +20,7 @@ from busutil_net import REPO, env_for, private_config
 from beyond.cli import main
 from cognition.bn import BayesNet, learn_network, synthetic_dataset
 from cognition.bn.inference import MAX_JOINT_ROWS, MAX_QUERY_WORK
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus
 
 ASKS = 50

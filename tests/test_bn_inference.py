@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from cognition.bn import BayesNet, learn_network, load_bag, load_definition, synthetic_dataset
 from cognition.bn.definition import NetworkDefinition, Variable
-from cognition.errors import InputError
+from core.errors import InputError
 
 
 def tiny() -> BayesNet:

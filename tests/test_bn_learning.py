@@ -14,7 +14,7 @@ from cognition.bn.definition import NetworkDefinition, Variable
 from cognition.bn.parameters import bdeu_cpt, ml_cpt, word_cpt
 from cognition.bn.reference import ReferenceNetwork, load_reference
 from cognition.bn.structure import CountingScorer, PgmpyScorer, k2_search
-from cognition.errors import InputError
+from core.errors import InputError
 
 
 @pytest.fixture(scope="module")

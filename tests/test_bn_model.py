@@ -12,9 +12,9 @@ import pytest
 from cognition.bn import learn_network, load_model, save_model, synthetic_dataset
 from cognition.bn.model import FORMAT, VERSION
 from cognition.bn.synthetic import DATA_DIR, EXPECTED_OBJVEL, generate, synthetic_paths
-from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR
 from cognition.variables import AFFORDANCE_VARIABLES, COLOR_WORDS
+from core.errors import InputError
 
 
 def test_model_round_trips_exactly(tmp_path: Path) -> None:

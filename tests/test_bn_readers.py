@@ -9,8 +9,8 @@ import pytest
 
 from cognition.bn.bag import Dataset, load_bag, parse_bag
 from cognition.bn.definition import load_definition, parse_definition
-from cognition.errors import InputError
 from cognition.variables import AFFORDANCE_VARIABLES
+from core.errors import InputError
 
 DEF_TEXT = "Action\tgrasp\ttap\ttouch\nShape\tcircle\tbox\nball\t-\tball\nbox\t-\tbox\n"
 BAG_TEXT = "Action\tShape\tball\tbox\ntap\tcircle\tball\t-\ngrasp\tbox\t-\tbox\ntouch\tbox\t-\t-\n"

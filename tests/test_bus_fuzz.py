@@ -29,7 +29,7 @@ import pytest
 from busutil_net import REPO, env_for, private_config
 
 import schemas as s
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus
 from runtime.config import BusConfig
 from services.registry import SERVICES

@@ -14,7 +14,7 @@ from busutil_net import private_config, skeleton_frames
 
 import schemas as s
 from beyond.commands.up import local_group, monitor_name, wait_list
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus
 from runtime.config import BusConfig, load_config, zenoh_config
 from runtime.reliable import RecoveryPolicy, ReliablePublisher, reliable_subscription

@@ -28,8 +28,8 @@ from cognition.descriptions import (
     nbest_sampled,
     top_keys,
 )
-from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR, Grammar, parse_grammar
+from core.errors import InputError
 
 SMALL = parse_grammar(
     "\n".join(

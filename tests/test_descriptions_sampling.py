@@ -19,8 +19,8 @@ from cognition.descriptions import (
     sample_keys,
     sample_sentences,
 )
-from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR, Phrase, parse_grammar
+from core.errors import InputError
 
 # By hand, from the walk over the word network (uniform among the words that can come next):
 # after the agent, each of 6 verbs offers 5 next words {V-s, has, just, V-ed, is}; after "has",

@@ -17,8 +17,8 @@ from cognition.descriptions import (
     plot_nbest,
     score_sentence,
 )
-from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR
+from core.errors import InputError
 
 
 def _probs(seed: int) -> dict[str, float]:

@@ -29,12 +29,12 @@ from cognition.development import (
     word_evidence,
     write_outputs,
 )
-from cognition.errors import InputError
 from cognition.fusion import fuse
 from cognition.gestures.hmm import TrainingConfig
 from cognition.grammar import DEFAULT_GRAMMAR
 from cognition.variables import ACTIONS, EFFECTS
 from cognition.world import simulate_effects
+from core.errors import InputError
 
 SMALL = LearningConfig(
     n_per_action=8,

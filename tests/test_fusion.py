@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cognition.bn import BayesNet, learn_network, load_bag, load_definition, synthetic_dataset
-from cognition.errors import InputError
 from cognition.fusion import fuse, fuse_words
+from core.errors import InputError
 
 AFFORDANCE = ("Color", "Shape", "Size", "ObjVel", "ObjHandVel", "HandVel", "Contact")
 

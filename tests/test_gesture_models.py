@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import scipy.io
 
-from cognition.errors import InputError
 from cognition.gestures.hmm import (
     GestureHMM,
     GestureModels,
@@ -19,6 +18,7 @@ from cognition.gestures.hmm import (
     train_hmm,
 )
 from cognition.gestures.matlab import load_matlab_models
+from core.errors import InputError
 
 
 def random_hmm(rng: np.random.Generator, q: int = 4, m: int = 2, d: int = 3) -> GestureHMM:

@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.errors import InputError
 from cognition.gestures.datasets import load_gestures
 from cognition.gestures.features import extract_features
 from cognition.gestures.logs import read_hand_log
@@ -17,6 +16,7 @@ from cognition.gestures.segmentation import (
     segment_gestures,
 )
 from cognition.gestures.synthetic import synthesize_continuous
+from core.errors import InputError
 
 
 def _iou(a: tuple[int, int], b: tuple[int, int]) -> float:

@@ -11,7 +11,6 @@ from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 from test_gesture_models import random_hmm
 
-from cognition.errors import InputError
 from cognition.gestures.features import extract_features
 from cognition.gestures.hmm import GestureHMM, GestureModels
 from cognition.gestures.logs import read_hand_log
@@ -21,6 +20,7 @@ from cognition.gestures.streaming import (
     StreamingRecognizer,
     recognize_sequence,
 )
+from core.errors import InputError
 
 
 def hmmlearn_prefix_scores(

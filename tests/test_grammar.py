@@ -2,8 +2,8 @@ from pathlib import Path
 
 import pytest
 
-from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR, parse_grammar
+from core.errors import InputError
 
 
 def test_grammar_size_matches_hand_count() -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.config import DEFAULT_PORT, BusConfig, load_config, zenoh_config
 
 

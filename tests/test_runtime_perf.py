@@ -226,7 +226,7 @@ def test_chunk_parser_reads_what_mcap_reads(tmp_path: Path, compression: str) ->
 
 
 def test_a_corrupt_chunk_is_reported_as_damage(tmp_path: Path) -> None:
-    from cognition.errors import InputError
+    from core.errors import InputError
     from runtime.recording import read_recording
 
     keys = s.Keys("robot")

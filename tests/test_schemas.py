@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import schemas as s
-from cognition.errors import InputError
+from core.errors import InputError
 from schemas.messages import IMAGE_BYTES_MAX
 
 H = s.Header(version=1, source="test", seq=7, stamp=1_700_000_000_123_456_789, correlation="x/1")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime import acl, keystore
 from runtime.bus import Bus
 from runtime.config import BusConfig, load_config, zenoh_config

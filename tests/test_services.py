@@ -126,7 +126,7 @@ async def test_reasoner_answers_ad_hoc_queries_and_rejects_bad_ones(bus: Bus) ->
     direct = model.query("ObjVel", {"Shape": "circle", "Action": "tap"}).marginal("ObjVel")
     assert dist == pytest.approx(direct, abs=1e-12)
     bad = s.AffordanceQuery(header=_header(1, 0), query=["Nope"])
-    from cognition.errors import InputError
+    from core.errors import InputError
 
     with pytest.raises(InputError, match="valid: Action"):
         await bus.query(bus.keys.ask, s.AffordanceAnswer, payload=bad, timeout=5)

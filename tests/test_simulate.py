@@ -12,7 +12,6 @@ from mcap.reader import make_reader
 
 from beyond.cli import main
 from beyond.commands.simulate import check_recording, checks_pass
-from cognition.errors import InputError
 from cognition.gestures.segmentation import segment_gestures
 from cognition.gestures.synthetic import synthesize_continuous
 from cognition.scene import (
@@ -25,6 +24,7 @@ from cognition.scene import (
     simulate_scene,
 )
 from cognition.vision.tabletop import kinect_to_table
+from core.errors import InputError
 from runtime.images import image_from_message, message_from_image
 from runtime.recording import RecordingWriter, inspect_recording, read_recording
 from schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame

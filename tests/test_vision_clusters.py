@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.errors import InputError
 from cognition.variables import AFFORDANCE_VARIABLES
 from cognition.vision.clusters import (
     DEFAULT_PATH,
@@ -16,6 +15,7 @@ from cognition.vision.clusters import (
     learn_discretiser,
     name_by_majority,
 )
+from core.errors import InputError
 
 
 def _speeds(seed: int) -> tuple[np.ndarray, list[str]]:

@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.errors import InputError
 from cognition.vision.background import BackgroundModel
 from cognition.vision.clusters import ClusterModel
 from cognition.vision.features import measure
@@ -21,6 +20,7 @@ from cognition.vision.tabletop import (
     random_object,
     render_frame,
 )
+from core.errors import InputError
 
 LEMON_AND_CUBOID = "saponaro2019/lemon_and_cuboid"
 # reference blob descriptors, obj/data.log: first two numbers of each bottle

@@ -18,10 +18,10 @@ from typing import Any
 
 from cognition.bn import learn_network, load_model, synthetic_dataset
 from cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
-from cognition.errors import InputError
 from cognition.gestures import load_models
 from cognition.gestures.default_models import default_models
 from cognition.vision.clusters import ClusterModel
+from core.errors import InputError
 from runtime.images import image_from_message
 from runtime.recording import inspect_recording, read_recording
 from schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame

@@ -15,7 +15,7 @@ from rich.console import Console
 from rich.table import Table
 
 from beyond.commands import argtypes
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from schemas import AffordanceAnswer, AffordanceQuery, Header

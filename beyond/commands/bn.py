@@ -30,7 +30,7 @@ from cognition.bn.model import BayesNet, learn_network, load_model, save_model
 from cognition.bn.parameters import UNSEEN_RULES
 from cognition.bn.structure import DEFAULT_MAX_PARENTS, DEFAULT_ROOTS
 from cognition.bn.synthetic import synthetic_paths
-from cognition.errors import InputError
+from core.errors import InputError
 
 HELP = "learn, show and query the Affordance–Words Bayesian network"
 

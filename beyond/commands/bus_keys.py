@@ -4,7 +4,7 @@ listens to nothing for ever does not say so; this one says which keys exist."""
 
 from __future__ import annotations
 
-from cognition.errors import unknown
+from core.errors import unknown
 from schemas.base import Message
 from schemas.keys import HEALTH, STREAMS, Keys, type_for_key
 

@@ -19,9 +19,9 @@ from pathlib import Path
 from beyond.commands import argtypes
 from cognition.bn.evidence import parse_evidence, parse_soft
 from cognition.bn.model import BayesNet
-from cognition.errors import InputError
 from cognition.fusion import ACTION, action_vector
 from cognition.gestures.features import LOG_SCALE
+from core.errors import InputError
 
 
 def add_evidence_arguments(parser: argparse.ArgumentParser) -> None:

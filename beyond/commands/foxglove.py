@@ -13,7 +13,7 @@ from pathlib import Path
 
 from beyond.commands import argtypes
 from beyond.commands.terminal import stop_on_signals
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.foxglove_bridge import DEFAULT_PORT, FoxgloveBridge

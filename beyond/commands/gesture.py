@@ -30,7 +30,6 @@ from rich.table import Table
 
 from beyond.commands import argtypes
 from beyond.commands.terminal import progress_bar
-from cognition.errors import InputError
 from cognition.gestures.datasets import (
     SYNTHETIC,
     action_from_name,
@@ -41,6 +40,7 @@ from cognition.gestures.evaluation import LabelledGesture
 from cognition.gestures.features import LOG_SCALE, extract_features
 from cognition.gestures.hmm import TrainingConfig, load_models, save_models, train_models
 from cognition.gestures.logs import parse_frames, read_hand_log
+from core.errors import InputError
 
 HELP = "train, run (frame by frame) and evaluate the gesture HMMs"
 

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from beyond.commands import argtypes
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from schemas import ServiceHealth

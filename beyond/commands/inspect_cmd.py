@@ -6,7 +6,7 @@ import argparse
 import json
 from dataclasses import asdict
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.recording import inspect_recording
 
 HELP = "list the channels, schemas, message counts and duration of an MCAP recording"

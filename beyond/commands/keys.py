@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 
 from beyond.commands import argtypes
-from cognition.errors import InputError
+from core.errors import InputError
 
 HELP = "make the secure bus's keystore (CA, certificates) and show its access rules"
 

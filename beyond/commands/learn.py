@@ -22,7 +22,7 @@ from rich.console import Console
 
 from beyond.commands import argtypes
 from beyond.commands.terminal import progress_bar
-from cognition.errors import InputError
+from core.errors import InputError
 
 HELP = "learn gesture models from human demonstrations labelled by the affordance network"
 

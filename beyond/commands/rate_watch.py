@@ -13,7 +13,7 @@ from collections.abc import Callable
 from beyond.commands import argtypes
 from beyond.commands.bus_keys import check_key
 from beyond.commands.terminal import stop_on_signals
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.bus import Bus, RawSample, decode_any
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.rates import RateStats, RateWindow

@@ -15,8 +15,8 @@ from pathlib import Path
 from rich.console import Console
 
 from beyond.commands import argtypes
-from cognition.errors import InputError
 from cognition.paths import SOURCES, shared_data_dir
+from core.errors import InputError
 
 HELP = "re-run the article's experiments 1-6 on its real data; write report.md, PNGs, JSON"
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import msgspec
 
-from cognition.errors import InputError
+from core.errors import InputError
 from schemas.base import Message
 from schemas.codec import (
     RECORDING_JSON_FORM,

@@ -16,7 +16,7 @@ from rich.console import Console
 
 from beyond.commands import argtypes
 from beyond.commands.terminal import progress_bar
-from cognition.errors import InputError
+from core.errors import InputError
 
 HELP = "segment tabletop objects in an image or MCAP recording; learn or evaluate the clusters"
 

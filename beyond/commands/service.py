@@ -12,7 +12,7 @@ import argparse
 import json
 from typing import Any
 
-from cognition.errors import InputError
+from core.errors import InputError
 from runtime.cliargs import add_bus_arguments, config_from_args
 from services.options import check_options, load_options
 from services.registry import SERVICES, service_class

@@ -25,7 +25,6 @@ from rich.console import Console
 
 from beyond.commands import argtypes
 from beyond.commands.terminal import progress_bar
-from cognition.errors import InputError
 from cognition.scene import (
     CAMERA_FPS_RANGE,
     EPOCH_NS,
@@ -38,6 +37,7 @@ from cognition.scene import (
     parse_scene,
     simulate_scene,
 )
+from core.errors import InputError
 from runtime.images import image_from_message, message_from_image
 from runtime.recording import RecordingWriter, inspect_recording, read_recording
 from schemas import CameraFrame, CompressedCameraFrame, Header, Joint, SkeletonFrame

@@ -43,8 +43,8 @@ from rich.console import Console
 from rich.live import Live
 
 from beyond.commands import argtypes
-from cognition.errors import InputError
 from cognition.paths import REPO_ROOT
+from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig

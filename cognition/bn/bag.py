@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from cognition.bn.definition import NetworkDefinition
-from cognition.errors import InputError
+from core.errors import InputError
 
 
 @dataclass(frozen=True)

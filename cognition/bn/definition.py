@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 
 ABSENT = "-"
 

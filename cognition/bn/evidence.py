@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from cognition.bn.definition import NetworkDefinition
-from cognition.errors import InputError
+from core.errors import InputError
 
 SUM_TOLERANCE = 1e-6
 

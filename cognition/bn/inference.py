@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from cognition.bn.definition import Variable
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 
 MAX_CORE_STATES = 5_000_000
 # Work per query is capped, with the limit in the message (the reasoner and `beyond bn query`

@@ -30,7 +30,7 @@ from cognition.bn.structure import (
     k2_search,
     log_likelihood,
 )
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 
 FORMAT = "beyond-self/bn-model"
 VERSION = 1

@@ -21,7 +21,7 @@ from typing import Literal
 
 import numpy as np
 
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 
 UnseenRule = Literal["absent", "uniform", "dirichlet"]
 UNSEEN_RULES: tuple[str, ...] = ("absent", "uniform", "dirichlet")

@@ -29,7 +29,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from cognition.bn.bag import Dataset
-from cognition.errors import InputError, unknown
+from core.errors import InputError, unknown
 
 DEFAULT_ROOTS: tuple[str, ...] = ("Action", "Color", "Shape", "Size")
 DEFAULT_MAX_PARENTS = 10

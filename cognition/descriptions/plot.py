@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cognition.descriptions.space import ScoredSentence
-from cognition.errors import InputError
+from core.errors import InputError
 
 
 def plot_nbest(items: Sequence[ScoredSentence], path: str | Path, title: str) -> Path:

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cognition.descriptions.space import FloatArray, IntArray, SentenceSpace
-from cognition.errors import InputError
 from cognition.grammar import _TOKEN, DEFAULT_GRAMMAR, Grammar, Phrase
+from core.errors import InputError
 
 
 @dataclass

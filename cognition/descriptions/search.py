@@ -37,8 +37,8 @@ from cognition.descriptions.space import (
     SentenceSpace,
     final_scores,
 )
-from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR, Grammar
+from core.errors import InputError
 
 Require = re.Pattern[str] | str | None
 

@@ -32,8 +32,8 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from cognition.errors import InputError
 from cognition.grammar import DEFAULT_GRAMMAR, Grammar, Phrase
+from core.errors import InputError
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

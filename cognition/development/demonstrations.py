@@ -50,11 +50,11 @@ from numpy.typing import NDArray
 
 from cognition.bn.bag import Dataset
 from cognition.bn.synthetic import Narrator
-from cognition.errors import InputError, unknown
 from cognition.gestures.evaluation import LabelledGesture
 from cognition.gestures.synthetic import SynthesisConfig, synthesize_gesture
 from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES, EFFECTS, OBJECT_FEATURES
 from cognition.world import Effects, simulate_effects
+from core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
 

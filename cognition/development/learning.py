@@ -62,10 +62,10 @@ from cognition.development.demonstrations import (
     split_demonstrations,
     synthesize_demonstrations,
 )
-from cognition.errors import InputError
 from cognition.fusion import ACTION, action_vector
 from cognition.gestures.hmm import GestureModels, TrainingConfig, train_models
 from cognition.gestures.streaming import CompiledModels, recognize_sequence
+from core.errors import InputError
 
 FloatArray = NDArray[np.float64]
 SYNTHETIC = "synthetic"

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
 from cognition.bn.model import BayesNet
-from cognition.errors import InputError
 from cognition.fusion import ACTION, fuse, fuse_words
 from cognition.variables import EFFECTS
+from core.errors import InputError
 
 R = TypeVar("R")
 

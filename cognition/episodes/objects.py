@@ -32,7 +32,6 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from cognition.errors import InputError
 from cognition.vision.clusters import ClusterModel
 from cognition.vision.pipeline import (
     DetectedObject,
@@ -40,6 +39,7 @@ from cognition.vision.pipeline import (
     RecordingAnalysis,
     describe_frame,
 )
+from core.errors import InputError
 
 R = TypeVar("R")
 EFFECT_VARIABLES = ("ObjVel", "HandVel", "ObjHandVel", "Contact")

@@ -109,7 +109,7 @@ class GestureTracker(Generic[R]):
     def push(self, stamp: int, number: int, x: np.ndarray, ref: R) -> list[Event[R]]:
         """The events at this frame (x: the hand in feature space, see extract_features)."""
         if self.last_stamp is not None and stamp <= self.last_stamp:
-            from cognition.errors import InputError
+            from core.errors import InputError
 
             raise InputError(
                 f"skeleton frame {number} stamped {stamp} is not after the previous frame "

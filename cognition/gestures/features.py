@@ -22,7 +22,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cognition.errors import InputError
+from core.errors import InputError
 
 FloatArray = NDArray[np.float64]
 

@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cognition.errors import InputError, unknown
 from cognition.variables import ACTIONS
+from core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
 

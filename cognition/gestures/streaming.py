@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cognition.errors import InputError
 from cognition.gestures.hmm import FloatArray, GestureModels, log_prior
+from core.errors import InputError
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 

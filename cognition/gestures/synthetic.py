@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from cognition.errors import InputError, unknown
 from cognition.gestures.features import features_from_joints
 from cognition.variables import ACTIONS
+from core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
 

@@ -25,8 +25,8 @@ from functools import lru_cache
 import numpy as np
 from scipy import ndimage
 
-from cognition.errors import InputError
 from cognition.vision.images import as_frame
+from core.errors import InputError
 
 
 @lru_cache(maxsize=16)

@@ -35,8 +35,8 @@ import numpy as np
 from scipy.cluster.vq import kmeans2
 from scipy.optimize import linear_sum_assignment
 
-from cognition.errors import InputError, unknown
 from cognition.variables import AFFORDANCE_VARIABLES
+from core.errors import InputError, unknown
 
 FORMAT = "beyond-self/vision-clusters"
 VERSION = 1

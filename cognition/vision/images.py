@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cognition.errors import InputError
+from core.errors import InputError
 
 SUFFIXES = (".ppm", ".pgm", ".pnm", ".png")
 

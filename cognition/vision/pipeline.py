@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cognition.errors import InputError
 from cognition.variables import OBJECT_FEATURES
 from cognition.vision.background import BackgroundModel
 from cognition.vision.clusters import VARIABLE_FEATURES, ClusterModel, learn_discretiser
@@ -25,6 +24,7 @@ from cognition.vision.images import as_frame
 from cognition.vision.segmentation import Segmentation, SegmentParams, segment
 from cognition.vision.tabletop import Camera, Experiment
 from cognition.vision.tracking import Tracker
+from core.errors import InputError
 
 ASSUMED_HAND_HEIGHT_M = 0.05  # a hand seen only as a blob is taken to hover this high
 

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from cognition.errors import InputError
 from cognition.vision.background import BackgroundModel
 from cognition.vision.images import as_frame
+from core.errors import InputError
 
 _OPEN = np.ones((3, 3), dtype=bool)
 _EIGHT = np.ones((3, 3), dtype=bool)

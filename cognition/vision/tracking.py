@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from cognition.errors import InputError
+from core.errors import InputError
 
 
 @dataclass
