@@ -347,7 +347,7 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
         return statistics.median(lat) / 1e3
 
     async def to_loop(wakeup_fd: bool) -> float:
-        from runtime.bus import Inbox
+        from runtime.inbox import Inbox
 
         inbox: Inbox[int] = Inbox(asyncio.get_running_loop(), 16, wakeup_fd=wakeup_fd)
         lat: list[int] = []

@@ -35,6 +35,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from runtime.bus import Bus
+from runtime.subscription import consume
 from schemas.messages import Progress, ServiceHealth
 
 log = logging.getLogger("beyond.pacing")
@@ -72,23 +73,24 @@ class Pacer:
         """Subscribe to progress, then learn what each (alive) consumer takes."""
         sub = self.bus.subscribe(self.bus.keys.progress(), Progress)
 
-        async def pump() -> None:
-            async for received in sub:
-                msg = received.message
-                self.last[msg.service] = msg
-                mine = self.handled.setdefault(msg.service, {})
-                for key, stamp in msg.handled.items():
-                    mine[key] = max(mine.get(key, -1), stamp)
-                self.published[msg.service] = dict(msg.published)
-                self.received[msg.service] = dict(msg.received)
-                self._moved.set()
+        def on_progress(msg: Progress) -> None:
+            self.last[msg.service] = msg
+            mine = self.handled.setdefault(msg.service, {})
+            for key, stamp in msg.handled.items():
+                mine[key] = max(mine.get(key, -1), stamp)
+            self.published[msg.service] = dict(msg.published)
+            self.received[msg.service] = dict(msg.received)
+            self._moved.set()
 
-        self._task = asyncio.get_running_loop().create_task(pump())
+        def failed(key: str, exc: Exception) -> None:
+            log.warning("progress on %s not understood: %s", key, exc)
 
-        async def answer(key: str, _payload: bytes | None) -> Progress | None:
+        self._task = asyncio.get_running_loop().create_task(consume(sub, on_progress, failed))
+
+        async def answer(key: str, _request: None) -> Progress | None:
             return self.last.get(key.rsplit("/", 1)[-1])
 
-        self._close_queryable = self.bus.queryable(self.bus.keys.progress("*"), answer)
+        self._close_queryable = self.bus.queryable(self.bus.keys.progress("*"), None, answer)
         for name in self.names:
             for reply in await self._health(name):
                 health = reply.message
@@ -108,7 +110,9 @@ class Pacer:
             try:
                 return await self.bus.query(self.bus.keys.health(name), ServiceHealth, timeout=5.0)
             except Exception as exc:  # Zenoh's timeout comes back as an error reply
-                if loop.time() > deadline or not await self.bus.alive(self.bus.keys.alive(name)):
+                if loop.time() > deadline or not await self.bus.live_tokens(
+                    self.bus.keys.alive(name)
+                ):
                     log.warning("consumer %s never answered its health query (%s)", name, exc)
                     return []
 
@@ -151,7 +155,7 @@ class Pacer:
                 await asyncio.wait_for(self._moved.wait(), _CHECK_ALIVE_S)
             except TimeoutError:
                 for name in behind:
-                    if await self.bus.alive(self.bus.keys.alive(name)):
+                    if await self.bus.live_tokens(self.bus.keys.alive(name)):
                         self._gone_since.pop(name, None)
                         continue
                     gone = self._gone_since.setdefault(name, loop.time())

@@ -1,65 +1,47 @@
-"""The base every service stands on: lifecycle, liveliness, health, counting, logging.
+"""The base every service stands on: its surface (subscribe, publish, serve, spawn, report),
+its lifecycle (liveliness, health, clean shutdown on signals) and its accounting.
 
 A service subclasses `Service`, names the streams it touches in class attributes (`subscribes`,
 `publishes`, `serves`: stream and queryable names of schemas/keys.py, from which runtime/acl.py
-generates a secure router's access rules), opens them in `setup()` with
-`self.subscribe(key, Type, handler)`, `self.publisher(key, Type)` and `self.bus.queryable(...)`
-(a key the class did not declare is refused there, so the rules cannot drift from the code;
-a class that declares nothing is not checked, and has no place on a secure bus), and is run with
-`asyncio.run(service.run())` (or `Service.main()`). It stops cleanly on SIGINT/SIGTERM:
-consumers are cancelled, subscribers, publishers, queryables and the liveliness token are
-undeclared, then the session closes.
+generates a secure router's access rules), opens them in `setup()` with `self.subscribe`,
+`self.publisher` and `self.queryable` (a key the class did not declare is refused there, so the
+rules cannot drift from the code; a class that declares nothing is not checked, and has no
+place on a secure bus), and is run with `asyncio.run(service.run())` (or `Service.main()`).
+It stops cleanly on SIGINT/SIGTERM: its tasks and timers are cancelled, subscribers,
+publishers, queryables and the liveliness token are undeclared, then the session closes.
 
-Bad input never stops a service: a payload that does not decode is counted as malformed and
-logged once per (key, reason); an `InputError` raised by a handler is counted as an error and
-logged; the service goes on with the next message.
+Bad input never stops a service (runtime.accounting): a payload that does not decode is counted
+as malformed; whatever a handler, a timer, a spawned task, a queryable or the teardown raises is
+counted as an error and logged; the service goes on. runtime/README.md shows a whole service.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import inspect
 import logging
-import os
-import signal
-import sys
 import time
-from collections.abc import Awaitable, Callable
-from typing import Any, Literal, NoReturn, TypeVar, overload
+from collections.abc import Callable, Coroutine
+from typing import Any, TypeVar, overload
 
 from core.errors import InputError
-from runtime.bus import Bus, Publisher, Subscription
+from runtime import process
+from runtime.accounting import ErrorAccount
+from runtime.bus import Bus
 from runtime.clock import Clock
 from runtime.config import BusConfig, load_config
-from runtime.log import event, setup_logging
-from runtime.reliable import (
-    RecoveryPolicy,
-    ReliablePublisher,
-    ReliableSubscription,
-    reliable_publisher,
-    reliable_subscription,
-)
+from runtime.delivery import RELIABLE, STATUS, Delivery
+from runtime.log import event
+from runtime.progress import ProgressReport, resume
+from runtime.publisher import Publisher
+from runtime.queries import PlainQueryHandler, QueryHandler
+from runtime.subscription import Handler, Received, Subscription, consume
 from schemas.base import Header, Message
 from schemas.codec import SchemaError
 from schemas.keys import PROGRESS, check_name
-from schemas.messages import Progress, ServiceHealth
+from schemas.messages import ServiceHealth
 
 M = TypeVar("M", bound=Message)
-Handler = Callable[[M], Awaitable[None] | None]
-_MAX_REMEMBERED_REASONS = 1000
-
-
-REASON_MAX = 500  # characters of a logged reason (and of ServiceHealth.last_error)
-
-
-def _bounded(text: str, limit: int = REASON_MAX) -> str:
-    """`text` on one line of at most `limit` characters: a hostile payload's error (a 5,000-joint
-    frame's list of joint names) must not become a 95 KB log line that a reader chokes on."""
-    text = " ".join(text.split())
-    if len(text) <= limit:
-        return text
-    return f"{text[: limit - 30]}... ({len(text)} characters)"
+Q = TypeVar("Q", bound=Message)
 
 
 class Service:
@@ -91,29 +73,22 @@ class Service:
             self.health_period = health_period
         self.log = logging.getLogger(f"beyond.{self.name}")
         self.started = asyncio.Event()
+        self.account = ErrorAccount(self.log, self.name)
         self._stop = asyncio.Event()
-        self._subscriptions: list[
-            tuple[Subscription[Any] | ReliableSubscription[Any], Handler[Any]]
-        ] = []
-        self._publishers: list[Publisher[Any] | ReliablePublisher[Any]] = []
-        self._paced: set[str] = set()  # keys whose handled stamps are reported as Progress
-        self._handled: dict[str, int] = {}
-        self._last_handled: dict[str, int] = {}
-        self._progress: Publisher[Progress] | None = None
+        self._subscriptions: list[tuple[Subscription[Any], Handler[Any]]] = []
+        self._publishers: list[Publisher[Any]] = []
+        self._progress = ProgressReport(self.name, self.header)
         self._recovery_reported: tuple[int, int] = (0, 0)
-        self._tasks: list[asyncio.Task[None]] = []
-        self._seen_reasons: set[tuple[str, str]] = set()
+        self._tasks: set[asyncio.Task[Any]] = set()
+        self._timers: set[asyncio.TimerHandle] = set()
         self._seq = 0
         self._health_seq = 0
         self._started_at = time.monotonic()
-        self.errors = 0
-        self.malformed_other = 0
-        self.last_error = ""
 
     # --- for subclasses --------------------------------------------------------------------
 
     async def setup(self) -> None:
-        """Declare subscriptions and publishers here."""
+        """Open subscriptions, publishers and queryables here."""
 
     async def teardown(self) -> None:
         """Release anything `setup` acquired beyond subscriptions and publishers."""
@@ -124,96 +99,113 @@ class Service:
             raise RuntimeError("the bus is open only while the service runs")
         return self._bus
 
-    @overload
     def subscribe(
         self,
         key: str,
         cls: type[M],
         handler: Handler[M],
+        delivery: Delivery = RELIABLE,
         *,
-        maxsize: int = ...,
-        recover: Literal[False] = ...,
-        paced: bool = ...,
-    ) -> Subscription[M]: ...
-
-    @overload
-    def subscribe(
-        self,
-        key: str,
-        cls: type[M],
-        handler: Handler[M],
-        *,
-        maxsize: int = ...,
-        recover: Literal[True] | RecoveryPolicy,
-        paced: bool = ...,
-    ) -> ReliableSubscription[M]: ...
-
-    def subscribe(
-        self,
-        key: str,
-        cls: type[M],
-        handler: Handler[M],
-        *,
-        maxsize: int = 1024,
-        recover: bool | RecoveryPolicy = False,
         paced: bool = False,
-    ) -> Subscription[M] | ReliableSubscription[M]:
-        """Call `handler(message)` for every well-formed `cls` message on `key`. With `recover`,
-        messages lost while a link was down come back from the publishers' caches (in order,
-        once each; see runtime.reliable). With `paced` (sensor inputs), the stamp of every
+    ) -> Subscription[M]:
+        """Call `handler(message)` for every well-formed `cls` message on `key`, received as
+        `delivery` says (runtime.delivery). With `paced` (sensor inputs), the stamp of every
         message handled is published as `Progress`, so a player never outruns this service."""
         self._check_declared("subscribe", key)
-        sub: Subscription[M] | ReliableSubscription[M]
-        if recover:
-            policy = recover if isinstance(recover, RecoveryPolicy) else None
-            sub = reliable_subscription(
-                self.bus, key, cls, maxsize=maxsize, on_malformed=self._malformed, policy=policy
-            )
-        else:
-            sub = self.bus.subscribe(key, cls, maxsize=maxsize, on_malformed=self._malformed)
+        sub = self.bus.subscribe(key, cls, delivery, on_malformed=self.account.malformed)
         self._subscriptions.append((sub, handler))
         if paced:
-            self._paced.add(key)
-            self._handled.setdefault(key, -1)
+            self._progress.pace(key)
         if self.started.is_set():
-            self._tasks.append(asyncio.get_running_loop().create_task(self._consume(sub, handler)))
+            self.spawn(self._consume(sub, handler), key)
         return sub
 
-    @overload
-    def publisher(
-        self, key: str, cls: type[M], *, reliable: bool = ..., cache: None = ...
-    ) -> Publisher[M]: ...
-
-    @overload
-    def publisher(
-        self, key: str, cls: type[M], *, reliable: bool = ..., cache: int
-    ) -> ReliablePublisher[M]: ...
-
-    def publisher(
-        self, key: str, cls: type[M], *, reliable: bool = True, cache: int | None = None
-    ) -> Publisher[M] | ReliablePublisher[M]:
-        """A publisher; with `cache`, one that keeps its last `cache` messages for subscribers
-        that recover (`subscribe(..., recover=True)`) after a link failure or a late start.
-        A cached publisher never blocks (`reliable` is ignored): what a congested or dead link
-        drops comes back from the cache (runtime.reliable.ReliablePublisher)."""
+    def publisher(self, key: str, cls: type[M], delivery: Delivery = RELIABLE) -> Publisher[M]:
+        """A publisher of `cls` messages on `key`, sending as `delivery` says."""
         self._check_declared("publish", key)
-        pub: Publisher[M] | ReliablePublisher[M]
-        if cache is not None:
-            pub = reliable_publisher(self.bus, key, cls, cache=cache)
-        else:
-            pub = self.bus.publisher(key, cls, reliable=reliable)
+        pub = self.bus.publisher(key, cls, delivery)
         self._publishers.append(pub)
         return pub
+
+    @overload
+    def queryable(self, key: str, request: type[Q], handler: QueryHandler[Q]) -> None: ...
+
+    @overload
+    def queryable(self, key: str, request: None, handler: PlainQueryHandler) -> None: ...
+
+    def queryable(self, key: str, request: Any, handler: Any) -> None:
+        """Answer queries on `key` with `await handler(query_key, request)` (the decoded
+        `request`, None without a payload): a message, a list of (key, message), or None.
+        A malformed request is counted as malformed, whatever the handler raises as an error;
+        the asker gets an error reply either way."""
+        self._check_declared("serve", key)
+        self.bus.queryable(key, request, handler, on_error=self._query_failed)
+
+    def watch_tokens(self, key_expr: str, on_change: Callable[[str, bool], None]) -> None:
+        """`on_change(key, present)` for every liveliness token matching `key_expr` that
+        appears or goes (runtime.liveliness); what it raises is counted as an error."""
+
+        def guarded(key: str, present: bool) -> None:
+            try:
+                on_change(key, present)
+            except Exception as exc:
+                self.report_error(key, exc)
+
+        self.bus.watch_tokens(key_expr, guarded)
+
+    def spawn(self, work: Coroutine[Any, Any, Any], name: str = "task") -> asyncio.Task[Any]:
+        """Run `work` beside the handlers until the service stops (then it is cancelled); what
+        it raises is counted as an error under `name`."""
+        task = asyncio.get_running_loop().create_task(work, name=f"{self.name}: {name}")
+        self._tasks.add(task)
+
+        def finished(done: asyncio.Task[Any]) -> None:
+            self._tasks.discard(done)
+            if not done.cancelled() and done.exception() is not None:
+                self.report_error(name, done.exception())  # type: ignore[arg-type]
+
+        task.add_done_callback(finished)
+        return task
+
+    def call_later(self, delay_s: float, fn: Callable[[], object], name: str = "timer") -> None:
+        """Call `fn()` in `delay_s` seconds unless the service stops first; what it raises is
+        counted as an error under `name`. For the machine's business (retries, reports), never
+        to decide an output: outputs follow the inputs' stamps (runtime/README.md)."""
+        loop = asyncio.get_running_loop()
+
+        def fire() -> None:
+            self._timers.discard(handle)
+            try:
+                fn()
+            except Exception as exc:
+                self.report_error(name, exc)
+
+        handle = loop.call_later(delay_s, fire)
+        self._timers.add(handle)
+
+    def report_error(self, key: str, exc: BaseException) -> None:
+        """Count and log `exc`, raised while handling `key`; the service goes on."""
+        self.account.error(key, exc)
+
+    def _query_failed(self, key: str, exc: Exception) -> None:
+        if isinstance(exc, SchemaError):
+            self.account.malformed_other += 1
+            self.account.malformed(key, exc)
+        else:
+            self.report_error(key, exc)
 
     def _check_declared(self, kind: str, key: str) -> None:
         """Refuse a key the class did not declare (when it declares anything)."""
         if all(getattr(self, a) is None for a in ("subscribes", "publishes", "serves")):
             return
-        if kind == "subscribe" and key.startswith(f"{self.bus.keys.root}/{PROGRESS}/"):
+        keys = self.bus.keys
+        if kind == "subscribe" and key.startswith(f"{keys.root}/{PROGRESS}/"):
             return  # how far others have got: every service may read it (runtime.acl)
+        if kind == "serve" and key == keys.health(self.name):
+            return  # every service answers for its health
         from runtime.acl import declaration_of, declared_keys
 
-        allowed = declared_keys(declaration_of(self.name, type(self)), self.bus.keys.root)[kind]
+        allowed = declared_keys(declaration_of(self.name, type(self)), keys.root)[kind]
         if key not in allowed:
             raise InputError(
                 f"service {self.name!r} may {kind} only on the keys its class declares "
@@ -245,12 +237,14 @@ class Service:
             correlation=f"{self.name}/{seq}",
         )
 
-    # --- health ---------------------------------------------------------------------------
+    # --- health and progress -------------------------------------------------------------
 
-    def health(self) -> ServiceHealth:
+    def health_report(self) -> ServiceHealth:
+        """This service's `ServiceHealth`: what it received, sent, dropped, could not read."""
         seq = self._health_seq
         self._health_seq += 1
         subs = [s for s, _ in self._subscriptions]
+        keys = self.bus.keys
         return ServiceHealth(
             header=Header(
                 version=ServiceHealth.VERSION,
@@ -264,110 +258,54 @@ class Service:
             messages_in=sum(s.received for s in subs),
             messages_out=sum(p.sent for p in self._publishers),
             dropped=sum(s.dropped for s in subs),
-            malformed=sum(s.malformed for s in subs) + self.malformed_other,
-            errors=self.errors,
-            last_error=self.last_error,
+            malformed=sum(s.malformed for s in subs) + self.account.malformed_other,
+            errors=self.account.errors,
+            last_error=self.account.last_error,
             inputs=sorted({s.key for s in subs}),
             outputs=sorted(
                 {p.key for p in self._publishers}
-                | ({self.bus.keys.progress(self.name)} if self._paced else set())
+                | ({keys.progress(self.name)} if self._progress.paced else set())
             ),
         )
-
-    def _malformed(self, key: str, error: SchemaError) -> None:
-        key, reason = _bounded(key, 200), _bounded(str(error))
-        self.last_error = reason
-        if (key, reason) not in self._seen_reasons:
-            if len(self._seen_reasons) < _MAX_REMEMBERED_REASONS:
-                self._seen_reasons.add((key, reason))
-            event(self.log, logging.WARNING, "malformed payload skipped", key=key, reason=reason)
-
-    def _failed(self, key: str, exc: BaseException) -> None:
-        self.errors += 1
-        key = _bounded(key, 200)
-        self.last_error = _bounded(f"{type(exc).__name__}: {exc}")
-        if isinstance(exc, InputError):
-            reason = _bounded(str(exc))
-            if (key, reason) not in self._seen_reasons:
-                if len(self._seen_reasons) < _MAX_REMEMBERED_REASONS:
-                    self._seen_reasons.add((key, reason))
-                event(self.log, logging.WARNING, "bad input skipped", key=key, reason=reason)
-        else:
-            self.log.error(
-                "handler failed", exc_info=exc, extra={"fields": {"key": key, "service": self.name}}
-            )
-
-    async def _consume(
-        self, sub: Subscription[Any] | ReliableSubscription[Any], handler: Handler[Any]
-    ) -> None:
-        async for received in sub:
-            self.clock.observe(received.message.header.stamp)
-            try:
-                result = handler(received.message)
-                if inspect.isawaitable(result):
-                    await result
-            except asyncio.CancelledError:
-                raise
-            except Exception as exc:
-                self._failed(received.key, exc)
-            if sub.key in self._paced:
-                self._last_handled[sub.key] = received.message.header.stamp
-            if self._paced:
-                self.publish_progress()
 
     def received_counts(self) -> dict[str, int]:
         """Messages received per input key, as reported in `Progress` (a service whose inputs
         carry their own sequence numbers may report those instead: they survive a restart)."""
         return {s.key: s.received for s, _ in self._subscriptions}
 
-    async def resume(self) -> None:
-        """A restarted instance does not publish again what its predecessor already did: the
-        player keeps the last `Progress` of every service it paces (runtime.pacing), which says
-        up to which stamp each output key was published."""
-        try:
-            replies = await self.bus.query(self.bus.keys.progress(self.name), Progress, timeout=2.0)
-        except (InputError, TimeoutError):
-            return
-        done = {k: v for r in replies for k, v in r.message.published_stamps.items()}
-        for pub in self._publishers:
-            pub.skip_until = max(pub.skip_until, done.get(pub.key, -1))
-        if any(v >= 0 for v in done.values()):
-            event(self.log, logging.INFO, "resuming after a previous instance", **done)
-
     def publish_progress(self) -> None:
-        """Publish how far each paced input is handled, how many messages each subscription
-        received and each publisher sent: after the handler, so everything an input caused has
-        been published before its progress says so."""
-        for key, stamp in self._last_handled.items():
-            self._handled[key] = max(self._handled.get(key, -1), stamp)
-        if self._progress is not None:
-            self._progress.put(
-                Progress(
-                    header=self.header(Progress, max(self._handled.values(), default=0)),
-                    service=self.name,
-                    handled=self._handled,
-                    published={p.key: p.sent for p in self._publishers},
-                    received=self.received_counts(),
-                    published_stamps={p.key: p.last_stamp for p in self._publishers},
-                )
-            )
-
-    async def _publish_health(self) -> None:
-        pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, reliable=False)
-        while True:
-            pub.put(self.health())
-            if self._paced:
-                self.publish_progress()
-            self._report_recovery()
-            await asyncio.sleep(self.health_period)
+        """Report how far each paced input is handled (runtime.progress)."""
+        self._progress.publish(self._publishers, self.received_counts())
 
     def recovery(self) -> tuple[int, int]:
         """(recovered, missed): messages of recovering subscriptions that came from publisher
         caches after a link failure or a late start, and those no cache held any more."""
-        subs = [s for s, _ in self._subscriptions if isinstance(s, ReliableSubscription)]
+        subs = [s for s, _ in self._subscriptions]
         return sum(s.recovered for s in subs), sum(s.missed for s in subs)
 
-    def _report_recovery(self) -> None:
+    async def _consume(self, sub: Subscription[Any], handler: Handler[Any]) -> None:
+        def observe(received: Received[Any]) -> None:
+            self.clock.observe(received.message.header.stamp)
+
+        def progressed(received: Received[Any]) -> None:
+            self._progress.handled_up_to(sub.key, received.message.header.stamp)
+            self.publish_progress()
+
+        paced = bool(self._progress.paced)
+        await consume(
+            sub, handler, self.report_error, before=observe, after=progressed if paced else None
+        )
+
+    async def _report_periodically(self) -> None:
+        pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, STATUS)
+        while True:
+            pub.put(self.health_report())
+            if self._progress.paced:
+                self.publish_progress()
+            self._log_recovery()
+            await asyncio.sleep(self.health_period)
+
+    def _log_recovery(self) -> None:
         now = self.recovery()
         if now != self._recovery_reported:
             self._recovery_reported = now
@@ -388,122 +326,77 @@ class Service:
 
     async def run(self, *, install_signals: bool = True) -> None:
         """Open the bus (unless given one), set up, serve until stopped, clean up."""
-        loop = asyncio.get_running_loop()
         if self._bus is None:
             config = self.config or load_config()
             if config.secure is not None and config.identity is None:
                 config = config.with_(identity=self.name)
             self._bus = Bus.open(config)
             self._owns_bus = True
-        if self._owns_bus:
-            own_health = self.bus.keys.health(self.name)
-
-            def guard(key: str) -> None:
-                if key != own_health:
-                    self._check_declared("serve", key)
-
-            self.bus.guard = guard
-        installed: list[signal.Signals] = []
-        if install_signals:
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                try:
-                    loop.add_signal_handler(sig, self.stop)
-                    installed.append(sig)
-                except (NotImplementedError, RuntimeError, ValueError):
-                    pass  # not the main thread, or not supported here
-        undeclare_token = None
+        installed = process.install_signals(self.stop) if install_signals else []
+        undeclare_token: Callable[[], None] | None = None
         try:
             await self.setup()
-            if self._paced:
-                await self.resume()
+            if self._progress.paced:
+                await resume(self.bus, self.name, self._publishers, self.log)
             for sub, handler in self._subscriptions:
-                self._tasks.append(loop.create_task(self._consume(sub, handler)))
+                self.spawn(self._consume(sub, handler), sub.key)
             health_key = self.bus.keys.health(self.name)
 
-            async def answer_health(_key: str, _payload: bytes | None) -> list[tuple[str, Message]]:
-                return [(health_key, self.health())]
+            async def answer_health(_key: str, _request: None) -> list[tuple[str, Message]]:
+                return [(health_key, self.health_report())]
 
-            self.bus.queryable(health_key, answer_health)
-            if self._paced:
-                # never blocking: a subscriber across a dead link (a remote monitor) must not
-                # stall the pipeline; a dropped report is repaired by the next, or by the
-                # periodic one beside health
-                self._progress = self.bus.publisher(
-                    self.bus.keys.progress(self.name), Progress, reliable=False
-                )
-                self._progress.put(
-                    Progress(
-                        header=self.header(Progress, 0), service=self.name, handled=self._handled
-                    )
-                )
-            self._tasks.append(loop.create_task(self._publish_health()))
+            self.queryable(health_key, None, answer_health)
+            if self._progress.paced:
+                self._progress.open(self.bus)
+            self.spawn(self._report_periodically(), "health")
             undeclare_token = self.bus.declare_token(self.bus.keys.alive(self.name))
             self.started.set()
             event(self.log, logging.INFO, "started", service=self.name, robot=self.bus.keys.robot)
             await self._stop.wait()
         finally:
-            for task in self._tasks:
-                task.cancel()
-            for task in self._tasks:
-                with contextlib.suppress(asyncio.CancelledError, Exception):
-                    await task
-            self._tasks.clear()
-            if undeclare_token is not None:
-                undeclare_token()
-            for sub, _ in self._subscriptions:
-                sub.close()
-            for pub in self._publishers:
-                pub.close()
-            with contextlib.suppress(Exception):
-                await self.teardown()
-            health = self.health()
-            recovered, missed = self.recovery()
-            event(
-                self.log,
-                logging.INFO,
-                "stopped",
-                service=self.name,
-                messages_in=health.messages_in,
-                messages_out=health.messages_out,
-                malformed=health.malformed,
-                dropped=health.dropped,
-                errors=health.errors,
-                recovered=recovered,
-                missed=missed,
-            )
-            if self._owns_bus and self._bus is not None:
-                self._bus.close()
-                self._bus = None
+            await self._shut_down(undeclare_token)
             for sig in installed:
-                loop.remove_signal_handler(sig)
+                asyncio.get_running_loop().remove_signal_handler(sig)
+
+    async def _shut_down(self, undeclare_token: Callable[[], None] | None) -> None:
+        for timer in self._timers:
+            timer.cancel()
+        self._timers.clear()
+        tasks = list(self._tasks)
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        if undeclare_token is not None:
+            undeclare_token()
+        for sub, _ in self._subscriptions:
+            sub.close()
+        for pub in self._publishers:
+            pub.close()
+        try:
+            await self.teardown()
+        except Exception as exc:
+            self.report_error("teardown", exc)
+        health = self.health_report()
+        recovered, missed = self.recovery()
+        event(
+            self.log,
+            logging.INFO,
+            "stopped",
+            service=self.name,
+            messages_in=health.messages_in,
+            messages_out=health.messages_out,
+            malformed=health.malformed,
+            dropped=health.dropped,
+            errors=health.errors,
+            recovered=recovered,
+            missed=missed,
+        )
+        if self._owns_bus and self._bus is not None:
+            self._bus.close()
+            self._bus = None
 
     @classmethod
     def main(cls, *args: Any, **kwargs: Any) -> int:
-        """Entry point for a service process: logging, run until SIGINT/SIGTERM, exit 0."""
-        setup_logging()
-
-        async def go() -> None:
-            await cls(*args, **kwargs).run()
-
-        try:
-            asyncio.run(go())
-        except InputError as exc:
-            logging.getLogger("beyond").error(str(exc))
-            return 2
-        return 0
-
-    @classmethod
-    def main_and_exit(cls, *args: Any, **kwargs: Any) -> NoReturn:
-        """`main`, then leave at once (`exit_process`)."""
-        exit_process(cls.main(*args, **kwargs))
-
-
-def exit_process(code: int) -> NoReturn:
-    """Leave the process at once with `code`, logs and output flushed: for a process whose
-    Zenoh session is closed and whose work is done (a service, `beyond up`). The interpreter's
-    own teardown of native threads (Zenoh's, BLAS's) has been seen to abort such a process
-    ("FATAL: exception not rethrown", SIGABRT) after it had stopped cleanly."""
-    logging.shutdown()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
+        """Entry point for a service process: logging, run until SIGINT/SIGTERM; the exit
+        status (2 for bad input such as a bad option)."""
+        return process.run_to_completion(lambda: cls(*args, **kwargs).run())

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from cognition.descriptions import nbest_exact
-from runtime.reliable import EVENT_CACHE
+from runtime.delivery import EVENTS
 from runtime.service import Service
 from schemas import Description, Evidence, ScoredSentence, WordProbabilities
 
@@ -30,8 +30,8 @@ class DescriptionGenerator(Service):
 
     async def setup(self) -> None:
         keys = self.bus.keys
-        self.out = self.publisher(keys.description, Description, cache=EVENT_CACHE)
-        self.subscribe(keys.words, WordProbabilities, self.on_words, recover=True)
+        self.out = self.publisher(keys.description, Description, EVENTS)
+        self.subscribe(keys.words, WordProbabilities, self.on_words, EVENTS)
 
     def on_words(self, msg: WordProbabilities) -> None:
         if not msg.final and not self.unfolding:

@@ -19,7 +19,7 @@ from cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
 from cognition.gestures import GestureModels, extract_features, load_models
 from cognition.gestures.default_models import default_models
 from core.errors import InputError
-from runtime.reliable import EVENT_CACHE, FRAME_CACHE
+from runtime.delivery import EVENTS, FRAMES
 from runtime.service import Service
 from schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
 
@@ -57,10 +57,10 @@ class GestureStreamer(Service):
         )
         self.actions = list(self.gesture_models.actions)
         keys = self.bus.keys
-        self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, cache=FRAME_CACHE)
-        self.segments = self.publisher(keys.gesture_segment, GestureSegment, cache=EVENT_CACHE)
+        self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, FRAMES)
+        self.segments = self.publisher(keys.gesture_segment, GestureSegment, EVENTS)
         self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame, paced=True)
-        self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, recover=True)
+        self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
 
     def features(self, frame: SkeletonFrame) -> np.ndarray:
         hand = frame.joints.get(self.hand_joint)

@@ -33,17 +33,15 @@ import numpy as np
 
 from cognition.gestures.logs import read_hand_log
 from core.errors import InputError
-from runtime.bus import Publisher
+from runtime.delivery import CAMERA, EVENTS
 from runtime.images import message_from_image
 from runtime.log import event
 from runtime.pacing import DEFAULT_WINDOW_S, Pacer
+from runtime.publisher import Publisher
 from runtime.recording import read_recording
-from runtime.reliable import EVENT_CACHE, ReliablePublisher
 from runtime.service import Service
 from schemas import CameraFrame, CompressedCameraFrame, Joint, SkeletonFrame, StreamEnd
 from schemas.keys import with_robot
-
-CAMERA_CACHE = 300  # frames: 20 s at 15 fps, longer than a gesture and its lead
 
 
 class SensorIngest(Service):
@@ -100,12 +98,10 @@ class SensorIngest(Service):
         self.skeleton = self.publisher(keys.skeleton, SkeletonFrame)
         # camera frames are cached (never leaving the robot): an object segmenter restarted
         # mid-gesture gets back the frames of the gesture it was analysing
-        self.camera = self.publisher(keys.camera, CameraFrame, cache=CAMERA_CACHE)
-        self.compressed = self.publisher(
-            keys.camera_compressed, CompressedCameraFrame, cache=CAMERA_CACHE
-        )
-        self.end = self.publisher(keys.stream_end, StreamEnd, cache=EVENT_CACHE)
-        self._tasks.append(asyncio.get_running_loop().create_task(self._play()))
+        self.camera = self.publisher(keys.camera, CameraFrame, CAMERA)
+        self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame, CAMERA)
+        self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
+        self.spawn(self._play(), "source")
 
     async def _play(self) -> None:
         # Publishing before the consumers' subscriptions reached this session would lose the
@@ -133,7 +129,7 @@ class SensorIngest(Service):
                 if not self.loop:
                     break
         except InputError as exc:
-            self._failed("source", exc)
+            self.report_error("source", exc)
         finally:
             self.pacer.stop()
         end = StreamEnd(
@@ -170,7 +166,7 @@ class SensorIngest(Service):
 
     async def _play_recording(self, path: Path) -> None:
         keys = self.bus.keys
-        streams: dict[str, tuple[str, Publisher[Any] | ReliablePublisher[Any]]] = {
+        streams: dict[str, tuple[str, Publisher[Any]]] = {
             keys.skeleton: ("skeleton", self.skeleton),
             keys.camera: ("camera", self.camera),
             keys.camera_compressed: ("camera_compressed", self.compressed),

@@ -10,13 +10,15 @@ described.
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections.abc import Callable
 from typing import Any
 
 from cognition.episodes import GestureReport
-from runtime.bus import Bus, Subscription
-from runtime.reliable import ReliableSubscription, reliable_subscription
+from runtime.bus import Bus
+from runtime.delivery import FRAMES, RELIABLE
+from runtime.subscription import Received, consume
 from schemas import (
     ActionPosterior,
     AffordancePrediction,
@@ -27,6 +29,8 @@ from schemas import (
     ServiceHealth,
     StreamEnd,
 )
+
+log = logging.getLogger("beyond.monitor")
 
 
 class PipelineMonitor:
@@ -62,21 +66,19 @@ class PipelineMonitor:
         ]
         for key, cls, handler in subscriptions:
             # derived streams may cross a link (robot <-> workstation): recover what it loses
-            sub: Subscription[Any] | ReliableSubscription[Any] = (
-                self.bus.subscribe(key, cls)
-                if cls in (ServiceHealth, Progress)
-                else reliable_subscription(self.bus, key, cls)
+            delivery = RELIABLE if cls in (ServiceHealth, Progress) else FRAMES
+            sub = self.bus.subscribe(key, cls, delivery)
+            self._tasks.append(
+                loop.create_task(consume(sub, handler, self._failed, after=self._seen))
             )
-            self._tasks.append(loop.create_task(self._pump(sub, handler)))
 
-    async def _pump(
-        self, sub: Subscription[Any] | ReliableSubscription[Any], handler: Callable[[Any], None]
-    ) -> None:
-        async for received in sub:
-            handler(received.message)
-            if not isinstance(received.message, ServiceHealth | Progress):
-                self.last_message = time.monotonic()
-            self.changed.set()
+    def _seen(self, received: Received[Any]) -> None:
+        if not isinstance(received.message, ServiceHealth | Progress):
+            self.last_message = time.monotonic()
+        self.changed.set()
+
+    def _failed(self, key: str, exc: Exception) -> None:
+        log.warning("could not show a message on %s: %s", key, exc)
 
     def stop(self) -> None:
         for task in self._tasks:

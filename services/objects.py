@@ -20,8 +20,8 @@ from typing import Any
 
 from cognition.episodes import FrameObjects, GestureEffects, ObjectAtStart, ObjectWatch
 from cognition.vision.clusters import ClusterModel
+from runtime.delivery import CAMERA, EVENTS, FRAMES
 from runtime.images import CameraMessage, image_from_message
-from runtime.reliable import EVENT_CACHE, FRAME_CACHE
 from runtime.service import Service
 from schemas import (
     CameraFrame,
@@ -70,16 +70,16 @@ class ObjectSegmenter(Service):
             ClusterModel.load(self.clusters_path), **self.watch_options
         )
         keys = self.bus.keys
-        self.objects_out = self.publisher(keys.objects, DetectedObjects, cache=FRAME_CACHE)
-        self.at_start_out = self.publisher(keys.gesture_object, GestureObject, cache=EVENT_CACHE)
-        self.effects_out = self.publisher(keys.effects, ObjectEffects, cache=EVENT_CACHE)
+        self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
+        self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
+        self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)
         # recovered: restarted mid-gesture, it gets the gesture's frames back from the cache
-        self.subscribe(keys.camera, CameraFrame, self.on_camera, paced=True, recover=True)
+        self.subscribe(keys.camera, CameraFrame, self.on_camera, CAMERA, paced=True)
         self.subscribe(
-            keys.camera_compressed, CompressedCameraFrame, self.on_camera, paced=True, recover=True
+            keys.camera_compressed, CompressedCameraFrame, self.on_camera, CAMERA, paced=True
         )
-        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, recover=True)
-        self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, recover=True)
+        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, EVENTS)
+        self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
         self.subscribe(keys.progress("gestures"), Progress, self.on_gestures_progress)
         self.segments_received = 0
         self.gestures_progress: deque[tuple[int, int]] = deque(maxlen=4096)  # (stamp, events)

@@ -21,7 +21,7 @@ from cognition.episodes import Anticipation, FusionJoin, Outcome
 from cognition.episodes.fusion import Prediction
 from cognition.fusion import ACTION, action_vector
 from core.errors import InputError, unknown
-from runtime.reliable import EVENT_CACHE, FRAME_CACHE
+from runtime.delivery import EVENTS, FRAMES
 from runtime.service import Service
 from schemas import (
     ActionPosterior,
@@ -67,22 +67,19 @@ class AffordanceReasoner(Service):
             self.model, expect_objects=self.expect_objects, deadline_s=self.deadline_s
         )
         keys = self.bus.keys
-        self.predictions = self.publisher(keys.affordance, AffordancePrediction, cache=FRAME_CACHE)
-        self.words_out = self.publisher(keys.words, WordProbabilities, cache=EVENT_CACHE)
-        self.subscribe(keys.gesture_object, GestureObject, self.on_object, recover=True)
-        self.subscribe(keys.gesture_posterior, ActionPosterior, self.on_posterior, recover=True)
-        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, recover=True)
-        self.subscribe(keys.effects, ObjectEffects, self.on_effects, recover=True)
-        self.bus.queryable(keys.ask, self.on_ask)
+        self.predictions = self.publisher(keys.affordance, AffordancePrediction, FRAMES)
+        self.words_out = self.publisher(keys.words, WordProbabilities, EVENTS)
+        self.subscribe(keys.gesture_object, GestureObject, self.on_object, EVENTS)
+        self.subscribe(keys.gesture_posterior, ActionPosterior, self.on_posterior, FRAMES)
+        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, EVENTS)
+        self.subscribe(keys.effects, ObjectEffects, self.on_effects, EVENTS)
+        self.queryable(keys.ask, AffordanceQuery, self.on_ask)
         self._segmenters: set[str] = set()
-        self.bus.watch_tokens(keys.alive("objects"), self.on_objects_alive)
+        self.watch_tokens(keys.alive("objects"), self.on_objects_alive)
 
     def on_objects_alive(self, key: str, present: bool) -> None:
         (self._segmenters.add if present else self._segmenters.discard)(key)
-        try:
-            self.emit(self.join.objects_alive(bool(self._segmenters)))
-        except Exception as exc:
-            self._failed(key, exc)
+        self.emit(self.join.objects_alive(bool(self._segmenters)))
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -125,7 +122,7 @@ class AffordanceReasoner(Service):
             )
             if isinstance(out, Outcome):
                 if out.effects_dropped:
-                    self._failed("effects", InputError(out.effects_dropped))
+                    self.report_error("effects", InputError(out.effects_dropped))
                 self.words_out.put(
                     WordProbabilities(
                         header=self.derive(out.ref, WordProbabilities),
@@ -150,12 +147,9 @@ class AffordanceReasoner(Service):
             final=final,
         )
 
-    async def on_ask(self, key: str, payload: bytes | None) -> list[tuple[str, Message]]:
-        from schemas.codec import decode
-
-        if payload is None:
+    async def on_ask(self, key: str, q: AffordanceQuery | None) -> list[tuple[str, Message]]:
+        if q is None:
             raise InputError("an ask query needs an AffordanceQuery payload")
-        q = decode(payload, AffordanceQuery, key)
         soft: dict[str, list[float]] = {}
         for var, dist in q.soft.items():
             if var not in self.model.values:

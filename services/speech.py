@@ -15,6 +15,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+from runtime.delivery import EVENTS
 from runtime.log import event
 from runtime.service import Service
 from schemas import Description
@@ -47,7 +48,7 @@ class SpeechSynthesizer(Service):
         self.out_dir.mkdir(parents=True, exist_ok=True)
         if self.espeak is None:
             event(self.log, logging.WARNING, "espeak-ng not found: printing descriptions instead")
-        self.subscribe(self.bus.keys.description, Description, self.on_description, recover=True)
+        self.subscribe(self.bus.keys.description, Description, self.on_description, EVENTS)
 
     def on_description(self, msg: Description) -> None:
         if not msg.final or not msg.sentences:

@@ -269,7 +269,7 @@ def probe() -> int:
     import zenoh
 
     from runtime.bus import Bus
-    from runtime.reliable import reliable_subscription
+    from runtime.delivery import EVENTS
     from schemas import Description, GestureSegment
 
     zenoh.init_log_from_env_or("error")  # RUST_LOG=zenoh=debug to see the transport's view
@@ -290,8 +290,8 @@ def probe() -> int:
         with Bus.open() as bus:
             keys = bus.keys
             live = bus.subscribe(keys.gesture_segment, GestureSegment)
-            recovering = reliable_subscription(bus, keys.gesture_segment, GestureSegment)
-            described = reliable_subscription(bus, keys.description, Description)
+            recovering = bus.subscribe(keys.gesture_segment, GestureSegment, EVENTS)
+            described = bus.subscribe(keys.description, Description, EVENTS)
 
             def on_token(sample: object) -> None:  # Zenoh thread; print is thread-safe enough
                 kind = str(getattr(sample, "kind", ""))

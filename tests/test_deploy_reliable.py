@@ -1,6 +1,6 @@
 """The pieces a two-machine deployment stands on, checked fast on one machine: publisher caches
-and recovering subscriptions (runtime.reliable), routers joined in addition to the local group
-(runtime.config), and how `beyond up` hands that to the processes it starts."""
+and recovering subscriptions (runtime.delivery, runtime.recovery), routers joined in addition to
+the local group (runtime.config), and how `beyond up` hands that to the processes it starts."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from beyond.commands.up import local_group, monitor_name, wait_list
 from core.errors import InputError
 from runtime.bus import Bus
 from runtime.config import BusConfig, load_config, zenoh_config
-from runtime.reliable import RecoveryPolicy, ReliablePublisher, reliable_subscription
+from runtime.delivery import FRAMES, Delivery
 from services.launcher import service_env
 
 REPO = Path(__file__).resolve().parent.parent
@@ -31,7 +31,7 @@ async def test_a_late_subscriber_gets_the_cached_history_in_order_and_counts_it(
     config = private_config()
     frames = skeleton_frames(30)
     with Bus.open(config) as robot, Bus.open(config) as ws:
-        pub = ReliablePublisher(robot.session, robot.keys.skeleton, s.SkeletonFrame, cache=20)
+        pub = robot.publisher(robot.keys.skeleton, s.SkeletonFrame, FRAMES.with_(cache=20))
         barrier_in = ws.subscribe(ws.keys.stream_end, s.StreamEnd)
         barrier_out = robot.publisher(robot.keys.stream_end, s.StreamEnd)
         await barrier_out.wait_matching()
@@ -43,7 +43,7 @@ async def test_a_late_subscriber_gets_the_cached_history_in_order_and_counts_it(
         header = msgspec.structs.replace(frames[0].header, version=s.StreamEnd.VERSION)
         barrier_out.put(s.StreamEnd(header=header, source="barrier", messages=len(frames)))
         await barrier_in.recv(timeout=10)
-        sub = reliable_subscription(ws, ws.keys.skeleton, s.SkeletonFrame)
+        sub = ws.subscribe(ws.keys.skeleton, s.SkeletonFrame, FRAMES)
         got = await _drain(sub, 20)
         assert got == [f.frame for f in frames[10:]]  # the last 20, oldest first
         for frame in skeleton_frames(5, start_ns=2_000_000_000_000_000_000):
@@ -63,10 +63,10 @@ async def test_malformed_payloads_on_a_recovering_key_are_counted_and_skipped() 
     config = private_config()
     seen: list[str] = []
     with Bus.open(config) as a, Bus.open(config) as b:
-        sub = reliable_subscription(
-            b, b.keys.skeleton, s.SkeletonFrame, on_malformed=lambda key, err: seen.append(key)
+        sub = b.subscribe(
+            b.keys.skeleton, s.SkeletonFrame, FRAMES, on_malformed=lambda key, err: seen.append(key)
         )
-        pub = ReliablePublisher(a.session, a.keys.skeleton, s.SkeletonFrame, cache=8)
+        pub = a.publisher(a.keys.skeleton, s.SkeletonFrame, FRAMES.with_(cache=8))
         # published before discovery or after: the cache or the wire delivers both, in order
         pub.put_bytes(b"\x01not msgpack")
         pub.put(skeleton_frames(1)[0])
@@ -79,11 +79,13 @@ async def test_malformed_payloads_on_a_recovering_key_are_counted_and_skipped() 
 
 def test_bad_cache_or_history_sizes_are_input_errors() -> None:
     with pytest.raises(InputError, match="at least 1"):
-        RecoveryPolicy(history=0)
+        Delivery(history=0)
     with pytest.raises(InputError, match="> 0"):
-        RecoveryPolicy(max_age_s=-1)
-    with Bus.open(private_config()) as bus, pytest.raises(InputError, match="cache of 0"):
-        ReliablePublisher(bus.session, bus.keys.skeleton, s.SkeletonFrame, cache=0)
+        Delivery(max_age_s=-1)
+    with pytest.raises(InputError, match="cache of -1"):
+        Delivery(cache=-1)
+    with pytest.raises(InputError, match="'block', 'drop'"):
+        Delivery(congestion="wait")  # type: ignore[arg-type]
 
 
 # -- routers joined in addition to the local group -------------------------------------------

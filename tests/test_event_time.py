@@ -32,7 +32,7 @@ from cognition.episodes.offline import analyse_stream
 from cognition.gestures.default_models import default_models
 from cognition.vision.clusters import ClusterModel
 from runtime.bus import Bus
-from runtime.reliable import reliable_subscription
+from runtime.delivery import FRAMES
 from services.launcher import service_env, start_service, stop_services
 from services.monitor import PipelineMonitor
 
@@ -89,7 +89,7 @@ async def run_pipeline(
 
         async def capture(stream: str) -> None:
             cls = s.STREAMS[stream][1]
-            async for received in reliable_subscription(bus, keys.stream(stream), cls):
+            async for received in bus.subscribe(keys.stream(stream), cls, FRAMES):
                 captured[stream].append(s.encode(received.message))
 
         tasks = [asyncio.get_running_loop().create_task(capture(k)) for k in DERIVED]

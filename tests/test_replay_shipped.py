@@ -12,7 +12,7 @@ from busutil_net import private_config
 
 import schemas as s
 from runtime.bus import Bus
-from runtime.reliable import reliable_subscription
+from runtime.delivery import FRAMES
 from runtime.replay import replay
 from services.launcher import service_env, start_service, stop_services
 
@@ -33,7 +33,7 @@ async def _run_once(config, env, keys: s.Keys) -> list[tuple[str, bytes]]:  # ty
         arrived: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue()
 
         async def capture(key: str, cls: type[s.Message]) -> None:
-            async for received in reliable_subscription(bus, key, cls):
+            async for received in bus.subscribe(key, cls, FRAMES):
                 arrived.put_nowait((key, s.encode(received.message)))
 
         tasks = [asyncio.get_running_loop().create_task(capture(k, c)) for k, c in streams.items()]

@@ -13,7 +13,8 @@ import pytest
 from busutil_net import EXAMPLES, env_for, private_config, skeleton_frames
 
 import schemas as s
-from runtime.bus import Bus, Inbox
+from runtime.bus import Bus
+from runtime.inbox import Inbox
 from runtime.service import Service
 
 
@@ -95,10 +96,10 @@ async def test_query_reply_and_liveliness(buses) -> None:
         errors=0,
     )
 
-    async def answer(key: str, payload: bytes | None) -> list[tuple[str, s.Message]]:
+    async def answer(key: str, request: None) -> list[tuple[str, s.Message]]:
         return [(b.keys.health("q"), health)]
 
-    b.queryable(b.keys.health("q"), answer)
+    b.queryable(b.keys.health("q"), None, answer)
     b.declare_token(b.keys.alive("q"))
     alive = await a.wait_alive(a.keys.alive(), timeout=10)
     assert alive == {a.keys.alive("q")}
@@ -140,7 +141,7 @@ async def test_service_survives_garbage_on_every_subscribed_key(buses, caplog) -
     task = asyncio.create_task(service.run(install_signals=False))
     await asyncio.wait_for(service.started.wait(), 10)
     out = a.subscribe(a.keys.gesture_segment, s.GestureSegment)
-    inputs = service.health().inputs
+    inputs = service.health_report().inputs
     assert inputs == sorted([a.keys.skeleton, a.keys.objects])
     garbage = [
         b"",
@@ -176,9 +177,9 @@ async def test_service_survives_garbage_on_every_subscribed_key(buses, caplog) -
     expected = 2 * (len(garbage) + 1) + 1
     loop = asyncio.get_running_loop()
     deadline = loop.time() + 20  # the other key's garbage may still be in flight
-    while service.health().malformed < expected and loop.time() < deadline:
+    while service.health_report().malformed < expected and loop.time() < deadline:
         await asyncio.sleep(0.02)
-    health = service.health()
+    health = service.health_report()
     assert health.malformed == expected
     assert health.errors == 1
     bad_input = [r for r in caplog.records if r.getMessage() == "bad input skipped"]

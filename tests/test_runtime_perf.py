@@ -13,7 +13,8 @@ import pytest
 from busutil_net import private_config, skeleton_frames
 
 import schemas as s
-from runtime.bus import Bus, Inbox
+from runtime.bus import Bus
+from runtime.inbox import Inbox
 from runtime.recording import RecordingWriter
 from runtime.replay import replay
 from schemas.codec import encode, encode_into, wire_encoding

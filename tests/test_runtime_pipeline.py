@@ -12,9 +12,10 @@ from pathlib import Path
 from busutil_net import EXAMPLES, env_for, private_config, skeleton_frames
 
 import schemas as s
-from runtime.bus import Bus, RawSubscription
+from runtime.bus import Bus
 from runtime.recording import RecordingWriter
 from runtime.replay import replay
+from runtime.subscription import RawSubscription
 
 N = 150
 THRESHOLD = 1.6  # the segmenter's, on doubled coordinates

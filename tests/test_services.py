@@ -45,7 +45,7 @@ async def _stop(service: object) -> None:
 @pytest.mark.parametrize("name", [n for n in SERVICES if n != "ingest"])
 async def test_garbage_on_every_input_is_counted_and_skipped(name: str, bus: Bus) -> None:
     service = await _start(name, bus)
-    inputs = service.health().inputs  # type: ignore[attr-defined]
+    inputs = service.health_report().inputs  # type: ignore[attr-defined]
     assert inputs, f"{name} subscribes to nothing"
     for key in inputs:
         pub = bus.publisher(key, s.SkeletonFrame)
@@ -54,10 +54,10 @@ async def test_garbage_on_every_input_is_counted_and_skipped(name: str, bus: Bus
             pub.put_bytes(payload)
     expected = len(inputs) * len(GARBAGE)
     for _ in range(200):
-        if service.health().malformed >= expected:  # type: ignore[attr-defined]
+        if service.health_report().malformed >= expected:  # type: ignore[attr-defined]
             break
         await asyncio.sleep(0.02)
-    health = service.health()  # type: ignore[attr-defined]
+    health = service.health_report()  # type: ignore[attr-defined]
     assert health.malformed == expected
     assert not service._test_task.done()  # type: ignore[attr-defined]
     await _stop(service)
@@ -77,7 +77,7 @@ async def test_describer_still_describes_after_garbage(bus: Bus) -> None:
     got = (await out.recv(timeout=10)).message
     assert got.segment_id == 7 and got.final
     assert got.sentences[0].text == "he taps the ball and the ball rolls"
-    assert service.health().malformed == 1  # type: ignore[attr-defined]
+    assert service.health_report().malformed == 1  # type: ignore[attr-defined]
     await _stop(service)
 
 

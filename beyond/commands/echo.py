@@ -8,8 +8,9 @@ import sys
 
 from beyond.commands import argtypes
 from beyond.commands.terminal import stop_on_signals
-from runtime.bus import Bus, decode_any
+from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
+from runtime.subscription import decode_any
 from schemas.codec import SchemaError, to_json
 
 HELP = "print the messages on a key expression, decoded"

@@ -17,9 +17,10 @@ import zenoh
 
 from beyond.commands import argtypes
 from beyond.commands.bus_keys import check_key
-from runtime.bus import Bus, decode_any
+from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.rates import RateWindow
+from runtime.subscription import decode_any
 from schemas.codec import SchemaError, wire_encoding
 from schemas.messages import ServiceHealth
 
@@ -50,7 +51,7 @@ async def gather(bus: Bus, key: str, duration: float) -> dict[str, Any]:
     probe = bus.publisher(key, cls)
     healths, alive = await asyncio.gather(
         bus.query(bus.keys.health("*"), ServiceHealth, timeout=min(duration, 2.0)),
-        bus.alive(bus.keys.alive("*"), timeout=min(duration, 2.0)),
+        bus.live_tokens(bus.keys.alive("*"), timeout=min(duration, 2.0)),
     )
     window = RateWindow(None)
     sources: set[str] = set()

@@ -14,9 +14,10 @@ from beyond.commands import argtypes
 from beyond.commands.bus_keys import check_key
 from beyond.commands.terminal import stop_on_signals
 from core.errors import InputError
-from runtime.bus import Bus, RawSample, decode_any
+from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.rates import RateStats, RateWindow
+from runtime.subscription import RawSample, decode_any
 from schemas.codec import SchemaError
 
 Show = Callable[[str, RateStats], str]

@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
                         f"{args.wait_timeout:g} s (see `beyond topics`); nothing replayed"
                     ) from None
             if args.pace_for is None:
-                alive = await bus.alive(bus.keys.alive("*"))
+                alive = await bus.live_tokens(bus.keys.alive("*"))
                 pace_for = [key.rsplit("/", 1)[-1] for key in alive]
             else:
                 pace_for = args.pace_for

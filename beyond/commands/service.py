@@ -14,6 +14,7 @@ from typing import Any
 
 from core.errors import InputError
 from runtime.cliargs import add_bus_arguments, config_from_args
+from runtime.process import exit_process
 from services.options import check_options, load_options
 from services.registry import SERVICES, service_class
 
@@ -50,4 +51,4 @@ def service_options(name: str, config: str | None, sets: list[str]) -> dict[str,
 def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
-    cls.main_and_exit(config=config_from_args(args), **options)
+    exit_process(cls.main(config=config_from_args(args), **options))

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
                 window.add(sample.received_ns, len(sample.payload))
                 cls = type_from_encoding(sample.encoding) or type_for_key(sample.key)
                 types[sample.key] = cls.type_name() if cls else sample.encoding
-            alive = await bus.alive(f"{bus.keys.root}/alive/**" if not args.keyexpr else "**")
+            alive = await bus.live_tokens(f"{bus.keys.root}/alive/**" if not args.keyexpr else "**")
         if not windows:
             print(f"no messages on {keyexpr} in {args.duration:.1f} s")
         width = max((len(k) for k in windows), default=0)

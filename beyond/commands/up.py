@@ -48,7 +48,7 @@ from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig
-from runtime.service import exit_process
+from runtime.process import exit_process
 from schemas.keys import check_name
 from services.launcher import (
     HealthWatch,

@@ -1,0 +1,77 @@
+"""How messages on a key travel: one description for publishers and subscribers alike.
+
+Like a ROS 2 QoS profile, a `Delivery` says what a stream needs, and both ends of the stream are
+opened with the same one (`bus.publisher(key, Type, delivery)`, `bus.subscribe(key, Type,
+delivery)`, `service.publisher(...)`, `service.subscribe(...)`); each end reads the fields that
+concern it:
+
+- `congestion` (publisher): a full queue, `"block"` waits for room, `"drop"` drops the sample;
+- `cache` (publisher): keep the last N samples for subscribers that recover (0: none);
+- `recover` (subscriber): ask every publisher found (at start, after a cut link) for its cache,
+  and fill the gaps in its numbering from it;
+- `history` (subscriber): at most this many samples asked of each publisher;
+- `max_age_s` (subscriber): and none older than this (needs session timestamping);
+- `queue` (subscriber): messages waiting for the handler; beyond it the oldest is dropped, counted;
+- `express` (publisher): send at once, unbatched.
+
+Why a cached publisher drops rather than blocks: across a dead link Zenoh's queue fills within
+seconds, and a blocking put would stall the robot's own pipeline until the lease runs out; what
+was dropped comes back from the cache. Why a plain publisher blocks by default: without a cache,
+a dropped sample is gone.
+
+The presets name the stream kinds of this project; the services use them, and so should a new
+stream of the same kind.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, Literal
+
+from core.errors import InputError
+
+Congestion = Literal["block", "drop"]
+
+FRAME_CACHE = 1024  # samples: ~30 s of a per-frame stream at 30 Hz
+EVENT_CACHE = 64  # samples: per-gesture streams
+CAMERA_CACHE = 300  # frames: 20 s at 15 fps, longer than a gesture and its lead
+
+
+@dataclass(frozen=True)
+class Delivery:
+    congestion: Congestion = "block"
+    cache: int = 0
+    recover: bool = False
+    history: int = FRAME_CACHE
+    max_age_s: float | None = None
+    queue: int = 1024
+    express: bool = False
+
+    def __post_init__(self) -> None:
+        if self.congestion not in ("block", "drop"):
+            raise InputError(f"congestion {self.congestion!r}; valid: 'block', 'drop'")
+        if self.cache < 0:
+            raise InputError(f"publisher cache of {self.cache} samples; valid: 0 (none) or more")
+        if self.history < 1:
+            raise InputError(f"history of {self.history} samples; valid: at least 1")
+        if self.max_age_s is not None and not self.max_age_s > 0:
+            raise InputError(f"history age {self.max_age_s} s; valid: > 0 or None")
+        if self.queue < 1:
+            raise InputError(f"queue of {self.queue} messages; valid: at least 1")
+
+    def with_(self, **changes: Any) -> Delivery:
+        return replace(self, **changes)
+
+
+# Every message reaches a live subscriber; a full queue makes the publisher wait. Commands,
+# tools, replays of recordings, raw sensor streams of a live pipeline (paced by its consumers).
+RELIABLE = Delivery()
+# Reports that the next one repairs (health, progress): never wait for a slow or dead link.
+STATUS = Delivery(congestion="drop")
+# Derived per-frame streams (posteriors, objects, predictions): recovered after a cut link.
+FRAMES = Delivery(congestion="drop", cache=FRAME_CACHE, recover=True)
+# Per-gesture streams (segment events, effects, words, descriptions): recovered after a cut link.
+EVENTS = Delivery(congestion="drop", cache=EVENT_CACHE, recover=True)
+# Camera frames (never leaving the robot): an object segmenter restarted mid-gesture gets back the
+# frames of the gesture it was analysing.
+CAMERA = Delivery(congestion="drop", cache=CAMERA_CACHE, recover=True)

@@ -1,0 +1,50 @@
+"""A service as a process: signals, the exit status, and leaving at once when done."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import signal
+import sys
+from collections.abc import Callable, Coroutine
+from typing import Any, NoReturn
+
+from core.errors import InputError
+from runtime.log import setup_logging
+
+
+def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
+    """SIGINT and SIGTERM call `stop`, where this thread may handle them; the ones installed."""
+    loop = asyncio.get_running_loop()
+    installed: list[signal.Signals] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, stop)
+            installed.append(sig)
+        except (NotImplementedError, RuntimeError, ValueError):
+            pass  # not the main thread, or not supported here
+    return installed
+
+
+def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
+    """Run `work()` in a fresh event loop with logging set up; 0, or 2 for bad input (one
+    line logged, no traceback)."""
+    setup_logging()
+    try:
+        asyncio.run(work())
+    except InputError as exc:
+        logging.getLogger("beyond").error(str(exc))
+        return 2
+    return 0
+
+
+def exit_process(code: int) -> NoReturn:
+    """Leave the process at once with `code`, logs and output flushed: for a process whose
+    Zenoh session is closed and whose work is done (a service, `beyond up`). The interpreter's
+    own teardown of native threads (Zenoh's, BLAS's) has been seen to abort such a process
+    ("FATAL: exception not rethrown", SIGABRT) after it had stopped cleanly."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

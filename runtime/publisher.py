@@ -1,0 +1,129 @@
+"""Publishing messages of one type on one key, as a `Delivery` says (runtime.delivery).
+
+With `delivery.cache`, the publisher is a zenoh-ext advanced publisher that keeps its last
+`cache` samples for subscribers that recover (runtime.recovery), numbers them (sample miss
+detection), sends a sporadic heartbeat with the last number, and declares itself with a
+liveliness token (publisher detection). Without, it is a plain Zenoh publisher.
+
+A restarted service must not publish again what its predecessor already did (its inputs come
+back from caches): `skip_until` holds the last stamp published before, and `put` suppresses
+messages stamped at or before it (runtime.progress sets it).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import threading
+from typing import Any, Generic, TypeVar
+
+import zenoh
+from zenoh import ext
+
+from runtime.delivery import RELIABLE, Delivery
+from runtime.inbox import Inbox, direct_callback, undeclare
+from runtime.recovery import HEARTBEAT_S
+from schemas.base import Message
+from schemas.codec import encode, encode_into, wire_encoding
+
+M = TypeVar("M", bound=Message)
+
+
+def congestion_control(delivery: Delivery) -> zenoh.CongestionControl:
+    if delivery.congestion == "block":
+        return zenoh.CongestionControl.BLOCK
+    return zenoh.CongestionControl.DROP
+
+
+def declare_zenoh_publisher(
+    session: zenoh.Session, key: str, encoding: str | None, delivery: Delivery
+) -> Any:
+    """The Zenoh publisher `delivery` asks for, plain or advanced (cached)."""
+    zencoding = zenoh.Encoding(encoding) if encoding else None
+    if not delivery.cache:
+        return session.declare_publisher(
+            key,
+            encoding=zencoding,
+            congestion_control=congestion_control(delivery),
+            express=delivery.express,
+        )
+    return ext.declare_advanced_publisher(
+        session,
+        key,
+        encoding=zencoding,
+        congestion_control=congestion_control(delivery),
+        express=delivery.express,
+        # replies (recovery) keep zenoh's default: blocking, they are what must get through
+        cache=ext.CacheConfig(delivery.cache),
+        sample_miss_detection=ext.MissDetectionConfig(
+            heartbeat=None, sporadic_heartbeat=HEARTBEAT_S
+        ),
+        publisher_detection=True,
+    )
+
+
+class Publisher(Generic[M]):
+    def __init__(
+        self, session: zenoh.Session, key: str, cls: type[M], delivery: Delivery = RELIABLE
+    ) -> None:
+        self.key = key
+        self.cls = cls
+        self.delivery = delivery
+        self.sent = 0
+        self.last_stamp = -1  # of the last message sent
+        self.skip_until = -1  # messages stamped at or before this are not sent (a restart)
+        self.suppressed = 0
+        self._owner = threading.get_ident()
+        # One buffer reused for every put (Zenoh copies it before `put` returns): no fresh block
+        # per message, which for camera frames costs more than encoding them. A cache keeps
+        # the sample itself, so a cached publisher encodes into a fresh one.
+        self._reuse = not delivery.cache
+        self._buffer = bytearray()
+        self._pub = declare_zenoh_publisher(session, key, wire_encoding(cls), delivery)
+
+    def put(self, message: M) -> None:
+        if type(message) is not self.cls:
+            raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
+        stamp = message.header.stamp
+        if stamp <= self.skip_until:
+            self.suppressed += 1  # a previous instance of this service already published it
+            return
+        self.last_stamp = stamp
+        if self._reuse and threading.get_ident() == self._owner:
+            buffer = self._buffer
+            encode_into(message, buffer)
+            self._pub.put(buffer)
+        else:  # another thread must not share the buffer
+            self._pub.put(encode(message))
+        self.sent += 1
+
+    def put_bytes(self, payload: bytes) -> None:
+        """Publish an already encoded payload (replay, benchmarks)."""
+        self._pub.put(payload)
+        self.sent += 1
+
+    def matching(self) -> bool:
+        """Whether any subscriber currently matches this key (a plain publisher: zenoh-ext's
+        cached one does not report it)."""
+        return bool(self._pub.matching_status.matching)
+
+    async def wait_matching(self, timeout: float = 5.0) -> None:
+        """Wait until a subscriber matches (discovery handshake, not a fixed sleep)."""
+        loop = asyncio.get_running_loop()
+        inbox: Inbox[bool] = Inbox(loop, 16)
+        listener = self._pub.declare_matching_listener(
+            direct_callback(lambda status: inbox.push(bool(status.matching)))
+        )
+        try:
+            deadline = loop.time() + timeout
+            while not self.matching():
+                remaining = deadline - loop.time()
+                if remaining <= 0:
+                    raise TimeoutError(f"no subscriber for {self.key} within {timeout} s")
+                with contextlib.suppress(TimeoutError):
+                    await inbox.get(min(remaining, 0.5))
+        finally:
+            undeclare(listener)
+
+    def close(self) -> None:
+        undeclare(self._pub)

@@ -1,0 +1,124 @@
+"""Streams that survive a broken link: the subscriber half (zenoh-ext advanced subscriber).
+
+Between a robot and a workstation the network does fail: Wi-Fi drops, a cable is pulled, a
+router restarts. Zenoh then closes the session when its lease runs out and re-opens it when the
+link is back; whatever was published in between went nowhere. For derived streams (gesture
+posteriors and events, detected objects, effects, words, descriptions) every message matters: a
+gesture whose "end" event is lost is never described. So their publishers keep a cache
+(`Delivery.cache`, runtime.publisher) and their subscribers recover (`Delivery.recover`): an
+advanced subscriber asks every publisher it detects for its history (also when a publisher comes
+back after a partition) and recovers gaps it sees in the numbering or in the heartbeats from that
+publisher's cache. Samples are delivered in order per publisher, each once; what a cache no
+longer holds is counted in `missed` and logged.
+
+It also counts what came back from a cache rather than off the wire (`recovered`): a plain
+subscriber on the same key in the same session witnesses every live sample, so a delivered
+(source, sequence number) the witness never saw can only be a recovered one. Deployments say how
+much the caches saved, and the distributed test checks it.
+
+Sequence numbers need no clock; `max_age_s` (history by age) uses sample timestamps, which a
+session adds only with `timestamping` enabled (as in `deploy/zenoh/*.json5`); without them the
+history is bounded by count alone.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import OrderedDict, deque
+from typing import Any
+
+import zenoh
+from zenoh import ext
+
+from runtime.delivery import Delivery
+from runtime.inbox import Inbox, direct_callback, undeclare
+
+log = logging.getLogger("beyond.recovery")
+
+HEARTBEAT_S = 0.5  # publishers' sporadic heartbeat: the last sequence number, when it changed
+_WITNESS_GRACE_S = 1.0  # a delivered sample not witnessed live within this is a recovered one
+_WITNESS_MEMORY = 16384  # live (source, sn) pairs remembered for that comparison
+
+
+class RecoveringSource:
+    """Feeds `inbox` with (key, payload, received_ns) from an advanced subscriber on `key`."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        inbox: Inbox[tuple[str, Any, int]],
+        delivery: Delivery,
+    ) -> None:
+        self.missed = 0
+        self._lock = threading.Lock()
+        self._live: OrderedDict[tuple[str, int], None] = OrderedDict()
+        self._unconfirmed: deque[tuple[tuple[str, int], float]] = deque()
+        self._recovered = 0
+        push = inbox.push
+
+        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh thread
+            info = sample.source_info
+            if info is not None:
+                self._delivered((str(info.source_id), int(info.source_sn)))
+            push((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+        def on_live(sample: zenoh.Sample) -> None:  # Zenoh thread: the witness
+            info = sample.source_info
+            if info is None:
+                return
+            with self._lock:
+                live = self._live
+                live[(str(info.source_id), int(info.source_sn))] = None
+                if len(live) > _WITNESS_MEMORY:
+                    live.popitem(last=False)
+
+        def on_miss(miss: Any) -> None:  # Zenoh thread
+            self.missed += int(miss.nb)
+            log.warning(
+                "%d samples on %s lost for good (no longer in the publisher's cache)", miss.nb, key
+            )
+
+        self._witness = session.declare_subscriber(key, direct_callback(on_live))
+        self._sub = ext.declare_advanced_subscriber(
+            session,
+            key,
+            direct_callback(on_sample),
+            history=ext.HistoryConfig(
+                detect_late_publishers=True,
+                max_samples=delivery.history,
+                max_age=delivery.max_age_s,
+            ),
+            recovery=ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
+        )
+        self._miss_listener = self._sub.sample_miss_listener(direct_callback(on_miss))
+
+    def _delivered(self, ident: tuple[str, int]) -> None:
+        with self._lock:
+            self._unconfirmed.append((ident, time.monotonic()))
+            self._settle(time.monotonic())
+
+    def _settle(self, now: float) -> None:  # with the lock held
+        pending, live = self._unconfirmed, self._live
+        while pending:
+            ident, at = pending[0]
+            if ident in live:
+                del live[ident]
+            elif now - at < _WITNESS_GRACE_S:
+                return
+            else:
+                self._recovered += 1
+            pending.popleft()
+
+    @property
+    def recovered(self) -> int:
+        """Samples delivered from a publisher cache (history or gap recovery), so far."""
+        with self._lock:
+            self._settle(time.monotonic())
+            return self._recovered
+
+    def close(self) -> None:
+        for entity in (self._miss_listener, self._sub, self._witness):
+            undeclare(entity)
