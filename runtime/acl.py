@@ -236,3 +236,24 @@ def declared_keys(declaration: Declaration, robot_root: str) -> Mapping[str, set
         "publish": {f"{robot_root}/{STREAMS[s][0]}" for s in declaration.publishes},
         "serve": {f"{robot_root}/{QUERYABLES[q]}" for q in declaration.serves},
     }
+
+
+def check_declared(name: str, cls: type, kind: str, key: str, robot_root: str) -> None:
+    """Refuse (InputError) a key service `name` of class `cls` did not declare for `kind`
+    ("subscribe", "publish", "serve"): the rules are generated from the declarations, so a
+    service must not use what it did not declare. A class that declares nothing is not checked
+    (it has no place on a secure bus). Progress may be read by all; a health queryable served by
+    all."""
+    if all(getattr(cls, a, None) is None for a in ("subscribes", "publishes", "serves")):
+        return
+    if kind == "subscribe" and key.startswith(f"{robot_root}/{PROGRESS}/"):
+        return
+    if kind == "serve" and key == f"{robot_root}/{HEALTH}/{name}":
+        return
+    allowed = declared_keys(declaration_of(name, cls), robot_root)[kind]
+    if key not in allowed:
+        raise InputError(
+            f"service {name!r} may {kind} only on the keys its class declares "
+            f"({', '.join(sorted(allowed)) or 'none'}), not {key}; add it to "
+            f"{cls.__qualname__}'s declarations"
+        )

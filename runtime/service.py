@@ -23,9 +23,9 @@ import time
 from collections.abc import Callable, Coroutine
 from typing import Any, TypeVar, overload
 
-from core.errors import InputError
 from runtime import process
 from runtime.accounting import ErrorAccount
+from runtime.acl import check_declared
 from runtime.bus import Bus
 from runtime.clock import Clock
 from runtime.config import BusConfig, load_config
@@ -37,7 +37,7 @@ from runtime.queries import PlainQueryHandler, QueryHandler
 from runtime.subscription import Handler, Received, Subscription, consume
 from schemas.base import Header, Message
 from schemas.codec import SchemaError
-from schemas.keys import PROGRESS, check_name
+from schemas.keys import check_name
 from schemas.messages import ServiceHealth
 
 M = TypeVar("M", bound=Message)
@@ -195,23 +195,7 @@ class Service:
             self.report_error(key, exc)
 
     def _check_declared(self, kind: str, key: str) -> None:
-        """Refuse a key the class did not declare (when it declares anything)."""
-        if all(getattr(self, a) is None for a in ("subscribes", "publishes", "serves")):
-            return
-        keys = self.bus.keys
-        if kind == "subscribe" and key.startswith(f"{keys.root}/{PROGRESS}/"):
-            return  # how far others have got: every service may read it (runtime.acl)
-        if kind == "serve" and key == keys.health(self.name):
-            return  # every service answers for its health
-        from runtime.acl import declaration_of, declared_keys
-
-        allowed = declared_keys(declaration_of(self.name, type(self)), keys.root)[kind]
-        if key not in allowed:
-            raise InputError(
-                f"service {self.name!r} may {kind} only on the keys its class declares "
-                f"({', '.join(sorted(allowed)) or 'none'}), not {key}; add it to "
-                f"{type(self).__qualname__}'s declarations"
-            )
+        check_declared(self.name, type(self), kind, key, self.bus.keys.root)
 
     def derive(self, source: Header, cls: type[Message]) -> Header:
         """Header of a `cls` output computed from `source`: same stamp, same sequence number and the
