@@ -115,7 +115,8 @@ def parse_gesture(items: Sequence[str]) -> dict[str, float]:
     if len(items) > 1 or "=" not in items[0]:
         raise InputError(
             f"--gesture takes P_HMM(A | G) as one {GESTURE_FORM} (e.g. {_GESTURE_EXAMPLE}); "
-            f"to run the recogniser over a hand log give --gesture-log MODELS LOG; "
+            "to run the recogniser over a hand log give --gesture-log MODELS LOG "
+            "(bn query|words, describe); "
             f"got {' '.join(items)!r}"
         )
     out: dict[str, float] = {}
