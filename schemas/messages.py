@@ -412,7 +412,9 @@ class Progress(Message, frozen=True):
 
 class AffordanceQuery(Message, frozen=True):
     """An ad-hoc question to the reasoner: P(query | evidence, soft evidence, gesture evidence).
-    `soft`: variable -> {value: likelihood}; `gesture`: P_HMM(A | G) by action (fused)."""
+    `soft`: variable -> {value: p}, a distribution over its values (values not named: 0);
+    `gesture`: P_HMM(A | G) by action (fused). The reasoner checks them with the rules every
+    command uses (`cognition.bn.evidence.build_evidence`)."""
 
     query: Annotated[list[Name], msgspec.Meta(max_length=VARIABLES_MAX)]
     evidence: Assignment = msgspec.field(default_factory=dict)

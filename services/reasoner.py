@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
+from cognition.bn.evidence import Evidence, build_evidence
 from cognition.episodes import Anticipation, FusionJoin, Outcome
 from cognition.episodes.fusion import Prediction
-from cognition.fusion import ACTION, action_vector
-from core.errors import InputError, unknown
+from core.errors import InputError
 from runtime.delivery import EVENTS, FRAMES
 from runtime.service import Service
 from schemas import (
@@ -150,21 +150,8 @@ class AffordanceReasoner(Service):
     async def on_ask(self, key: str, q: AffordanceQuery | None) -> list[tuple[str, Message]]:
         if q is None:
             raise InputError("an ask query needs an AffordanceQuery payload")
-        soft: dict[str, list[float]] = {}
-        for var, dist in q.soft.items():
-            if var not in self.model.values:
-                raise unknown("soft-evidence variable", var, self.model.variables)
-            extra = [v for v in dist if v not in self.model.values[var]]
-            if extra:
-                raise unknown(f"value of {var}", extra[0], self.model.values[var])
-            soft[var] = [dist.get(v, 0.0) for v in self.model.values[var]]
-        if q.gesture:
-            if ACTION in soft:
-                raise InputError("give the action either as gesture evidence or as soft evidence")
-            soft[ACTION] = action_vector(self.model, q.gesture).tolist()
-            if ACTION in q.evidence:
-                raise InputError("the action is never observed with gesture evidence; drop it")
-        posterior = self.model.query(q.query, q.evidence, soft)
+        ev = build_evidence(self.model, Evidence(q.evidence, q.soft, q.gesture))
+        posterior = self.model.query(q.query, ev.observed, ev.soft)
         answer = AffordanceAnswer(
             header=self.header(AffordanceAnswer),
             variables=list(posterior.variables),

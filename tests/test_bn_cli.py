@@ -58,7 +58,8 @@ def test_query_several_variables_with_soft_evidence(
     model_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["bn", "query", str(model_path), "--query", "ObjVel", "ball"]
-    argv += ["--evidence", "Shape=circle", "--soft", "Action=0.2,0.5,0.3", "--json"]
+    argv += ["--evidence", "Shape=circle", "--soft", "Action=grasp:0.2,tap:0.5,touch:0.3"]
+    argv += ["--json"]
     out = _json(capsys, argv)
     assert isinstance(out, dict)
     assert out["variables"] == ["ObjVel", "ball"]
@@ -85,9 +86,23 @@ def test_words(model_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
         (["--query", "Action", "--evidence", "Shape=ball"], "unknown value of Shape 'ball'"),
         (["--query", "Action", "--evidence", "Shape"], "--evidence expects VAR=VALUE"),
         (["--query", "Action", "--evidence", "Action=tap"], "both observed and queried"),
-        (["--query", "Shape", "--soft", "Action=0.5,0.5"], "Action has 3 values"),
-        (["--query", "Shape", "--soft", "Action=0.5,0.4,0.4"], "sum to 1.3"),
-        (["--query", "Shape", "--soft", "Action=a,b,c"], "comma-separated numbers"),
+        (["--query", "Shape", "--soft", "Action=grasp:0.5,push:0.5"], "unknown value of Action"),
+        (["--query", "Shape", "--soft", "Speed=fast:1"], "unknown soft-evidence variable"),
+        (["--query", "Shape", "--soft", "Action=grasp:0.5,tap:0.4,touch:0.4"], "sum to 1.3"),
+        (["--query", "Shape", "--soft", "Action=grasp:1.5,tap:-0.5"], "lie in [0, 1]"),
+        (["--query", "Shape", "--soft", "Action=grasp:a"], "value:p pairs"),
+        (["--query", "Shape", "--soft", "Action=grasp:1", "Action=tap:1"], "Action twice"),
+        (["--query", "Shape", "--gesture", "grasp=1,push=0"], "unknown action"),
+        (["--query", "Shape", "--gesture", "grasp=1,tap=0"], "lacks action(s) touch"),
+        (["--query", "Shape", "--gesture", "grasp=x"], "ACTION=p pairs"),
+        (
+            ["--query", "Shape", "--evidence", "Action=tap", "--gesture", "grasp=0,tap=1,touch=0"],
+            "drop Action=tap from --evidence",
+        ),
+        (
+            ["--query", "Shape", "--soft", "Action=tap:1", "--gesture", "grasp=0,tap=1,touch=0"],
+            "drop Action from --soft",
+        ),
         (
             # in this world only a grasp (long contact) makes the narrator say "rises"
             ["--query", "Shape", "--evidence", "Contact=short", "rises=rises"],
@@ -103,6 +118,52 @@ def test_bad_input_exits_2_with_one_line(
     err = capsys.readouterr().err.strip()
     assert message in err
     assert err.count("\n") == 0
+
+
+@pytest.mark.parametrize("command", ["query", "words"])
+@pytest.mark.parametrize(
+    ("old", "names"),
+    [
+        (["--soft", "Action=0.2,0.5,0.3"], "VAR=value:p,value:p"),
+        (
+            ["--gesture", "HMM_M3_Q6_mixsplit.mat", "tap_notable_seated_1"],
+            "--gesture-log MODELS LOG",
+        ),
+        (["--gesture", "HMM_M3_Q6_mixsplit.mat"], "--gesture-log MODELS LOG"),
+    ],
+)
+def test_the_old_evidence_forms_exit_2_naming_the_new_one(
+    model_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: str,
+    old: list[str],
+    names: str,
+) -> None:
+    """`--soft VAR=p1,p2,...` and `--gesture MODELS LOG` are refused, not half-understood."""
+    capsys.readouterr()
+    query = ["--query", "Shape"] if command == "query" else []
+    assert main(["bn", command, str(model_path), *query, *old]) == 2
+    err = capsys.readouterr().err.strip()
+    assert names in err
+    assert err.count("\n") == 0
+
+
+def test_gesture_evidence_given_directly_is_fused(
+    model_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A certain gesture is the action observed; an unnormalised one is normalised first."""
+    base = ["bn", "query", str(model_path), "--query", "ObjVel", "--evidence", "Shape=circle"]
+    observed = _json(capsys, [*base, "Action=tap", "--json"])
+    certain = _json(capsys, [*base, "--gesture", "grasp=0,tap=1,touch=0", "--json"])
+    assert isinstance(observed, dict) and isinstance(certain, dict)
+    assert certain["ObjVel"] == pytest.approx(observed["ObjVel"], abs=1e-12)
+    soft = _json(capsys, [*base, "--soft", "Action=grasp:0.2,tap:0.5,touch:0.3", "--json"])
+    scaled = _json(capsys, [*base, "--gesture", "grasp=0.4,tap=1,touch=0.6", "--json"])
+    assert isinstance(soft, dict) and isinstance(scaled, dict)
+    assert scaled["ObjVel"] == pytest.approx(soft["ObjVel"], abs=1e-12)
+    assert main([*base, "--gesture", "grasp=0,tap=1,touch=0"]) == 0
+    shown = " ".join(capsys.readouterr().out.split())  # undo rich's line wrapping
+    assert "gesture grasp 0.000, tap 1.000, touch 0.000" in shown
 
 
 def test_missing_model_file_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -1,4 +1,4 @@
-"""`beyond describe` and the `--gesture` evidence option, run in-process like a user would."""
+"""`beyond describe` and the `--gesture-log` evidence option, run in-process like a user would."""
 
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ def test_gesture_evidence_is_fused(
 ) -> None:
     human = shared_data / "saponaro2019" / "human_data"
     gesture = [
-        "--gesture",
+        "--gesture-log",
         str(human / "HMM_M3_Q6_mixsplit.mat"),
         str(human / "tap_notable_seated_1"),
     ]
@@ -87,14 +87,20 @@ def test_gesture_conflicts_and_bad_options_exit_2(
 ) -> None:
     human = shared_data / "saponaro2019" / "human_data"
     gesture = [
-        "--gesture",
+        "--gesture-log",
         str(human / "HMM_M3_Q6_mixsplit.mat"),
         str(human / "tap_notable_seated_1"),
     ]
     assert main(["describe", str(real_model), "--evidence", "Action=tap", *gesture]) == 2
     assert "drop Action" in capsys.readouterr().err
     assert main(["describe", str(real_model), "--frames", "1:5"]) == 2
-    assert "give --gesture" in capsys.readouterr().err
+    assert "give --gesture-log" in capsys.readouterr().err
+    both = [*gesture, "--gesture", "grasp=0,tap=1,touch=0"]
+    assert main(["describe", str(real_model), *both]) == 2
+    assert "not both" in capsys.readouterr().err
+    old = ["--gesture", *gesture[1:]]  # the two-argument --gesture of old
+    assert main(["describe", str(real_model), *old]) == 2
+    assert "--gesture-log MODELS LOG" in capsys.readouterr().err
     assert main(["describe", str(real_model), *gesture, "--frames", "300:999"]) == 2
     assert "out of range" in capsys.readouterr().err
     assert main(["describe", str(real_model), "--nbest", "0"]) == 2

@@ -1,7 +1,10 @@
 """`beyond ask`: ask the running affordance reasoner a question over the bus.
 
-beyond ask --query VAR [VAR ...] [--evidence VAR=VALUE ...] [--soft VAR=value:p,... ...]
-           [--gesture grasp=p,tap=p,touch=p] [--json] [bus options]
+beyond ask --query VAR [VAR ...] [--evidence VAR=VALUE ...] [--soft VAR=value:p,value:p ...]
+           [--gesture ACTION=p,...] [--json] [bus options]
+
+The evidence options are those of `beyond bn query` (beyond/commands/evidence_args.py), less
+--gesture-log: the recogniser runs in the pipeline, not here.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from rich.console import Console
 from rich.table import Table
 
 from beyond.commands import argtypes
+from beyond.commands.evidence_args import add_evidence_arguments, parse_evidence_args
 from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
@@ -25,48 +29,23 @@ HELP = "query the running affordance reasoner (exact posterior, with optional ge
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--query", nargs="+", required=True, metavar="VAR")
-    parser.add_argument("--evidence", nargs="+", action="extend", default=[], metavar="VAR=VALUE")
-    parser.add_argument(
-        "--soft", nargs="+", action="extend", default=[], metavar="VAR=value:p,value:p"
-    )
-    parser.add_argument("--gesture", metavar="ACTION=p,...", help="P_HMM(A | G) to fuse")
+    add_evidence_arguments(parser, gesture_log=False)
     parser.add_argument("--timeout", type=argtypes.seconds(), default=3.0)
     parser.add_argument("--json", action="store_true")
     add_bus_arguments(parser)
 
 
-def _pairs(text: str, sep: str, what: str) -> dict[str, float]:
-    out: dict[str, float] = {}
-    for part in text.split(","):
-        name, ok, value = part.partition(sep)
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            ok = ""
-        if not ok:
-            raise InputError(
-                f"{what} expects name{sep}number pairs separated by commas; got {text!r}"
-            )
-    return out
-
-
 def build_query(args: argparse.Namespace) -> AffordanceQuery:
-    evidence: dict[str, str] = {}
-    for item in args.evidence:
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise InputError(f"--evidence expects VAR=VALUE; got {item!r}")
-        evidence[name] = value
-    soft = {}
-    for item in args.soft:
-        name, sep, rest = item.partition("=")
-        if not sep:
-            raise InputError(f"--soft expects VAR=value:p,...; got {item!r}")
-        soft[name] = _pairs(rest, ":", "--soft")
-    gesture = _pairs(args.gesture, "=", "--gesture") if args.gesture else {}
+    """The question as the reasoner takes it: evidence by name, checked against its network
+    by the same `cognition.bn.evidence.build_evidence` that `beyond bn query` runs."""
+    evidence = parse_evidence_args(args)
     header = Header(version=AffordanceQuery.VERSION, source="ask", seq=0, stamp=0)
     return AffordanceQuery(
-        header=header, query=list(args.query), evidence=evidence, soft=soft, gesture=gesture
+        header=header,
+        query=list(args.query),
+        evidence=dict(evidence.hard),
+        soft={name: dict(dist) for name, dist in evidence.soft.items()},
+        gesture=dict(evidence.gesture),
     )
 
 

@@ -2,9 +2,12 @@
 
     beyond bn learn [BAG] [--network DEF] -o MODEL
     beyond bn show MODEL [--json]
-    beyond bn query MODEL --query VAR [VAR ...] [--evidence VAR=VALUE ...] [--soft VAR=p1,... ...]
-                    [--gesture MODELS LOG [--frames A:B] [--scale S]] [--json]
-    beyond bn words MODEL [--evidence ...] [--soft ...] [--json]
+    beyond bn query MODEL --query VAR [VAR ...] [--evidence VAR=VALUE ...]
+                    [--soft VAR=value:p,value:p ...] [--gesture ACTION=p,... |
+                    --gesture-log MODELS LOG [--frames A:B] [--scale S]] [--json]
+    beyond bn words MODEL [--evidence ...] [--soft ...] [--gesture ... | --gesture-log ...] [--json]
+
+The evidence options are the same for every command (beyond/commands/evidence_args.py).
 
 JSON goes to stdout, progress and tables for people to stderr/stdout through rich. Bad input is an
 InputError (exit 2 via the dispatcher).
@@ -77,10 +80,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     query.add_argument("model", type=Path, metavar="MODEL")
     query.add_argument("--query", nargs="+", required=True, metavar="VAR")
     add_evidence_arguments(query)
+    query.add_argument("--json", action="store_true")
 
     words = sub.add_parser("words", help="P(word present) for every word")
     words.add_argument("model", type=Path, metavar="MODEL")
     add_evidence_arguments(words)
+    words.add_argument("--json", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,6 +1,7 @@
 """`beyond describe`: the N best sentences of the grammar describing what the evidence says.
 
-    beyond describe MODEL [--evidence ...] [--soft ...] [--gesture MODELS LOG [--frames A:B]]
+    beyond describe MODEL [--evidence VAR=VALUE ...] [--soft VAR=value:p,... ...]
+                    [--gesture ACTION=p,... | --gesture-log MODELS LOG [--frames A:B] [--scale S]]
                     [--nbest N] [--sentences FILE | --samples N --seed S] [--legacy-offset]
                     [--require REGEX] [--json] [--plot OUT.png]
 
@@ -37,6 +38,7 @@ HELP = "N-best sentences describing the evidence (exact search over the grammar 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", type=Path, metavar="MODEL", help="network model file (.json)")
     add_evidence_arguments(parser)
+    parser.add_argument("--json", action="store_true")
     parser.add_argument("--nbest", type=argtypes.count(1, NBEST_MAX), default=10, metavar="N")
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--sentences", type=Path, metavar="FILE", help="re-score these sentences")

@@ -1,68 +1,181 @@
-"""Evidence as people type it (`VAR=VALUE`, `VAR=p1,p2,...`), checked against a network.
+"""Evidence: one grammar for typing it, one function that turns it into what the network needs.
 
-Shared by every command that takes evidence, so the syntax and the messages are the same
-everywhere. Soft evidence typed by a person is a distribution over the variable's values (in
-definition order) and must sum to 1 within `SUM_TOLERANCE`; the library API itself accepts any
-likelihood vector.
+Every command that takes evidence (`beyond bn query|words`, `beyond describe`, `beyond ask`) and
+the reasoner's ask queryable go through this module, so a question asked offline and the same
+question asked over the bus give the same numbers and are refused with the same messages:
+
+    --evidence VAR=VALUE ...              hard evidence
+    --soft VAR=value:p,value:p ...        a distribution over VAR's values, by name; values not
+                                          named get 0, and the whole must sum to 1
+    --gesture ACTION=p,ACTION=p,...       P_HMM(A | G), fused with the network (cognition.fusion)
+
+Values are named, not listed in definition order, because `beyond ask` has no network at hand
+(the reasoner holds it) and the bus message carries names; the `parse_*` functions therefore
+need no network. `build_evidence` is where the network comes in: it checks every name, builds
+the soft vectors in definition order and turns gesture evidence into soft evidence on the action,
+which is why the action may then be neither observed nor given as soft evidence.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 
-from cognition.bn.definition import NetworkDefinition
-from core.errors import InputError
+from cognition.bn.model import BayesNet
+from cognition.fusion import ACTION, action_vector
+from core.errors import InputError, unknown
 
 SUM_TOLERANCE = 1e-6
+EVIDENCE_FORM = "VAR=VALUE"
+SOFT_FORM = "VAR=value:p,value:p,..."
+GESTURE_FORM = "ACTION=p,ACTION=p,..."
+_SOFT_EXAMPLE = "--soft Action=grasp:0.2,tap:0.5,touch:0.3"
+_GESTURE_EXAMPLE = "--gesture grasp=0.1,tap=0.8,touch=0.1"
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """Evidence by name, before any network is at hand (what `AffordanceQuery` carries)."""
+
+    hard: Mapping[str, str] = field(default_factory=dict)
+    soft: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    gesture: Mapping[str, float] = field(default_factory=dict)  # empty: no gesture evidence
+
+
+@dataclass(frozen=True)
+class NetworkEvidence:
+    """What `BayesNet.query` and `word_probabilities` take: hard values and soft vectors."""
+
+    observed: dict[str, str]
+    soft: dict[str, list[float]]
 
 
 def _split(item: str, flag: str, form: str) -> tuple[str, str]:
     name, sep, rest = item.partition("=")
-    if not sep or not name or not rest:
+    if not sep or not name.strip() or not rest.strip():
         raise InputError(f"{flag} expects {form}; got {item!r}")
     return name.strip(), rest.strip()
 
 
-def parse_evidence(items: Iterable[str], definition: NetworkDefinition) -> dict[str, str]:
-    """`["Shape=box", ...]` → {"Shape": "box"}; unknown variables or values are InputErrors."""
+def _number(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def parse_evidence(items: Iterable[str]) -> dict[str, str]:
+    """`["Shape=box", ...]` → {"Shape": "box"}; names are checked by `build_evidence`."""
     out: dict[str, str] = {}
     for item in items:
-        name, value = _split(item, "--evidence", "VAR=VALUE")
-        var = definition[name]
-        var.index(value)
+        name, value = _split(item, "--evidence", EVIDENCE_FORM)
         if name in out:
             raise InputError(f"--evidence gives {name} twice ({out[name]!r} and {value!r})")
         out[name] = value
     return out
 
 
-def parse_soft(
-    items: Iterable[str], definition: NetworkDefinition, normalised: bool = True
-) -> dict[str, list[float]]:
-    """`["Action=0.2,0.7,0.1"]` → {"Action": [0.2, 0.7, 0.1]}, one number per value."""
-    out: dict[str, list[float]] = {}
+def parse_soft(items: Iterable[str]) -> dict[str, dict[str, float]]:
+    """`["Action=grasp:0.2,tap:0.8"]` → {"Action": {"grasp": 0.2, "tap": 0.8}}."""
+    out: dict[str, dict[str, float]] = {}
     for item in items:
-        name, text = _split(item, "--soft", "VAR=p1,p2,...")
-        var = definition[name]
-        try:
-            probs = [float(x) for x in text.split(",")]
-        except ValueError:
+        name, text = _split(item, "--soft", SOFT_FORM)
+        parts = [part.strip() for part in text.split(",")]
+        if all(":" not in part and _number(part) is not None for part in parts):
             raise InputError(
-                f"--soft {name}: expected comma-separated numbers; got {text!r}"
-            ) from None
-        if len(probs) != var.card:
-            raise InputError(
-                f"--soft {name}: {len(probs)} numbers given; {name} has {var.card} values "
-                f"({', '.join(var.values)}), give one probability each"
+                f"--soft names each value now, {SOFT_FORM} (e.g. {_SOFT_EXAMPLE}); "
+                f"the positional form VAR=p1,p2,... is gone; got {item!r}"
             )
-        if any(not 0.0 <= p <= 1.0 for p in probs):
-            raise InputError(f"--soft {name}: probabilities must lie in [0, 1]; got {text}")
-        if normalised and abs(sum(probs) - 1.0) > SUM_TOLERANCE:
-            raise InputError(
-                f"--soft {name}: probabilities sum to {sum(probs):.9g}; they must sum to 1 "
-                f"(within {SUM_TOLERANCE:g})"
-            )
+        dist: dict[str, float] = {}
+        for part in parts:
+            value, sep, number = part.partition(":")
+            p = _number(number)
+            if not sep or not value.strip() or p is None:
+                raise InputError(
+                    f"--soft {name}: expected comma-separated value:p pairs with p a number "
+                    f"({SOFT_FORM}); got {text!r}"
+                )
+            if value.strip() in dist:
+                raise InputError(f"--soft {name} gives {value.strip()} twice")
+            dist[value.strip()] = p
         if name in out:
             raise InputError(f"--soft gives {name} twice")
-        out[name] = probs
+        out[name] = dist
     return out
+
+
+def parse_gesture(items: Sequence[str]) -> dict[str, float]:
+    """`["grasp=0.1,tap=0.8,touch=0.1"]` → {"grasp": 0.1, ...}; no items, no gesture evidence.
+
+    A list, so that the two-argument form of old (`--gesture MODELS LOG`) arrives here and is
+    refused with a message naming what replaced it, instead of being half-parsed."""
+    if not items:
+        return {}
+    if len(items) > 1 or "=" not in items[0]:
+        raise InputError(
+            f"--gesture takes P_HMM(A | G) as one {GESTURE_FORM} (e.g. {_GESTURE_EXAMPLE}); "
+            "to run the recogniser over a hand log give --gesture-log MODELS LOG "
+            "(bn query|words, describe); "
+            f"got {' '.join(items)!r}"
+        )
+    out: dict[str, float] = {}
+    for part in items[0].split(","):
+        action, sep, number = part.partition("=")
+        p = _number(number)
+        if not sep or not action.strip() or p is None:
+            raise InputError(
+                f"--gesture expects comma-separated ACTION=p pairs with p a number "
+                f"({GESTURE_FORM}); got {items[0]!r}"
+            )
+        if action.strip() in out:
+            raise InputError(f"--gesture gives {action.strip()} twice")
+        out[action.strip()] = p
+    return out
+
+
+def _soft_vector(model: BayesNet, name: str, dist: Mapping[str, float]) -> list[float]:
+    if name not in model.values:
+        raise unknown("soft-evidence variable", name, model.variables)
+    values = model.values[name]
+    extra = [v for v in dist if v not in values]
+    if extra:
+        raise unknown(f"value of {name}", extra[0], values)
+    probs = [float(dist.get(v, 0.0)) for v in values]
+    if any(not (math.isfinite(p) and 0.0 <= p <= 1.0) for p in probs):
+        shown = ", ".join(f"{v}:{p:g}" for v, p in dist.items())
+        raise InputError(f"--soft {name}: probabilities must lie in [0, 1]; got {shown}")
+    total = sum(probs)
+    if abs(total - 1.0) > SUM_TOLERANCE:
+        raise InputError(
+            f"--soft {name}: probabilities sum to {total:.9g}; they must sum to 1 "
+            f"(within {SUM_TOLERANCE:g}) over {', '.join(values)}"
+        )
+    return probs
+
+
+def build_evidence(model: BayesNet, evidence: Evidence) -> NetworkEvidence:
+    """Evidence by name → hard values and soft vectors in `model`'s definition order.
+
+    Gesture evidence becomes soft evidence on the action (`cognition.fusion.action_vector`,
+    SPEC.md's P_comb), so with it the action may be neither observed nor soft evidence."""
+    observed: dict[str, str] = {}
+    for name, value in evidence.hard.items():
+        model.definition[name].index(value)  # unknown variable or value: InputError
+        observed[name] = value
+    soft = {name: _soft_vector(model, name, dist) for name, dist in evidence.soft.items()}
+    if evidence.gesture:
+        if ACTION not in model.values:
+            raise InputError(f"the network has no {ACTION} node; gesture evidence needs one")
+        if ACTION in observed:
+            raise InputError(
+                f"the action comes from the gesture evidence, so it is never observed: "
+                f"drop {ACTION}={observed[ACTION]} from --evidence"
+            )
+        if ACTION in soft:
+            raise InputError(
+                f"the action comes from the gesture evidence: drop {ACTION} from --soft "
+                "(give the action one way)"
+            )
+        soft[ACTION] = action_vector(model, evidence.gesture).tolist()
+    return NetworkEvidence(observed, soft)

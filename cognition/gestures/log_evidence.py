@@ -1,6 +1,6 @@
 """Gesture evidence from a recorded hand log: P_HMM(A | G) after the last frame of a span.
 
-One function, so `beyond gesture stream`, the `--gesture` option of the network commands and the
+One function, so `beyond gesture stream`, the `--gesture-log` option of the network commands and the
 article's experiments all cut, scale and recognise a log the same way.
 """
 
