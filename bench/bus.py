@@ -76,6 +76,7 @@ import zenoh  # noqa: E402
 import schemas as s  # noqa: E402
 from runtime.bus import Bus  # noqa: E402
 from runtime.config import BusConfig, load_config, zenoh_config  # noqa: E402
+from runtime.delivery import Delivery  # noqa: E402
 
 KINDS = {
     # kind: (latency messages, pacing Hz, throughput messages)
@@ -174,7 +175,7 @@ def receive_typed(
 
     async def go() -> dict[str, object]:
         with Bus.open(config) as bus:
-            sub = bus.subscribe(key or f"bench/{config.robot}/{kind}", cls, maxsize=1 << 17)
+            sub = bus.subscribe(key or f"bench/{config.robot}/{kind}", cls, Delivery(queue=1 << 17))
             bus.declare_token(ready or f"bench/{config.robot}/ready")
             lat: list[int] = []
             times: list[int] = []

@@ -54,6 +54,7 @@ from websockets.exceptions import ConnectionClosed  # noqa: E402
 import schemas as s  # noqa: E402
 from runtime.bus import Bus  # noqa: E402
 from runtime.config import BusConfig  # noqa: E402
+from runtime.delivery import Delivery  # noqa: E402
 from runtime.recording import inspect_recording, read_recording  # noqa: E402
 
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
@@ -140,8 +141,10 @@ def subscribe(config: BusConfig, expected: int) -> None:
     async def go() -> dict[str, Any]:
         with Bus.open(config) as bus:
             subs = [
-                bus.subscribe(bus.keys.skeleton, s.SkeletonFrame, maxsize=1 << 14),
-                bus.subscribe(bus.keys.camera_compressed, s.CompressedCameraFrame, maxsize=4096),
+                bus.subscribe(bus.keys.skeleton, s.SkeletonFrame, Delivery(queue=1 << 14)),
+                bus.subscribe(
+                    bus.keys.camera_compressed, s.CompressedCameraFrame, Delivery(queue=4096)
+                ),
             ]
             bus.declare_token(f"{bus.keys.root}/alive/bench-subscriber")
             latencies: list[int] = []

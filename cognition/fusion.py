@@ -16,7 +16,7 @@ services; a property test holds them equal to 1e-12.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 
@@ -57,7 +57,7 @@ def action_vector(model: BayesNet, p_hmm: Mapping[str, float] | Sequence[float])
         raise InputError(
             f"gesture evidence must be finite, non-negative and not all zero; got {vec.tolist()}"
         )
-    return vec / vec.sum()
+    return cast(np.ndarray, vec / vec.sum())
 
 
 def _check_observed(model: BayesNet, observed: Mapping[str, str]) -> None:

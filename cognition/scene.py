@@ -39,6 +39,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -227,7 +228,7 @@ def _brighter(rgb: tuple[float, float, float], gain: float) -> tuple[float, floa
 
 
 def _stamps(n: int, fps: float) -> np.ndarray:
-    return np.rint(np.arange(n) * (1e9 / fps)).astype(np.int64)
+    return cast(np.ndarray, np.rint(np.arange(n) * (1e9 / fps)).astype(np.int64))
 
 
 def _child_seeds(seed: int, n: int) -> list[int]:
@@ -236,7 +237,7 @@ def _child_seeds(seed: int, n: int) -> list[int]:
 
 def _min_jerk(tau: np.ndarray) -> np.ndarray:
     t = np.clip(tau, 0.0, 1.0)
-    return t**3 * (10.0 - 15.0 * t + 6.0 * t**2)
+    return cast(np.ndarray, t**3 * (10.0 - 15.0 * t + 6.0 * t**2))
 
 
 def _resample(track: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray:
@@ -416,11 +417,11 @@ def _withdrawal(exp: Experiment, j_first: int, fps: float) -> Callable[[int], np
 
     def at(m: int) -> np.ndarray:
         if m <= linger:
-            return end + velocity * m
+            return cast(np.ndarray, end + velocity * m)
         if m - linger > steps:
             return np.full(3, np.nan)
         s = float(_min_jerk(np.asarray((m - linger) / steps)))
-        return leave + (target - leave) * s
+        return cast(np.ndarray, leave + (target - leave) * s)
 
     return at
 

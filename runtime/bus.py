@@ -21,7 +21,7 @@ from runtime import liveliness, queries
 from runtime.config import BusConfig, describe, load_config, zenoh_config
 from runtime.delivery import RELIABLE, Delivery
 from runtime.inbox import undeclare
-from runtime.publisher import Publisher, declare_zenoh_publisher
+from runtime.publisher import Publisher, ZenohPublisher, declare_zenoh_publisher
 from runtime.queries import ErrorHandler, PlainQueryHandler, QueryHandler
 from runtime.subscription import MalformedHandler, RawSubscription, Received, Subscription
 from schemas.base import Message
@@ -72,7 +72,9 @@ class Bus:
         self.on_close(pub.close)
         return pub
 
-    def raw_publisher(self, key: str, encoding: str, delivery: Delivery = RELIABLE) -> Any:
+    def raw_publisher(
+        self, key: str, encoding: str, delivery: Delivery = RELIABLE
+    ) -> ZenohPublisher:
         """Already encoded payloads with an encoding string (replay of arbitrary channels)."""
         pub = declare_zenoh_publisher(self.session, key, encoding, delivery)
         self.on_close(lambda: undeclare(pub))
@@ -180,4 +182,4 @@ class Bus:
         for task in list(self._tasks):
             task.cancel()
         with contextlib.suppress(Exception):
-            self.session.close()
+            self.session.close()  # type: ignore[no-untyped-call]  # zenoh's stub lacks "-> None"

@@ -28,10 +28,13 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from core.errors import InputError
 from schemas.keys import DEFAULT_ROBOT, check_name
+
+if TYPE_CHECKING:
+    import zenoh
 
 MODES = ("peer", "client", "router")
 DEFAULT_PORT = 7448  # rendezvous port of the default local group (7447 is Zenoh's router port)
@@ -196,7 +199,7 @@ def _refuse_deep_nesting(path: Path) -> None:
         )
 
 
-def zenoh_config(config: BusConfig) -> Any:
+def zenoh_config(config: BusConfig) -> zenoh.Config:
     """A zenoh.Config for this BusConfig (imported lazily: zenoh is slow to import)."""
     import zenoh
 
@@ -262,7 +265,7 @@ def zenoh_config(config: BusConfig) -> Any:
     return zc
 
 
-def _file_endpoints(zc: Any, path: str) -> list[str]:
+def _file_endpoints(zc: zenoh.Config, path: str) -> list[str]:
     """The endpoints a config file lists at `path` (a list, or a per-mode mapping)."""
     try:
         value = json.loads(zc.get_json(path))

@@ -15,7 +15,7 @@ import os
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Generic, Protocol, TypeVar
 
 import zenoh
 
@@ -35,14 +35,11 @@ def undeclare(entity: Undeclarable) -> None:
         entity.undeclare()
 
 
-def direct_callback(fn: Callable[[Any], None]) -> Any:
+def direct_callback(fn: Callable[[T], None]) -> zenoh.handlers.Callback[T]:
     """Run `fn` on the Zenoh network thread (it only appends to a deque), not on an extra
     Python thread. For the low-rate streams (queries, liveliness, matching, recovery);
     plain subscriptions use channels and a drain thread (runtime.subscription)."""
-    try:
-        return zenoh.handlers.Callback(fn, indirect=False)
-    except TypeError:  # older zenoh-python without `indirect`
-        return fn
+    return zenoh.handlers.Callback(fn, indirect=False)
 
 
 class Inbox(Generic[T]):

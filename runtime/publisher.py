@@ -15,11 +15,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 import zenoh
 from zenoh import ext
 
+from core.errors import InputError
 from runtime.delivery import RELIABLE, Delivery
 from runtime.inbox import Inbox, direct_callback, undeclare
 from runtime.recovery import HEARTBEAT_S
@@ -27,6 +28,7 @@ from schemas.base import Message
 from schemas.codec import encode, encode_into, wire_encoding
 
 M = TypeVar("M", bound=Message)
+ZenohPublisher = zenoh.Publisher | ext.AdvancedPublisher
 
 
 def congestion_control(delivery: Delivery) -> zenoh.CongestionControl:
@@ -37,7 +39,7 @@ def congestion_control(delivery: Delivery) -> zenoh.CongestionControl:
 
 def declare_zenoh_publisher(
     session: zenoh.Session, key: str, encoding: str | None, delivery: Delivery
-) -> Any:
+) -> ZenohPublisher:
     """The Zenoh publisher `delivery` asks for, plain or advanced (cached)."""
     zencoding = zenoh.Encoding(encoding) if encoding else None
     if not delivery.cache:
@@ -102,18 +104,29 @@ class Publisher(Generic[M]):
         self._pub.put(payload)
         self.sent += 1
 
+    def _plain(self) -> zenoh.Publisher:
+        if not isinstance(self._pub, zenoh.Publisher):
+            raise InputError(
+                f"the publisher on {self.key} keeps a cache (Delivery.cache), and zenoh-ext's "
+                "cached publishers do not report matching subscribers; use a plain one"
+            )
+        return self._pub
+
     def matching(self) -> bool:
-        """Whether any subscriber currently matches this key (a plain publisher: zenoh-ext's
-        cached one does not report it)."""
-        return bool(self._pub.matching_status.matching)
+        """Whether any subscriber currently matches this key (plain publishers only)."""
+        # zenoh's stub says bool; it is a MatchingStatus
+        status: zenoh.MatchingStatus = self._plain().matching_status  # type: ignore[assignment]
+        return bool(status.matching)
 
     async def wait_matching(self, timeout: float = 5.0) -> None:
         """Wait until a subscriber matches (discovery handshake, not a fixed sleep)."""
         loop = asyncio.get_running_loop()
         inbox: Inbox[bool] = Inbox(loop, 16)
-        listener = self._pub.declare_matching_listener(
-            direct_callback(lambda status: inbox.push(bool(status.matching)))
-        )
+
+        def on_status(status: zenoh.MatchingStatus) -> None:
+            inbox.push(bool(status.matching))
+
+        listener = self._plain().declare_matching_listener(direct_callback(on_status))
         try:
             deadline = loop.time() + timeout
             while not self.matching():

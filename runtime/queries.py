@@ -70,7 +70,7 @@ def serve(
             with contextlib.suppress(Exception):
                 query.reply_err(str(exc))
         finally:
-            query.drop()
+            query.drop()  # type: ignore[no-untyped-call]  # zenoh's stub lacks "-> None"
 
     async def serving() -> None:
         while True:

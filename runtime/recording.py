@@ -301,7 +301,7 @@ class RecordingWriter:
         if self._closed:
             return
         self._closed = True
-        self._writer.finish()
+        self._writer.finish()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
         if self._file is not None:
             self._file.close()
 

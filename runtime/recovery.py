@@ -27,7 +27,6 @@ import logging
 import threading
 import time
 from collections import OrderedDict, deque
-from typing import Any
 
 import zenoh
 from zenoh import ext
@@ -49,7 +48,7 @@ class RecoveringSource:
         self,
         session: zenoh.Session,
         key: str,
-        inbox: Inbox[tuple[str, Any, int]],
+        inbox: Inbox[tuple[str, bytes | zenoh.ZBytes, int]],
         delivery: Delivery,
     ) -> None:
         self.missed = 0
@@ -75,7 +74,7 @@ class RecoveringSource:
                 if len(live) > _WITNESS_MEMORY:
                     live.popitem(last=False)
 
-        def on_miss(miss: Any) -> None:  # Zenoh thread
+        def on_miss(miss: ext.Miss) -> None:  # Zenoh thread
             self.missed += int(miss.nb)
             log.warning(
                 "%d samples on %s lost for good (no longer in the publisher's cache)", miss.nb, key

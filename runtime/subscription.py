@@ -21,7 +21,7 @@ import threading
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 import zenoh
 
@@ -36,6 +36,9 @@ M = TypeVar("M", bound=Message)
 T = TypeVar("T")
 
 MalformedHandler = Callable[[str, SchemaError], None]
+# (key, payload, received_ns): a large payload stays Zenoh's ZBytes until the loop copies it
+WirePayload = tuple[str, bytes | zenoh.ZBytes, int]
+RawWire = tuple[str, bytes | zenoh.ZBytes, str, int]  # (key, payload, encoding, received_ns)
 
 # Zenoh-side staging channel of a subscription. The inbox behind it is the real bound (drops
 # oldest, counted); this one only has to absorb a burst while the drain thread waits for the GIL
@@ -63,7 +66,11 @@ class Received(Generic[M]):
     received_ns: int
 
 
-def _drain(handler: Any, inbox: Inbox[T], convert: Callable[[Any, int], T]) -> None:
+def _drain(
+    handler: zenoh.handlers.Handler[zenoh.Sample],
+    inbox: Inbox[T],
+    convert: Callable[[zenoh.Sample, int], T],
+) -> None:
     """Body of a subscription's drain thread: channel -> inbox, a burst at a time, until the
     subscriber is undeclared (then `recv` raises)."""
     recv, try_recv, now = handler.recv, handler.try_recv, time.time_ns
@@ -74,16 +81,16 @@ def _drain(handler: Any, inbox: Inbox[T], convert: Callable[[Any, int], T]) -> N
             return
         batch = [convert(sample, now())]
         while len(batch) < _BURST:
-            sample = try_recv()
-            if sample is None:
+            more = try_recv()
+            if more is None:
                 break
-            batch.append(convert(sample, now()))
+            batch.append(convert(more, now()))
         inbox.extend(batch)
 
 
 def _channel_subscriber(
-    session: zenoh.Session, key: str, inbox: Inbox[T], convert: Callable[[Any, int], T]
-) -> Any:
+    session: zenoh.Session, key: str, inbox: Inbox[T], convert: Callable[[zenoh.Sample, int], T]
+) -> zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]:
     """Declare a subscriber on `key` whose samples reach `inbox` through a drain thread."""
     sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(_CHANNEL_CAPACITY))
     thread = threading.Thread(
@@ -98,33 +105,30 @@ def _channel_subscriber(
 _COPY_ON_LOOP = 64 * 1024
 
 
-def _raw_sample(sample: Any, received_ns: int) -> RawSample:
-    """A RawSample whose payload, when large, is still Zenoh's ZBytes (see `_COPY_ON_LOOP`);
-    `RawSubscription.recv` copies it out."""
+def _wire_payload(sample: zenoh.Sample) -> bytes | zenoh.ZBytes:
+    """The payload as bytes, or for a large one still as Zenoh's ZBytes (`_COPY_ON_LOOP`)."""
     payload = sample.payload
-    if len(payload) <= _COPY_ON_LOOP:
-        payload = payload.to_bytes()
-    return RawSample(str(sample.key_expr), payload, str(sample.encoding), received_ns)
+    return payload.to_bytes() if len(payload) <= _COPY_ON_LOOP else payload
 
 
-def _sample_converter(key: str) -> Callable[[Any, int], tuple[str, Any, int]]:
+def _raw_wire(sample: zenoh.Sample, received_ns: int) -> RawWire:
+    """Drain-thread conversion for a raw subscription; `RawSubscription.recv` makes the
+    RawSample."""
+    return (str(sample.key_expr), _wire_payload(sample), str(sample.encoding), received_ns)
+
+
+def _sample_converter(key: str) -> Callable[[zenoh.Sample, int], WirePayload]:
     """Drain-thread conversion for a typed subscription: (key, payload, received_ns), the
     payload as bytes, or for a large one still as Zenoh's ZBytes."""
     if "*" in key or "$" in key:  # a wildcard: each sample says which key it came on
 
-        def convert(sample: Any, received_ns: int) -> tuple[str, Any, int]:
-            payload = sample.payload
-            if len(payload) <= _COPY_ON_LOOP:
-                payload = payload.to_bytes()
-            return (str(sample.key_expr), payload, received_ns)
+        def convert(sample: zenoh.Sample, received_ns: int) -> WirePayload:
+            return (str(sample.key_expr), _wire_payload(sample), received_ns)
 
     else:  # one key: no need to build its string for every sample
 
-        def convert(sample: Any, received_ns: int) -> tuple[str, Any, int]:
-            payload = sample.payload
-            if len(payload) <= _COPY_ON_LOOP:
-                payload = payload.to_bytes()
-            return (key, payload, received_ns)
+        def convert(sample: zenoh.Sample, received_ns: int) -> WirePayload:
+            return (key, _wire_payload(sample), received_ns)
 
     return convert
 
@@ -137,8 +141,8 @@ class RawSubscription:
         self, session: zenoh.Session, keys: list[str], loop: asyncio.AbstractEventLoop, maxsize: int
     ) -> None:
         self.keys = keys
-        self._inbox: Inbox[RawSample] = Inbox(loop, maxsize, wakeup_fd=True)
-        self._subs = [_channel_subscriber(session, key, self._inbox, _raw_sample) for key in keys]
+        self._inbox: Inbox[RawWire] = Inbox(loop, maxsize, wakeup_fd=True)
+        self._subs = [_channel_subscriber(session, key, self._inbox, _raw_wire) for key in keys]
 
     @property
     def dropped(self) -> int:
@@ -146,11 +150,12 @@ class RawSubscription:
 
     async def recv(self, timeout: float | None = None) -> RawSample:
         items = self._inbox.items
-        sample = items.popleft() if items else await self._inbox.get(timeout)
-        if type(sample.payload) is not bytes:
-            payload: Any = sample.payload
-            sample = RawSample(sample.key, payload.to_bytes(), sample.encoding, sample.received_ns)
-        return sample
+        key, payload, encoding, received_ns = (
+            items.popleft() if items else await self._inbox.get(timeout)
+        )
+        if not isinstance(payload, bytes):
+            payload = payload.to_bytes()
+        return RawSample(key, payload, encoding, received_ns)
 
     def __aiter__(self) -> AsyncIterator[RawSample]:
         return self._iterate()
@@ -193,9 +198,9 @@ class Subscription(Generic[M]):
         self._on_malformed = on_malformed
         self._recovering: RecoveringSource | None = None
         if delivery.recover:
-            self._inbox: Inbox[tuple[str, Any, int]] = Inbox(loop, delivery.queue)
+            self._inbox: Inbox[WirePayload] = Inbox(loop, delivery.queue)
             self._recovering = RecoveringSource(session, key, self._inbox, delivery)
-            self._sub: Any = None
+            self._sub: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = None
         else:
             self._inbox = Inbox(loop, delivery.queue, wakeup_fd=True)
             self._sub = _channel_subscriber(session, key, self._inbox, _sample_converter(key))
@@ -219,9 +224,11 @@ class Subscription(Generic[M]):
         """Messages received and not yet taken by the consumer."""
         return len(self._inbox)
 
-    def _accept(self, key: str, payload: Any, received_ns: int) -> Received[M] | None:
+    def _accept(
+        self, key: str, payload: bytes | zenoh.ZBytes, received_ns: int
+    ) -> Received[M] | None:
         """The decoded message, or None (counted) when the payload is malformed."""
-        if type(payload) is not bytes:
+        if not isinstance(payload, bytes):
             payload = payload.to_bytes()
         try:
             message = decode(payload, self.cls, key)

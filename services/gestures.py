@@ -11,7 +11,7 @@ recording is answered whatever order the end marker and the frames arrive in.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -72,7 +72,9 @@ class GestureStreamer(Service):
                 f"joints: {shown or 'none'}"
             )
         torso = frame.joints.get(self.torso_joint)
-        return extract_features(hand.position, torso.position if torso else None)[0]
+        return cast(
+            np.ndarray, extract_features(hand.position, torso.position if torso else None)[0]
+        )
 
     def on_frame(self, frame: SkeletonFrame) -> None:
         if self.finished:

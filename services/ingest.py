@@ -27,7 +27,7 @@ import importlib
 import logging
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -252,4 +252,4 @@ def load_plugin(spec: str) -> Callable[[], AsyncIterator[tuple[str, Any]]]:
     fn = getattr(module, attr, None)
     if not callable(fn):
         raise InputError(f"plug-in {spec!r}: {module_name} has no function {attr!r}")
-    return fn
+    return cast("Callable[[], AsyncIterator[tuple[str, Any]]]", fn)

@@ -15,6 +15,7 @@ from busutil_net import REPO, env_for, private_config, skeleton_frames
 
 import schemas as s
 from runtime.bus import Bus
+from runtime.delivery import Delivery
 from runtime.rates import RateWindow
 from runtime.recording import read_recording
 from runtime.replay import replay
@@ -222,7 +223,7 @@ async def test_replay_starts_paused_steps_and_remaps() -> None:
     assert remap is not None
     with Bus.open(config) as bus:
         target = f"beyond/{config.robot}/other/skeleton"
-        sub = bus.subscribe(target, s.SkeletonFrame, maxsize=4096)
+        sub = bus.subscribe(target, s.SkeletonFrame, Delivery(queue=4096))
         probe = bus.publisher(target, s.SkeletonFrame)
         await probe.wait_matching(timeout=30)
         got: list[int] = []

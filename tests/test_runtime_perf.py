@@ -14,6 +14,7 @@ from busutil_net import private_config, skeleton_frames
 
 import schemas as s
 from runtime.bus import Bus
+from runtime.delivery import Delivery
 from runtime.inbox import Inbox
 from runtime.recording import RecordingWriter
 from runtime.replay import replay
@@ -105,7 +106,7 @@ async def test_channel_subscription_keeps_order_and_counts_malformed(buses) -> N
 
 async def test_a_full_subscription_drops_the_oldest_and_counts_them(buses) -> None:
     a, b = buses
-    sub = a.subscribe(a.keys.skeleton, s.SkeletonFrame, maxsize=4)
+    sub = a.subscribe(a.keys.skeleton, s.SkeletonFrame, Delivery(queue=4))
     pub = b.publisher(b.keys.skeleton, s.SkeletonFrame)
     await pub.wait_matching(timeout=10)
     frames = skeleton_frames(40)

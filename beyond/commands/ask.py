@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
-from typing import Any
 
 from rich.console import Console
 from rich.table import Table
@@ -22,6 +21,7 @@ from beyond.commands.evidence_args import add_evidence_arguments, parse_evidence
 from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
+from runtime.subscription import Received
 from schemas import AffordanceAnswer, AffordanceQuery, Header
 
 HELP = "query the running affordance reasoner (exact posterior, with optional gesture evidence)"
@@ -61,7 +61,9 @@ async def ask(args: argparse.Namespace) -> AffordanceAnswer:
     return replies[0].message
 
 
-async def _ask_until(bus: Bus, query: AffordanceQuery, timeout: float) -> list[Any]:
+async def _ask_until(
+    bus: Bus, query: AffordanceQuery, timeout: float
+) -> list[Received[AffordanceAnswer]]:
     """Ask until a reasoner answers or `timeout` is over.
 
     A session just opened has not yet learnt of the reasoner's queryable: a query then finds no

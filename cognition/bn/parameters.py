@@ -17,7 +17,7 @@ all zero and maximum likelihood is undefined. The rule is an explicit choice (`u
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 
@@ -48,7 +48,7 @@ def ml_cpt(counts: np.ndarray, unseen: str, absent_index: int = 0) -> np.ndarray
         cpt[empty, :] = 1.0 / r
     else:
         raise unknown("rule for unseen parent configurations", unseen, ["absent", "uniform"])
-    return cpt
+    return cast(np.ndarray, cpt)
 
 
 def word_cpt(counts: np.ndarray, unseen: str, word_ess: float = 1.0) -> np.ndarray:

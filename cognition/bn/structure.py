@@ -90,7 +90,7 @@ class CountingScorer:
             ll = log_likelihood(counts, smoothed / smoothed.sum(axis=1, keepdims=True))
         else:
             ll = ml_log_likelihood(counts)
-        return ll - 0.5 * q * (r - 1) * self.log_n
+        return float(ll - 0.5 * q * (r - 1) * self.log_n)
 
 
 class PgmpyScorer:

@@ -18,6 +18,7 @@ depend on the future. Training runs the same function over whole arrays.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -73,7 +74,7 @@ def extract_features(
     if not (horizontal > 0 and vertical > 0):
         raise InputError(f"body scale {body!r} is invalid; valid: two positive lengths")
     divisor = np.array([horizontal, vertical, horizontal])
-    return (h - t) * scale / divisor
+    return cast(np.ndarray, (h - t) * scale / divisor)
 
 
 def features_from_joints(

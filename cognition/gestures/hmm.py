@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -457,7 +457,7 @@ def _preinitialised_gmmhmm() -> Any:
     """
     from hmmlearn.hmm import GMMHMM
 
-    class PreinitialisedGMMHMM(GMMHMM):
+    class PreinitialisedGMMHMM(GMMHMM):  # type: ignore[misc]  # hmmlearn has no type hints
         def _init(self, X: FloatArray, lengths: Any = None) -> None:
             self._check_and_set_n_features(X)
             self._init_covar_priors()
@@ -540,4 +540,4 @@ def log_prior(priors: ArrayLike | None, n: int) -> FloatArray:
             f"priors {priors!r} are invalid; valid: {n} non-negative numbers, not all 0"
         )
     with np.errstate(divide="ignore"):
-        return np.log(p / p.sum())
+        return cast(np.ndarray, np.log(p / p.sum()))

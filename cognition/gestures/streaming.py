@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -83,7 +84,7 @@ class CompiledModels:
     def log_gauss(self, x: FloatArray) -> FloatArray:
         """Weighted component log densities (..., D) -> (..., K, Q, M)."""
         out = self.phi(x) @ self.coef + self.const
-        return out.reshape(*x.shape[:-1], self.k, self.q, self.m)
+        return cast(np.ndarray, out.reshape(*x.shape[:-1], self.k, self.q, self.m))
 
     def log_emission(self, x: FloatArray) -> FloatArray:
         """State log emission densities (..., D) -> (..., K, Q)."""
@@ -91,7 +92,7 @@ class CompiledModels:
         top = lg.max(axis=-1, keepdims=True)
         top = np.where(np.isfinite(top), top, 0.0)
         with np.errstate(divide="ignore"):
-            return np.log(np.exp(lg - top).sum(axis=-1)) + top[..., 0]
+            return cast(np.ndarray, np.log(np.exp(lg - top).sum(axis=-1)) + top[..., 0])
 
 
 def _check_frames(x: ArrayLike, d: int, n: int | None) -> FloatArray:
@@ -218,7 +219,7 @@ def _posterior(loglik: FloatArray, log_prior_: FloatArray) -> FloatArray:
     with np.errstate(invalid="ignore", divide="ignore"):
         post = e / total
     n = loglik.shape[-1]
-    return np.where(total > 0, post, 1.0 / n)
+    return cast(np.ndarray, np.where(total > 0, post, 1.0 / n))
 
 
 def _posterior_1d(loglik: FloatArray, log_prior_: FloatArray) -> FloatArray:

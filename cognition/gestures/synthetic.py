@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -176,7 +177,7 @@ def _along(points: list[FloatArray], u: FloatArray) -> FloatArray:
     """Points on a smooth curve through `points` at fractions u of its chord length."""
     pts = np.stack(points)
     if len(pts) == 2:
-        return pts[0] + (pts[1] - pts[0]) * u[:, None]
+        return cast(np.ndarray, pts[0] + (pts[1] - pts[0]) * u[:, None])
     chord = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
     if chord[-1] <= 0:
         return np.repeat(pts[:1], len(u), axis=0)
@@ -324,7 +325,7 @@ def _arm(
     h = np.sqrt(np.clip(l1**2 - a**2, 0.0, None))
     w = pole[None, :] - (pole[None, :] * u).sum(axis=1, keepdims=True) * u
     w /= np.clip(np.linalg.norm(w, axis=1, keepdims=True), 1e-9, None)
-    return shoulder + a * u + h * w
+    return cast(np.ndarray, shoulder + a * u + h * w)
 
 
 def _body(

@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -62,7 +63,7 @@ def block_means(frame: np.ndarray, block: int) -> np.ndarray:
     img = frame.astype(np.float32)
     if hb * block != h or wb * block != w:
         img = np.pad(img, ((0, hb * block - h), (0, wb * block - w), (0, 0)), mode="edge")
-    return img.reshape(hb, block, wb, block, 3).mean(axis=(1, 3))
+    return cast(np.ndarray, img.reshape(hb, block, wb, block, 3).mean(axis=(1, 3)))
 
 
 def distortions(
@@ -83,7 +84,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out = a[..., 0] * b[..., 0]
     out += a[..., 1] * b[..., 1]
     out += a[..., 2] * b[..., 2]
-    return out
+    return cast(np.ndarray, out)
 
 
 @dataclass

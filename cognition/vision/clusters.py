@@ -29,7 +29,7 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy.cluster.vq import kmeans2
@@ -79,13 +79,13 @@ class Discretiser:
             )
         if self.transform == "log":
             z = np.log(np.maximum(z, _FLOOR))
-        return (z - self.offset) / self.scale
+        return cast(np.ndarray, (z - self.offset) / self.scale)
 
     def assign(self, x: np.ndarray) -> np.ndarray:
         """Cluster index of each row."""
         z = self.space(x)
         d = ((z[:, None, :] - self.centers[None, :, :]) ** 2).sum(axis=2)
-        return np.argmin(d, axis=1)
+        return cast(np.ndarray, np.argmin(d, axis=1))
 
     def label(self, x: np.ndarray | Sequence[float] | float) -> str:
         """The value name for one measurement."""

@@ -7,6 +7,8 @@ brightness (shading, shadows) from hue and chroma (a*, b*).
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 # sRGB (linear) -> XYZ, D65 white, IEC 61966-2-1.
@@ -42,7 +44,7 @@ def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
     lab[..., 0] = 116.0 * f[..., 1] - 16.0
     lab[..., 1] = 500.0 * (f[..., 0] - f[..., 1])
     lab[..., 2] = 200.0 * (f[..., 1] - f[..., 2])
-    return lab
+    return cast(np.ndarray, lab)
 
 
 def lab_to_rgb(lab: np.ndarray) -> np.ndarray:
@@ -52,4 +54,4 @@ def lab_to_rgb(lab: np.ndarray) -> np.ndarray:
     f = np.stack([fy + lab[..., 1] / 500.0, fy, fy - lab[..., 2] / 200.0], axis=-1)
     xyz = np.where(f > 6.0 / 29.0, f**3, (f - 4.0 / 29.0) / _KAPPA) * _WHITE
     lin = xyz @ np.linalg.inv(_RGB_TO_XYZ).T
-    return np.clip(linear_to_srgb(lin), 0.0, 255.0)
+    return cast(np.ndarray, np.clip(linear_to_srgb(lin), 0.0, 255.0))

@@ -22,6 +22,7 @@ a disc of the same area) in metres at the table plane, through the camera's pixe
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import cast
 
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
@@ -87,7 +88,7 @@ def _crofton_weights() -> np.ndarray:
     nxt[-1] += np.pi
     prv = np.roll(ang, 1)
     prv[0] -= np.pi
-    return (nxt - prv) / 2.0
+    return cast(np.ndarray, (nxt - prv) / 2.0)
 
 
 _CROFTON_W = _crofton_weights()

@@ -81,8 +81,8 @@ def render_overlay(
             va="bottom",
             bbox={"facecolor": "black", "alpha": 0.5, "pad": 1.0},
         )
-    canvas.draw()
-    rgba = np.asarray(canvas.buffer_rgba())
+    canvas.draw()  # type: ignore[no-untyped-call]  # matplotlib leaves these unannotated
+    rgba = np.asarray(canvas.buffer_rgba())  # type: ignore[no-untyped-call]
     return np.ascontiguousarray(rgba[:, :, :3])
 
 

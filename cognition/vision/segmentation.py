@@ -19,6 +19,7 @@ The steps, each for a reason:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -52,7 +53,7 @@ class SkinModel:
         r = pixels[..., 0] / safe
         g = pixels[..., 1] / safe
         d = ((r - self.r) / self.radius_r) ** 2 + ((g - self.g) / self.radius_g) ** 2
-        return (d <= 1.0) & (s >= self.min_brightness)
+        return cast(np.ndarray, (d <= 1.0) & (s >= self.min_brightness))
 
 
 @dataclass(frozen=True)
@@ -141,8 +142,8 @@ def _open(mask: np.ndarray) -> np.ndarray:
     opening, gives back the corners of what remains (a rotated box keeps its sharp corners)."""
     opened = ndimage.binary_opening(mask, structure=_OPEN)
     if not opened.any():
-        return opened
-    return ndimage.binary_propagation(opened, structure=_EIGHT, mask=mask)
+        return cast(np.ndarray, opened)
+    return cast(np.ndarray, ndimage.binary_propagation(opened, structure=_EIGHT, mask=mask))
 
 
 def _components(mask: np.ndarray) -> tuple[np.ndarray, list[tuple[slice, slice]]]:
@@ -159,7 +160,7 @@ def _blob(labels: np.ndarray, index: int, sl: tuple[slice, slice], shape: tuple[
 
 def _chromaticity(pixels: np.ndarray) -> np.ndarray:
     s = np.maximum(pixels.sum(axis=-1, keepdims=True, dtype=np.float32), 1.0)
-    return (pixels[..., :2] / s).astype(np.float32)
+    return cast(np.ndarray, (pixels[..., :2] / s).astype(np.float32))
 
 
 def segment(
@@ -291,7 +292,7 @@ def _refine(
         keep = (counts > 0) & (sizes >= max(4, int(0.1 * sizes[1:].max())))
         keep[0] = False
         out = keep[labels]
-    return out
+    return cast(np.ndarray, out)
 
 
 def _thickness(mask: np.ndarray) -> float:

@@ -42,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -208,7 +209,7 @@ def make_table(camera: Camera, rng: np.random.Generator, gain: float = 1.0) -> n
     light = light * (1.0 + 0.025 * stains / max(float(np.abs(stains).max()), 1e-6))
     table = np.asarray(TABLE_RGB, dtype=np.float32) * light[:, :, None]
     table += rng.normal(0.0, 2.0, table.shape).astype(np.float32)
-    return table
+    return cast(np.ndarray, table)
 
 
 def _patch(
@@ -251,12 +252,12 @@ def _box_distance(
     qx = np.abs(dx * ca + dy * sa) - a / 2.0
     qy = np.abs(-dx * sa + dy * ca) - b / 2.0
     outside = np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
-    return outside + np.minimum(np.maximum(qx, qy), 0.0)
+    return cast(np.ndarray, outside + np.minimum(np.maximum(qx, qy), 0.0))
 
 
 def _shadow_offset(height_m: float) -> np.ndarray:
     """Where the shadow of something `height_m` above the table falls (table metres)."""
-    return -_LIGHT[:2] / _LIGHT[2] * height_m
+    return cast(np.ndarray, -_LIGHT[:2] / _LIGHT[2] * height_m)
 
 
 def _draw_shadow(
@@ -413,7 +414,7 @@ class Experiment:
 
 def _min_jerk(tau: np.ndarray) -> np.ndarray:
     t = np.clip(tau, 0.0, 1.0)
-    return 10 * t**3 - 15 * t**4 + 6 * t**5
+    return cast(np.ndarray, 10 * t**3 - 15 * t**4 + 6 * t**5)
 
 
 def _trajectories(

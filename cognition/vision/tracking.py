@@ -10,6 +10,7 @@ not matched (a new track starts), and a track not seen for `max_missed` frames e
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -31,7 +32,7 @@ class Track:
         p = np.asarray(self.positions[-1], dtype=np.float64)
         if len(self.positions) >= 2 and self.frames[-1] > self.frames[-2]:
             v = (p - np.asarray(self.positions[-2])) / (self.frames[-1] - self.frames[-2])
-            return p + v * (frame - self.frames[-1])
+            return cast(np.ndarray, p + v * (frame - self.frames[-1]))
         return p
 
     def as_arrays(self) -> tuple[np.ndarray, np.ndarray]:
