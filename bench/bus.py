@@ -374,7 +374,7 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
 
 
 def write_recording(path: Path, keys: s.Keys) -> None:
-    from runtime.recording import RecordingWriter
+    from runtime.recording_writer import RecordingWriter
 
     start = 1_700_000_000_000_000_000
     with RecordingWriter(path) as writer:

@@ -14,7 +14,7 @@ from busutil_net import private_config, skeleton_frames
 
 import schemas as s
 from runtime.bus import Bus, Inbox
-from runtime.recording import RecordingWriter
+from runtime.recording_writer import RecordingWriter
 from runtime.replay import replay
 from schemas.codec import encode, encode_into, wire_encoding
 
