@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import io
 import struct
-import zlib
 from typing import Any
 
 from mcap.data_stream import ReadDataStream
@@ -13,7 +12,7 @@ from mcap.exceptions import EndOfFile
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Schema
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import CRCValidationError
+from mcap.stream_reader import get_chunk_data_stream
 
 from core.errors import InputError
 
@@ -22,23 +21,12 @@ _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publis
 
 
 def _chunk_data(chunk: Chunk) -> bytes:
-    """The chunk's records, decompressed and checked against its CRC."""
-    if chunk.compression == "zstd":
-        import zstandard
-
-        data: bytes = zstandard.decompress(chunk.data, chunk.uncompressed_size)
-    elif chunk.compression == "lz4":
-        import lz4.frame  # type: ignore[import-untyped]
-
-        data = lz4.frame.decompress(chunk.data)
-    elif chunk.compression == "":
-        data = bytes(chunk.data)
-    else:
+    """The chunk's records, decompressed (by mcap, which brings its codecs) and checked against
+    its CRC."""
+    if chunk.compression not in ("zstd", "lz4", ""):
         raise InputError(f"unsupported chunk compression {chunk.compression!r}")
-    if chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise CRCValidationError(
-            expected=chunk.uncompressed_crc, actual=zlib.crc32(data), record=chunk
-        )
+    stream, length = get_chunk_data_stream(chunk, validate_crc=True)
+    data: bytes = stream.read(length)
     return data
 
 
