@@ -123,8 +123,10 @@ def free_port() -> int:
 
 
 def quantile(values: list[int], q: float) -> float:
+    """0.0 when nothing was measured (a bridge that forwarded nothing), so the run still ends
+    with its JSON line."""
     ordered = sorted(values)
-    return float(ordered[min(len(ordered) - 1, int(q * len(ordered)))])
+    return float(ordered[min(len(ordered) - 1, int(q * len(ordered)))]) if ordered else 0.0
 
 
 # --- receiving side (child process) ---------------------------------------------------------
