@@ -124,8 +124,10 @@ def free_port() -> int:
 
 
 def quantile(values: list[int], q: float) -> float:
+    """0.0 when nothing was measured (a bridge that forwarded nothing), so the run still ends
+    with its JSON line."""
     ordered = sorted(values)
-    return float(ordered[min(len(ordered) - 1, int(q * len(ordered)))])
+    return float(ordered[min(len(ordered) - 1, int(q * len(ordered)))]) if ordered else 0.0
 
 
 # --- receiving side (child process) ---------------------------------------------------------
@@ -375,7 +377,7 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
 
 
 def write_recording(path: Path, keys: s.Keys) -> None:
-    from runtime.recording import RecordingWriter
+    from runtime.recording_writer import RecordingWriter
 
     start = 1_700_000_000_000_000_000
     with RecordingWriter(path) as writer:

@@ -34,7 +34,6 @@ import contextlib
 import json
 import os
 import resource
-import socket
 import statistics
 import struct
 import subprocess
@@ -52,6 +51,7 @@ from websockets.asyncio.client import connect  # noqa: E402
 from websockets.exceptions import ConnectionClosed  # noqa: E402
 
 import schemas as s  # noqa: E402
+from bench.bus import free_port, quantile  # noqa: E402
 from runtime.bus import Bus  # noqa: E402
 from runtime.config import BusConfig  # noqa: E402
 from runtime.delivery import Delivery  # noqa: E402
@@ -62,17 +62,6 @@ SPEED = 4.0
 PASSES = 2  # of the 14.3 s demo: 7 s of publishing at 4x
 REPEATS = 3
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-def quantile(values: list[int], q: float) -> float:
-    ordered = sorted(values)
-    return float(ordered[min(len(ordered) - 1, int(q * len(ordered)))]) if ordered else 0.0
 
 
 def cpu_of(pid: int) -> float:

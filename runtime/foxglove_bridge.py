@@ -24,7 +24,7 @@ import foxglove
 from core.errors import InputError
 from runtime.bus import Bus
 from runtime.foxglove_views import VIEWS, VIEWS_OF, View, encode_view, is_view_key
-from runtime.recording import JSON, JSONSCHEMA
+from runtime.recording_format import JSON, JSONSCHEMA
 from runtime.subscription import RawSample, decode_any
 from schemas.base import Message
 from schemas.codec import (

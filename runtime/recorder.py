@@ -9,7 +9,7 @@ from pathlib import Path
 
 from runtime.bus import Bus
 from runtime.log import event
-from runtime.recording import DEFAULT_CHUNK_SIZE, RecordingWriter
+from runtime.recording_writer import DEFAULT_CHUNK_SIZE, RecordingWriter
 from schemas.codec import SchemaError
 
 log = logging.getLogger("beyond.record")

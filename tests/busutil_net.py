@@ -89,7 +89,7 @@ def skeleton_recording(path: Path, actions: list[str], seed: int, robot: str = "
     """A recording of synthetic gestures, skeleton frames only (no camera): the services then
     describe the gestures without measured effects."""
     from cognition.gestures import synthesize_continuous
-    from runtime.recording import RecordingWriter
+    from runtime.recording_writer import RecordingWriter
 
     stream = synthesize_continuous(actions, seed=seed)
     key = Keys(robot).skeleton

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from netns_util import TwoHosts, unavailable
 
 from cognition.paths import SOURCES, shared_data_dir
 
@@ -17,6 +19,28 @@ def shared_data() -> Path:
     if root is None:
         pytest.skip(f"../shared/data is absent (the article's data, from {SOURCES})")
     return root
+
+
+@pytest.fixture
+def hosts() -> Iterator[TwoHosts]:
+    """Two network namespaces joined by a veth pair (tests/netns_util.py), removed afterwards
+    with every process started in them; skips with the reason where they cannot be made.
+    NETNS_DUMP=FOLDER keeps each process's output there, timed (for debugging)."""
+    reason = unavailable()
+    if reason is not None:
+        pytest.skip(reason)
+    h = TwoHosts()
+    try:
+        yield h
+    finally:
+        h.close()
+        if os.environ.get("NETNS_DUMP"):
+            for proc in h.procs:
+                Path(os.environ["NETNS_DUMP"], f"{proc.name}.log").write_text(
+                    "\n".join(f"{t:.3f} {line}" for t, line in proc.lines)
+                )
+        assert h.namespaces_left() == [], "namespaces left behind"
+        assert all(p.popen.poll() is not None for p in h.procs), "processes left behind"
 
 
 # The JavaScript packages third-party tools read our files and streams with: @mcap/core (the MCAP

@@ -30,7 +30,7 @@ from typing import Any
 
 import pytest
 from busutil_net import skeleton_recording
-from netns_util import REPO, Proc, TwoHosts, unavailable
+from netns_util import REPO, Proc, TwoHosts
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(175)]
 
@@ -108,25 +108,6 @@ def gone(events: Events, service: str, since: float) -> bool:
         t > since and e["key"].endswith(f"/alive/{service}") and "DELETE" in e["kind"]
         for t, e in events.where(event="alive")
     )
-
-
-@pytest.fixture
-def hosts() -> Any:
-    reason = unavailable()
-    if reason is not None:
-        pytest.skip(reason)
-    h = TwoHosts()
-    try:
-        yield h
-    finally:
-        h.close()
-        if os.environ.get("NETNS_DUMP"):  # debugging: every process's output, timed
-            for proc in h.procs:
-                Path(os.environ["NETNS_DUMP"], f"{proc.name}.log").write_text(
-                    "\n".join(f"{t:.3f} {line}" for t, line in proc.lines)
-                )
-        assert h.namespaces_left() == [], "namespaces left behind"
-        assert all(p.popen.poll() is not None for p in h.procs), "processes left behind"
 
 
 class Sides:

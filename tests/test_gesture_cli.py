@@ -70,7 +70,7 @@ def test_train_then_evaluate_synthetic(tmp_path: Path, capsys: pytest.CaptureFix
 
 def _write_mcap(path: Path, actions: list[str], seed: int, metadata: dict[str, str]) -> None:
     from cognition.gestures.synthetic import synthesize_continuous
-    from runtime.recording import RecordingWriter
+    from runtime.recording_writer import RecordingWriter
     from schemas.base import Header
     from schemas.keys import Keys
     from schemas.messages import Joint, SkeletonFrame

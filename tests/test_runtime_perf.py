@@ -16,7 +16,7 @@ import schemas as s
 from runtime.bus import Bus
 from runtime.delivery import Delivery
 from runtime.inbox import Inbox
-from runtime.recording import RecordingWriter
+from runtime.recording_writer import RecordingWriter
 from runtime.replay import replay
 from schemas.codec import encode, encode_into, wire_encoding
 

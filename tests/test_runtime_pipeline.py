@@ -13,7 +13,7 @@ from busutil_net import EXAMPLES, env_for, private_config, skeleton_frames
 
 import schemas as s
 from runtime.bus import Bus
-from runtime.recording import RecordingWriter
+from runtime.recording_writer import RecordingWriter
 from runtime.replay import replay
 from runtime.subscription import RawSubscription
 

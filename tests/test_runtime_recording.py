@@ -18,7 +18,8 @@ from mcap.reader import make_reader
 
 import schemas as s
 from runtime.bus import Bus
-from runtime.recording import RecordingWriter, inspect_recording, read_recording
+from runtime.recording import inspect_recording, read_recording
+from runtime.recording_writer import RecordingWriter
 from runtime.replay import replay
 
 ROBOT_KEYS = s.Keys("r1")

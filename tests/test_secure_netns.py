@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 from busutil_net import skeleton_recording
-from netns_util import REPO, TwoHosts, unavailable
+from netns_util import REPO, TwoHosts
 
 from runtime import acl, keystore
 
@@ -31,20 +31,6 @@ VERBS = {
     "grasp": r"\b(grasps|grasped|grasping|picks|picked|picking)\b",
     "touch": r"\b(touches|touched|touching|pokes|poked|poking)\b",
 }
-
-
-@pytest.fixture
-def hosts() -> Any:
-    reason = unavailable()
-    if reason is not None:
-        pytest.skip(reason)
-    h = TwoHosts()
-    try:
-        yield h
-    finally:
-        h.close()
-        assert h.namespaces_left() == [], "namespaces left behind"
-        assert all(p.popen.poll() is not None for p in h.procs), "processes left behind"
 
 
 @pytest.fixture

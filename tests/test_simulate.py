@@ -26,7 +26,8 @@ from cognition.scene import (
 from cognition.vision.tabletop import kinect_to_table
 from core.errors import InputError
 from runtime.images import image_from_message, message_from_image
-from runtime.recording import RecordingWriter, inspect_recording, read_recording
+from runtime.recording import inspect_recording, read_recording
+from runtime.recording_writer import RecordingWriter
 from schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame
 from schemas.keys import Keys
 

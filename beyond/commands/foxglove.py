@@ -18,7 +18,8 @@ from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.foxglove_bridge import DEFAULT_PORT, FoxgloveBridge
 from runtime.log import setup_logging
-from runtime.recording import RecordingWriter, inspect_recording, read_recording
+from runtime.recording import inspect_recording, read_recording
+from runtime.recording_writer import RecordingWriter
 
 HELP = "serve the bus to Foxglove over its WebSocket protocol"
 

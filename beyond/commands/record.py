@@ -12,7 +12,7 @@ from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.log import setup_logging
 from runtime.recorder import record
-from runtime.recording import COMPRESSIONS, DEFAULT_CHUNK_SIZE
+from runtime.recording_writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE
 
 HELP = "record bus traffic on key expressions into an MCAP file"
 

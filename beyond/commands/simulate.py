@@ -39,7 +39,8 @@ from cognition.scene import (
 )
 from core.errors import InputError
 from runtime.images import image_from_message, message_from_image
-from runtime.recording import RecordingWriter, inspect_recording, read_recording
+from runtime.recording import inspect_recording, read_recording
+from runtime.recording_writer import RecordingWriter
 from schemas import CameraFrame, CompressedCameraFrame, Header, Joint, SkeletonFrame
 from schemas.keys import DEFAULT_ROBOT, Keys
 

@@ -470,11 +470,8 @@ def _preinitialised_gmmhmm() -> Any:
 def _one_blas_thread() -> Iterator[None]:
     """EM makes thousands of tiny LAPACK calls; with other processes on the machine, OpenBLAS
     threads waiting for each other turn 30 us calls into milliseconds. One thread is faster."""
-    try:
-        from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
-    except ImportError:  # pragma: no cover - comes with hmmlearn's scikit-learn
-        yield
-        return
+    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
     with threadpool_limits(limits=1, user_api="blas"):
         yield
 
