@@ -133,6 +133,15 @@ def _sample_converter(key: str) -> Callable[[zenoh.Sample, int], WirePayload]:
     return convert
 
 
+async def _until_closed(recv: Callable[[], Awaitable[T]]) -> AsyncIterator[T]:
+    """What `recv()` returns, one after the other, until the inbox is closed and drained."""
+    while True:
+        try:
+            yield await recv()
+        except EOFError:
+            return
+
+
 class RawSubscription:
     """Undecoded samples of one or more key expressions (recorder, echo): in arrival order per
     key expression (each has its own Zenoh subscriber)."""
@@ -158,14 +167,7 @@ class RawSubscription:
         return RawSample(key, payload, encoding, received_ns)
 
     def __aiter__(self) -> AsyncIterator[RawSample]:
-        return self._iterate()
-
-    async def _iterate(self) -> AsyncIterator[RawSample]:
-        while True:
-            try:
-                yield await self.recv()
-            except EOFError:
-                return
+        return _until_closed(self.recv)
 
     def close(self) -> None:
         if not self._inbox.closed:
@@ -251,14 +253,7 @@ class Subscription(Generic[M]):
                 return got
 
     def __aiter__(self) -> AsyncIterator[Received[M]]:
-        return self._iterate()
-
-    async def _iterate(self) -> AsyncIterator[Received[M]]:
-        while True:
-            try:
-                yield await self.recv()
-            except EOFError:
-                return
+        return _until_closed(self.recv)
 
     def close(self) -> None:
         if not self._inbox.closed:
