@@ -1,17 +1,25 @@
-"""Play a recording onto the bus, in stamp order, with its original timing scaled.
+"""The one replay engine: send timed messages at their stamp-derived times.
 
-`replay()` is the library form (tests and services call it in-process); `beyond replay` wraps it.
-Messages go out on reliable publishers (Zenoh blocks rather than drops when its queue is full),
-and with `pace_for` the replay never runs more than a window of recording time ahead of the
-slowest of those services (runtime.pacing), so an as-fast-as-possible replay into a pipeline is
-complete and deterministic.
+`Player` is shared by `beyond replay` (through `replay()` below) and the sensor ingest service
+(services/ingest.py), so speed, pause, pacing and stop mean the same on both paths and a fix to
+one is a fix to both. Each pass sends its cues in order, the n-th at
+`(at_n - at_0) / rate` after the pass began (None: as fast as possible; runtime.replay_control
+holds the one rule for rates). `at` is the message's own time, the recording's publish_time,
+which is its header stamp: timing follows the data, never when a sample arrived or was read.
+With a pacer the player never runs more than a window of stream time ahead of the slowest
+consumer (runtime.pacing), so even an as-fast-as-possible replay into a pipeline is complete and
+deterministic; with a control it holds while paused and shifts its schedule by the time held.
+What a message becomes on the wire (raw publishers here, the ingest's typed and cached ones
+there) is the caller's `send`.
+
+Messages go out on reliable publishers (Zenoh blocks rather than drops when its queue is full).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,11 +28,13 @@ from core.errors import InputError
 from runtime.bus import Bus
 from runtime.pacing import Pacer
 from runtime.recording import RecordedMessage, RecordingInfo, read_recording
-from runtime.replay_control import ReplayControl
+from runtime.replay_control import ReplayControl, check_rate
+from schemas.base import Message
 from schemas.codec import encode_into, wire_encoding
 from schemas.keys import with_robot
 
 log = logging.getLogger("beyond.replay")
+YIELD_EVERY = 32  # messages sent without sleeping before the event loop gets a turn
 
 
 @dataclass
@@ -40,6 +50,106 @@ class ReplayStats:
     def speed(self) -> float:
         """Recording seconds per wall second (over all passes)."""
         return (self.span_s * self.passes) / self.wall_s if self.wall_s > 0 else float("inf")
+
+
+@dataclass(slots=True, frozen=True)
+class Cue:
+    """One message to send: when (`at`, ns on the recording's clock), where (`key`, after any
+    rename: consumers report progress per key) and the stamp they will report handling."""
+
+    at: int
+    key: str
+    stamp: int
+    message: Message | None  # decoded once; None: a sample not ours, sent as recorded
+    recorded: RecordedMessage | None = None
+
+    def ours(self) -> Message:
+        """The message; InputError if the sample is not a beyond message."""
+        if self.message is not None:
+            return self.message
+        if self.recorded is not None:
+            return self.recorded.message()  # raises, naming the channel
+        raise InputError(f"cue on {self.key} carries no message")
+
+
+def recorded_cues(
+    items: Iterable[RecordedMessage], rename: Callable[[str], str | None] | None = None
+) -> Iterator[Cue]:
+    """Cues for recorded messages, ours decoded once (the stamp to pace on and the message to
+    send come from the same decoding). rename: the key to send a recorded key on, None to skip."""
+    for item in items:
+        key = item.key if rename is None else rename(item.key)
+        if key is None:
+            continue
+        if item.cls is None:
+            yield Cue(item.publish_time, key, item.publish_time, None, item)
+        else:
+            message = item.message()
+            yield Cue(item.publish_time, key, message.header.stamp, message, item)
+
+
+class Player:
+    """Sends cues through a caller's `send` at their times scaled by `rate`, held by `control`,
+    never ahead of `pacer`'s consumers (started and stopped by the caller), until `stop`."""
+
+    def __init__(
+        self,
+        *,
+        rate: float | None = 1.0,
+        pacer: Pacer | None = None,
+        control: ReplayControl | None = None,
+        stop: asyncio.Event | None = None,
+    ) -> None:
+        self.rate = check_rate(rate)
+        self.pacer = pacer
+        self.control = control
+        self.stop = stop
+        self.stats = ReplayStats()
+        self._began: float | None = None
+
+    @property
+    def stopped(self) -> bool:
+        return self.stop is not None and self.stop.is_set()
+
+    async def play(self, cues: Iterable[Cue], send: Callable[[Cue], None]) -> int:
+        """One pass over `cues` (timed from its first); returns how many were sent."""
+        loop = asyncio.get_running_loop()
+        stats, pacer = self.stats, self.pacer
+        if self._began is None:
+            self._began = loop.time()
+        pass_start = loop.time()
+        t0: int | None = None
+        last = 0
+        sent = 0
+        for cue in cues:
+            if self.stopped:
+                break
+            if t0 is None:
+                t0 = cue.at
+            last = cue.at
+            delay = 0.0
+            if self.rate is not None:
+                delay = pass_start + (cue.at - t0) / 1e9 / self.rate - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            elif stats.messages % YIELD_EVERY == 0:
+                await asyncio.sleep(0)  # let the loop breathe (health, progress, signals)
+            if self.control is not None:
+                pass_start += await self.control.gate()
+            if pacer is not None:
+                await pacer.before(cue.key, cue.stamp)
+            send(cue)
+            if pacer is not None:
+                pacer.after(cue.key, cue.stamp)
+            sent += 1
+            stats.messages += 1
+        stats.passes += 1
+        if t0 is not None:
+            stats.span_s = max(stats.span_s, (last - t0) / 1e9)
+        stats.wall_s = loop.time() - self._began
+        if pacer is not None:
+            stats.held_back_s = pacer.waited_s
+        return sent
 
 
 async def replay(
@@ -58,90 +168,64 @@ async def replay(
     remap: Callable[[str], str] | None = None,
     control: ReplayControl | None = None,
 ) -> ReplayStats:
-    """Publish `path` on `bus`. rate: 2.0 = twice as fast, None = as fast as possible.
-    robot: publish under this robot name instead of the recorded one. With `loop`, repeat until
-    `stop` is set (or forever). pace_for: services (by name) never to outrun. remap: renames
-    each key as published (runtime.replay_control); control: pause/step (the schedule shifts by
-    the time held)."""
-    if rate is not None and rate <= 0:
-        raise InputError(f"replay rate {rate} must be positive (or as fast as possible)")
+    """Publish `path` on `bus` as recorded (`beyond replay`). rate: 2.0 = twice as fast, None =
+    as fast as possible. robot: publish under this robot name instead of the recorded one. With
+    `loop`, repeat until `stop` is set (or forever). pace_for: services (by name) never to
+    outrun. remap: renames each key as published (runtime.replay_control); control: pause/step
+    (the schedule shifts by the time held). A damaged file replays its readable part and says
+    where it breaks in `damaged`."""
+    check_rate(rate)
     if start is not None and end is not None and end < start:
         raise InputError(f"--end {end} is before --start {start}")
-    event_loop = asyncio.get_running_loop()
-    publishers: dict[tuple[str, str], Any] = {}
-    stats = ReplayStats()
-    buffer = bytearray()
     topic_list = list(topics) if topics else None
+
+    def rename(key: str) -> str:
+        key = with_robot(key, robot) if robot else key
+        return remap(key) if remap is not None else key
+
     pacer: Pacer | None = None
     if pace_for:
         from runtime.recording import inspect_recording
 
-        recorded = [c.topic for c in inspect_recording(path).channels]
-        keys = [with_robot(k, robot) if robot else k for k in recorded]
-        pacer = Pacer(bus, pace_for, [remap(k) for k in keys] if remap else keys)
+        pacer = Pacer(bus, pace_for, [rename(c.topic) for c in inspect_recording(path).channels])
         await pacer.start()
-    began = event_loop.time()
+    player = Player(rate=rate, pacer=pacer, control=control, stop=stop)
+    stats = player.stats
+    publishers: dict[tuple[str, str], Any] = {}
+    buffer = bytearray()
+
+    def send(cue: Cue) -> None:
+        item = cue.recorded
+        assert item is not None
+        if cue.message is not None and item.cls is not None:
+            # = item.wire(), encoded into one reused buffer (Zenoh copies it in `put`):
+            # a fresh 230 kB block per camera frame costs more than the encoding.
+            encoding = wire_encoding(item.cls)
+            encode_into(cue.message, buffer)
+            payload: bytes | bytearray = buffer
+        else:
+            payload, encoding = item.data, item.encoding
+        pub = publishers.get((cue.key, encoding))
+        if pub is None:
+            pub = publishers[(cue.key, encoding)] = bus.raw_publisher(cue.key, encoding)
+        pub.put(payload)
+        if on_message is not None:
+            on_message(item)
 
     def damaged(info: RecordingInfo) -> None:
         if not stats.damaged:
             stats.damaged = info.damage()
             log.warning("replaying the readable part: %s", stats.damaged)
 
-    while True:
-        t0: int | None = None
-        last = 0
-        pass_start = event_loop.time()
-        count_before = stats.messages
-        for item in read_recording(
-            path, topics=topic_list, start=start, end=end, on_damage=damaged
-        ):
-            if stop is not None and stop.is_set():
+    try:
+        while True:
+            items = read_recording(path, topics=topic_list, start=start, end=end, on_damage=damaged)
+            sent = await player.play(recorded_cues(items, rename), send)
+            if not loop or player.stopped or sent == 0:
                 break
-            if t0 is None:
-                t0 = item.publish_time
-            last = item.publish_time
-            if rate is not None:
-                delay = pass_start + (item.publish_time - t0) / 1e9 / rate - event_loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-            elif stats.messages % 64 == 0:
-                await asyncio.sleep(0)  # let the loop breathe
-            if control is not None:
-                pass_start += await control.gate()
-            key = with_robot(item.key, robot) if robot else item.key
-            if remap is not None:
-                key = remap(key)
-            stamp = item.publish_time
-            if pacer is not None:
-                if item.cls is not None:
-                    stamp = item.message().header.stamp
-                await pacer.before(key, stamp)
-            if item.cls is not None:
-                # = item.wire(), encoded into one reused buffer (Zenoh copies it in `put`):
-                # a fresh 230 kB block per camera frame costs more than the encoding.
-                encoding = wire_encoding(item.cls)
-                encode_into(item.message(), buffer)
-                payload: bytes | bytearray = buffer
-            else:
-                payload, encoding = item.wire()
-            pub = publishers.get((key, encoding))
-            if pub is None:
-                pub = publishers[(key, encoding)] = bus.raw_publisher(key, encoding)
-            pub.put(payload)
-            if pacer is not None:
-                pacer.after(key, stamp)
-            stats.messages += 1
-            if on_message is not None:
-                on_message(item)
-        stats.passes += 1
-        if t0 is not None:
-            stats.span_s = max(stats.span_s, (last - t0) / 1e9)
-        if not loop or (stop is not None and stop.is_set()) or stats.messages == count_before:
-            break
-    stats.wall_s = event_loop.time() - began
-    if pacer is not None:
-        pacer.stop()
-        stats.held_back_s = pacer.waited_s
-    for pub in publishers.values():
-        pub.undeclare()
+    finally:
+        if pacer is not None:
+            pacer.stop()
+        for pub in publishers.values():
+            pub.undeclare()
     return stats

@@ -1,13 +1,49 @@
-"""Interactive replay: pause, resume, step one message, and key remapping (`beyond replay
---start-paused --remap FROM:TO`). Kept out of `runtime/replay.py`, which only asks the control
-before each message how long it was held (and shifts its schedule by that much)."""
+"""What a person steers a replay with: its speed, pause/resume/step, and key remapping
+(`beyond replay --rate R --start-paused --remap FROM:TO`, `beyond up --rate R`, the ingest
+service's `rate` option). Kept out of `runtime/replay.py`, which only asks the control before
+each message how long it was held (and shifts its schedule by that much); light to import, so
+argument parsing and services can check a rate without loading the bus.
+
+One rule for speed: code passes `rate: float | None`, a factor on the recording's timing
+(2 = twice as fast), None = as fast as possible. A person types a number, where 0 means as fast
+as possible (there is no "None" on a command line or in a YAML file); `rate_option` is the one
+place that turns that 0 into None, so both replay paths refuse and accept the same values.
+"""
 
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable, Iterable
 
 from core.errors import InputError
+
+RATE_MAX = 1e6  # times real time: already "as fast as possible" for any recording; more is a typo
+VALID_RATES = f"a speed factor in (0, {RATE_MAX:g}] (2: twice as fast)"
+
+
+def check_rate(rate: float | None) -> float | None:
+    """`rate` if the replay engine can follow it: a positive finite factor, or None."""
+    if rate is None:
+        return None
+    if not (isinstance(rate, int | float) and math.isfinite(rate) and 0 < rate <= RATE_MAX):
+        raise InputError(
+            f"replay rate {rate!r}; valid: {VALID_RATES}, or None for as fast as possible"
+        )
+    return float(rate)
+
+
+def rate_option(rate: float, name: str = "rate") -> float | None:
+    """A rate as a person gives it (`--rate`, a service's `rate` option: 0 = as fast as
+    possible) as the engine takes it; `name` is the option named in the error."""
+    if isinstance(rate, int | float) and rate == 0:
+        return None
+    try:
+        return check_rate(rate)
+    except InputError:
+        raise InputError(
+            f"{name} {rate!r}; valid: {VALID_RATES}, or 0 for as fast as possible"
+        ) from None
 
 
 class ReplayControl:

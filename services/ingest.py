@@ -3,9 +3,11 @@ source plug-in.
 
 - recording (MCAP): every skeleton and camera message is published as recorded (same headers and
   stamps, so a replay is byte-identical), with the original timing scaled by `rate`
-  (0 = as fast as possible).
+  (0 = as fast as possible, runtime.replay_control.rate_option), by the same engine as
+  `beyond replay` (runtime.replay.Player).
 - YARP hand log (the article's `data.log`): converted on the fly into skeleton frames holding one
-  joint, the hand, in metres (`scale`), stamped with the log's own times.
+  joint, the hand, in metres (`scale`), stamped with the log's own times and played by the same
+  engine, at the same rate.
 - plug-in (`module:function`): the function returns an async iterator of `("skeleton", {joint:
   (x, y, z)})` or `("camera", rgb_uint8_array)` items; ingest stamps them with the clock and
   numbers them. A bounded queue sits between the plug-in and the bus: when the bus cannot keep up
@@ -25,7 +27,7 @@ from __future__ import annotations
 import asyncio
 import importlib
 import logging
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
 from typing import Any, cast
 
@@ -39,6 +41,8 @@ from runtime.log import event
 from runtime.pacing import DEFAULT_WINDOW_S, Pacer
 from runtime.publisher import Publisher
 from runtime.recording import read_recording
+from runtime.replay import Cue, Player, recorded_cues
+from runtime.replay_control import rate_option
 from runtime.service import Service
 from schemas import CameraFrame, CompressedCameraFrame, Joint, SkeletonFrame, StreamEnd
 from schemas.keys import with_robot
@@ -74,10 +78,8 @@ class SensorIngest(Service):
                 f"sensor ingest needs exactly one source; got {', '.join(given) or 'none'}; "
                 "valid: recording=FILE.mcap, log=DIR_OR_DATA_LOG, plugin=module:function"
             )
-        if rate < 0:
-            raise InputError(f"rate {rate} must be >= 0 (0: as fast as possible)")
         self.recording, self.log_path, self.plugin = recording, log, plugin
-        self.rate = rate
+        self.rate = rate_option(rate)  # None: as fast as possible
         self.loop = loop
         self.scale = scale
         self.hand_joint = hand_joint
@@ -116,6 +118,7 @@ class SensorIngest(Service):
             window_s=self.window_s,
         )
         await self.pacer.start()
+        self.player = Player(rate=self.rate, pacer=self.pacer)
         if self.start_delay_s:
             await asyncio.sleep(self.start_delay_s)
         try:
@@ -150,19 +153,9 @@ class SensorIngest(Service):
             held_back_s=round(self.pacer.waited_s, 3),
         )
 
-    def _sent(self, stream: str, key: str, stamp: int) -> None:
+    def _sent(self, stream: str, stamp: int) -> None:
         self.published += 1
         self.last_stamps[stream] = stamp
-        self.pacer.after(key, stamp)
-
-    async def _pace(self, t0: int | None, stamp: int, wall0: float) -> None:
-        loop = asyncio.get_running_loop()
-        if self.rate > 0 and t0 is not None:
-            delay = wall0 + (stamp - t0) / 1e9 / self.rate - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
-        elif self.published % 32 == 0:
-            await asyncio.sleep(0)
 
     async def _play_recording(self, path: Path) -> None:
         keys = self.bus.keys
@@ -171,38 +164,40 @@ class SensorIngest(Service):
             keys.camera: ("camera", self.camera),
             keys.camera_compressed: ("camera_compressed", self.compressed),
         }
-        wall0 = asyncio.get_running_loop().time()
-        t0: int | None = None
-        for item in read_recording(path):
-            key = with_robot(item.key, keys.robot)
-            target = streams.get(key)
-            if target is None:
-                continue
-            stream, pub = target
-            message = item.message()
-            stamp = message.header.stamp
-            t0 = item.publish_time if t0 is None else t0
-            await self._pace(t0, item.publish_time, wall0)
-            await self.pacer.before(key, stamp)
-            pub.put(message)
-            self._sent(stream, key, stamp)
+
+        def rename(key: str) -> str | None:  # our robot's sensor streams; nothing else
+            key = with_robot(key, keys.robot)
+            return key if key in streams else None
+
+        def send(cue: Cue) -> None:
+            stream, pub = streams[cue.key]
+            pub.put(cue.ours())
+            self._sent(stream, cue.stamp)
+
+        await self.player.play(recorded_cues(read_recording(path), rename), send)
 
     async def _play_log(self, path: Path) -> None:
         log = read_hand_log(path)
-        wall0 = asyncio.get_running_loop().time()
+        key = self.bus.keys.skeleton
         stamps = np.rint(log.time * 1e9).astype(np.int64)
-        for i, (xyz, stamp) in enumerate(zip(log.xyz * self.scale, stamps, strict=True)):
-            await self._pace(int(stamps[0]), int(stamp), wall0)
-            await self.pacer.before(self.bus.keys.skeleton, int(stamp))
-            joint = Joint(position=(float(xyz[0]), float(xyz[1]), float(xyz[2])))
-            self.skeleton.put(
-                SkeletonFrame(
+
+        def cues() -> Iterator[Cue]:
+            for i, (xyz, stamp) in enumerate(zip(log.xyz * self.scale, stamps, strict=True)):
+                joint = Joint(position=(float(xyz[0]), float(xyz[1]), float(xyz[2])))
+                frame = SkeletonFrame(
                     header=self.header(SkeletonFrame, int(stamp)),
                     frame=i + 1,
                     joints={self.hand_joint: joint},
                 )
-            )
-            self._sent("skeleton", self.bus.keys.skeleton, int(stamp))
+                yield Cue(int(stamp), key, int(stamp), frame)
+
+        def send(cue: Cue) -> None:
+            frame = cue.ours()
+            assert isinstance(frame, SkeletonFrame)  # the only kind cues() makes
+            self.skeleton.put(frame)
+            self._sent("skeleton", cue.stamp)
+
+        await self.player.play(cues(), send)
 
     async def _play_plugin(self, spec: str) -> None:
         source = load_plugin(spec)()
@@ -225,16 +220,15 @@ class SensorIngest(Service):
                 if payload is done:
                     break
                 frame += 1
-                keys = self.bus.keys
                 if kind == "skeleton":
                     joints = {n: Joint(position=tuple(map(float, p))) for n, p in payload.items()}  # type: ignore[arg-type]
                     header = self.header(SkeletonFrame)
                     self.skeleton.put(SkeletonFrame(header=header, frame=frame, joints=joints))
-                    self._sent("skeleton", keys.skeleton, header.stamp)
+                    self._sent("skeleton", header.stamp)
                 elif kind == "camera":
                     header = self.header(CameraFrame)
                     self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
-                    self._sent("camera", keys.camera, header.stamp)
+                    self._sent("camera", header.stamp)
                 else:
                     raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera")
         finally:

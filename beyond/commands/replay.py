@@ -23,7 +23,7 @@ from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.log import setup_logging
 from runtime.recording import RecordedMessage, require_mcap
 from runtime.replay import replay
-from runtime.replay_control import ReplayControl, remapper
+from runtime.replay_control import ReplayControl, rate_option, remapper
 from schemas.keys import check_name
 
 HELP = "publish an MCAP recording on the bus in stamp order"
@@ -34,9 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument(
         "--rate",
-        type=argtypes.number(float, lo=0, hi=1e6, lo_open=True),
+        type=argtypes.rate,
         default=1.0,
-        help="speed factor (default 1)",
+        help="speed factor (default 1; 0: as fast as possible, as --as-fast-as-possible)",
     )
     speed.add_argument(
         "--as-fast-as-possible", "--afap", action="store_true", help="no timing, just go"
@@ -143,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     require_mcap(args.file)
     remap = remapper(args.remap)
+    rate = None if args.as_fast_as_possible else rate_option(args.rate, "--rate")
 
     async def go() -> int:
         stop = stop_on_signals()
@@ -177,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
             stats = await replay(
                 bus,
                 args.file,
-                rate=None if args.as_fast_as_possible else args.rate,
+                rate=rate,
                 loop=args.loop,
                 topics=args.topics,
                 start=args.start,
