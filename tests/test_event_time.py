@@ -27,6 +27,7 @@ from busutil_net import private_config
 
 import schemas as s
 from beyond.commands.analyse import _inputs
+from beyond.monitor import PipelineMonitor
 from cognition.bn import learn_network, synthetic_dataset
 from cognition.episodes.offline import analyse_stream
 from cognition.gestures.default_models import default_models
@@ -34,7 +35,6 @@ from cognition.vision.clusters import ClusterModel
 from runtime.bus import Bus
 from runtime.reliable import reliable_subscription
 from services.launcher import service_env, start_service, stop_services
-from services.monitor import PipelineMonitor
 
 RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"
 SHIPPED = sorted(p.name for p in RECORDINGS.glob("*.mcap"))

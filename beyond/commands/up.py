@@ -43,6 +43,8 @@ from rich.console import Console
 from rich.live import Live
 
 from beyond.commands import argtypes
+from beyond.live_view import render
+from beyond.monitor import PipelineMonitor
 from cognition.paths import REPO_ROOT
 from core.errors import InputError
 from runtime.bus import Bus
@@ -57,8 +59,6 @@ from services.launcher import (
     start_service,
     stop_services,
 )
-from services.live_view import render
-from services.monitor import PipelineMonitor
 from services.options import check_options, load_options
 from services.registry import PROFILES, service_class
 
