@@ -8,11 +8,11 @@ and what the tests and benchmarks that run several services launch, so a pipelin
     codes = await deployment.stop()  # each process's exit code
 
 Order: a secure side's own router first (its clients wait for it), then this process's session,
-then the services in the order given (the source, `ingest`, last). The watcher's liveliness token
-is declared in `start`, after whatever the caller subscribed between `open` and `start`: the
-source waits for it, so nothing it publishes is missed. The source waits itself for every local
-consumer (its `wait_for`) before it publishes, so the deployment awaits liveliness once, for all
-its processes together, only to know when it is up.
+then the services in the order given (the source, `ingest`, last). The watcher's liveliness
+token is declared as the first service is launched, after whatever the caller subscribed between
+`open` and `start`: the source waits for it, so nothing it publishes is missed. The source waits
+itself for every local consumer (its `wait_for`) before it publishes, so the deployment awaits
+liveliness once, for all its processes together, only to know when it is up.
 
 It lives in `services/` beside the launcher and the registry it builds on: it runs services and
 prints nothing (what to show is the caller's: `beyond up`'s terminal views are in `beyond/`).
@@ -139,8 +139,6 @@ class Deployment:
         health then answers) or has exited (`wait` reports it); TimeoutError if one is
         neither after ALIVE_TIMEOUT_S."""
         bus = await self.open()
-        if self.watcher is not None:  # after the caller's subscriptions: the source waits for it
-            self._token = bus.declare_token(bus.keys.alive(self.watcher))
         for name in sorted(self.services, key=lambda n: n == SOURCE):
             await self.launch(name)
         await asyncio.gather(*(_alive_or_exited(bus, sp, ALIVE_TIMEOUT_S) for sp in self.processes))
@@ -149,9 +147,14 @@ class Deployment:
 
     async def launch(self, name: str) -> ServiceProcess:
         """Start service `name` of this deployment, or start it again after it exited: the new
-        process takes the old one's place in `processes` (and in the health watch)."""
+        process takes the old one's place in `processes` (and in the health watch). `start`
+        launches them all; launch them one by one instead to choose the order (tests)."""
         if name not in self.options:
             raise unknown("service of this deployment", name, self.services)
+        bus = await self.open()
+        if self.watcher is not None and self._token is None:
+            # after the caller's subscriptions, before any service: the source waits for it
+            self._token = bus.declare_token(bus.keys.alive(self.watcher))
         old = next((i for i, sp in enumerate(self.processes) if sp.name == name), None)
         if old is not None and self.processes[old].running:
             raise InputError(f"service {name} is already running in this deployment")
