@@ -2,6 +2,7 @@
 
 Each service runs as `python -m beyond service NAME` with the bus settings in its environment,
 exactly as it would on another machine, so `beyond up` exercises the real deployment path.
+These are the parts `services.deployment.Deployment` runs a set of services with.
 
 A service's output is read in chunks, not lines: any line length and any bytes are fine (a line
 over asyncio's 64 KiB readline limit used to kill the reader; the pipe then filled and the
