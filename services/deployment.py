@@ -71,8 +71,10 @@ class Deployment:
     elsewhere). `clock="recording"`: the services follow the source's stamps (a replay).
     `router`: arguments of `beyond router` for a secure side's own router, started first and
     stopped last. `env`: extra environment of the services (log format, level). `log` receives
-    every line a process prints; `on_stuck` each process the health watch finds stuck (and
-    stops). `stop_on_signals`: SIGINT/SIGTERM end `wait` (as Ctrl-C ends `beyond up`)."""
+    every line a process prints. With `on_stuck`, a health watch asks every process for its
+    health and reports there, then stops, one that no longer answers (without it nothing is
+    stopped behind the caller's back: a benchmark on a loaded machine is slow, not stuck).
+    `stop_on_signals`: SIGINT/SIGTERM end `wait` (as Ctrl-C ends `beyond up`)."""
 
     def __init__(
         self,
@@ -102,7 +104,7 @@ class Deployment:
         clock_env = {"BEYOND_CLOCK": "recording"} if clock == "recording" else {}
         self.env = service_env(config, {**(env or {}), **clock_env})
         self.log = log
-        self.on_stuck = on_stuck or (lambda name, why: None)
+        self.on_stuck = on_stuck
         self.stop_on_signals = stop_on_signals
         self.bus: Bus | None = None
         self.router: ServiceProcess | None = None
@@ -142,8 +144,9 @@ class Deployment:
         for name in sorted(self.services, key=lambda n: n == SOURCE):
             await self.launch(name)
         await asyncio.gather(*(_alive_or_exited(bus, sp, ALIVE_TIMEOUT_S) for sp in self.processes))
-        self.health = HealthWatch(bus, self.processes, self.on_stuck)
-        self.health.start()
+        if self.on_stuck is not None:
+            self.health = HealthWatch(bus, self.processes, self.on_stuck)
+            self.health.start()
 
     async def launch(self, name: str) -> ServiceProcess:
         """Start service `name` of this deployment, or start it again after it exited: the new
