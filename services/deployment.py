@@ -127,7 +127,7 @@ class Deployment:
         if self.router_command is not None:
             command, env = self.router_command, self._router_env()
             self.router = await start_service("router", env, command=command, sink=self.log)
-        from runtime.bus import Bus
+        from runtime.bus import Bus  # here: zenoh is slow to import, building a plan needs none
 
         try:
             self.bus = Bus.open(self.config)  # a secure client waits here for its router
@@ -209,20 +209,23 @@ class Deployment:
         """Stop everything cleanly, in reverse order of start: the health watch, the watcher's
         token, the services (SIGTERM, then SIGKILL if hung), what was attached, the router last,
         then the session. Returns (and keeps in `codes`) every process's exit code."""
-        if self.health is not None:
-            await self.health.stop()
-        if self._token is not None:
-            self._token()
-            self._token = None
-        self.codes = await stop_services(self.processes)
-        for close in self._closers:
-            await close()
-        self._closers.clear()
-        self.codes.update(await self._stop_router())
-        if self.bus is not None:
-            self.bus.close()
-        if self.stop_on_signals:
-            _handle_signals(None)
+        try:
+            if self.health is not None:
+                await self.health.stop()
+            if self._token is not None:
+                self._token()
+                self._token = None
+            self.codes = await stop_services(self.processes)
+            for close in self._closers:
+                await close()
+            self._closers.clear()
+            self.codes.update(await self._stop_router())
+        finally:
+            if self.bus is not None:
+                self.bus.close()
+                self.bus = None
+            if self.stop_on_signals:
+                _handle_signals(None)
         return self.codes
 
     def unclean(self) -> dict[str, int]:
