@@ -41,11 +41,12 @@ import schemas as s  # noqa: E402
 from cognition.gestures import GestureSegmenter, synthesize_continuous  # noqa: E402
 from runtime.bus import Bus  # noqa: E402
 from runtime.config import BusConfig  # noqa: E402
-from services.launcher import service_env, start_service, stop_services  # noqa: E402
+from services.deployment import Deployment  # noqa: E402
 
 GESTURES = int(os.environ.get("BENCH_GESTURES", "100"))
 PORT = 17800 + os.getpid() % 1000
 VISION_REPEATS = int(os.environ.get("BENCH_VISION_REPEATS", "4"))  # x 6 gestures, real time
+QUIET = {"BEYOND_LOG_FORMAT": "text", "BEYOND_LOG_LEVEL": "WARNING"}
 CHUNK = 256  # frames per burst in the throughput pass (the streamer's queue holds 1024)
 
 
@@ -115,51 +116,47 @@ def raw_hop_us(config: BusConfig, n: int = 2000) -> float:
 
 
 async def pipeline_latency(config: BusConfig) -> tuple[list[float], float, float]:
-    env = service_env(config, {"BEYOND_LOG_FORMAT": "text", "BEYOND_LOG_LEVEL": "WARNING"})
-    procs = [
-        await start_service("gestures", env),
-        await start_service("reasoner", env, options={"objects": False}),
-        await start_service("describer", env),
-    ]
+    names = ["gestures", "reasoner", "describer"]
+    pipeline = Deployment(config, names, options={"reasoner": {"objects": False}}, env=QUIET)
     frames, triggers = stream_frames(seed=7)
     latencies: list[float] = []
     try:
-        with Bus.open(config) as bus:
-            await bus.wait_alive(bus.keys.alive("*"), count=3, timeout=60)
-            out = bus.subscribe(bus.keys.description, s.Description)
-            predictions = bus.subscribe(bus.keys.affordance, s.AffordancePrediction)
-            pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
-            await pub.wait_matching(timeout=30)
-            trig = set(triggers)
-            for i, frame in enumerate(frames):
-                if i in trig:
-                    # let the pipeline catch up with the frames before (they were sent faster
-                    # than real time), so the clock measures one pass, not a backlog
-                    while (await predictions.recv(timeout=30)).message.frame < i:
-                        pass
-                    t0 = time.perf_counter()
-                    pub.put(frame)
-                    await out.recv(timeout=30)
-                    latencies.append((time.perf_counter() - t0) * 1e3)
-                else:
-                    pub.put(frame)
-                    if i % 16 == 0:
-                        await asyncio.sleep(0)  # do not starve our own subscribers
-            # throughput: the same stream again in chunks, each published as fast as the bus
-            # takes it, then waiting until the streamer has consumed it (its health count), so
-            # its input queue never overflows and nothing is dropped
-            health_key = bus.keys.health("gestures")
-            before = await _consumed(bus, health_key)
-            t0 = time.perf_counter()
-            for start in range(0, len(frames), CHUNK):
-                for frame in frames[start : start + CHUNK]:
-                    pub.put(frame)
-                target = before + min(start + CHUNK, len(frames))
-                while await _consumed(bus, health_key) < target:
-                    await asyncio.sleep(0.002)
-            wall = time.perf_counter() - t0
+        bus = await pipeline.open()
+        await pipeline.start()
+        out = bus.subscribe(bus.keys.description, s.Description)
+        predictions = bus.subscribe(bus.keys.affordance, s.AffordancePrediction)
+        pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
+        await pub.wait_matching(timeout=30)
+        trig = set(triggers)
+        for i, frame in enumerate(frames):
+            if i in trig:
+                # let the pipeline catch up with the frames before (they were sent faster
+                # than real time), so the clock measures one pass, not a backlog
+                while (await predictions.recv(timeout=30)).message.frame < i:
+                    pass
+                t0 = time.perf_counter()
+                pub.put(frame)
+                await out.recv(timeout=30)
+                latencies.append((time.perf_counter() - t0) * 1e3)
+            else:
+                pub.put(frame)
+                if i % 16 == 0:
+                    await asyncio.sleep(0)  # do not starve our own subscribers
+        # throughput: the same stream again in chunks, each published as fast as the bus
+        # takes it, then waiting until the streamer has consumed it (its health count), so
+        # its input queue never overflows and nothing is dropped
+        health_key = bus.keys.health("gestures")
+        before = await _consumed(bus, health_key)
+        t0 = time.perf_counter()
+        for start in range(0, len(frames), CHUNK):
+            for frame in frames[start : start + CHUNK]:
+                pub.put(frame)
+            target = before + min(start + CHUNK, len(frames))
+            while await _consumed(bus, health_key) < target:
+                await asyncio.sleep(0.002)
+        wall = time.perf_counter() - t0
     finally:
-        await stop_services(procs)
+        await pipeline.stop()
     return latencies, len(frames) / wall, len(frames) / 30.0
 
 
@@ -204,40 +201,38 @@ async def vision_latency(config: BusConfig, repeats: int) -> tuple[list[float], 
             for ev in tracker.push(msg.header.stamp, msg.frame, x, None):
                 if isinstance(ev, Ended):
                     needs[ev.segment_id] = (i, ev.end_stamp)
-    env = service_env(config, {"BEYOND_LOG_FORMAT": "text", "BEYOND_LOG_LEVEL": "WARNING"})
-    names = ("gestures", "objects", "reasoner", "describer")
-    procs = [await start_service(n, env) for n in names]
+    pipeline = Deployment(config, ["gestures", "objects", "reasoner", "describer"], env=QUIET)
     sent_at: list[float] = []
     arrived: dict[int, float] = {}
     try:
-        with Bus.open(config) as bus:
-            await bus.wait_alive(bus.keys.alive("*"), count=len(names), timeout=60)
-            out = bus.subscribe(bus.keys.description, s.Description)
-            skeleton = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
-            camera = bus.publisher(bus.keys.camera_compressed, s.CompressedCameraFrame)
-            await skeleton.wait_matching(timeout=30)
-            await camera.wait_matching(timeout=30)
+        bus = await pipeline.open()
+        await pipeline.start()
+        out = bus.subscribe(bus.keys.description, s.Description)
+        skeleton = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
+        camera = bus.publisher(bus.keys.camera_compressed, s.CompressedCameraFrame)
+        await skeleton.wait_matching(timeout=30)
+        await camera.wait_matching(timeout=30)
 
-            async def receive() -> None:
-                while len(arrived) < len(needs):
-                    msg = (await out.recv(timeout=60)).message
-                    arrived.setdefault(msg.segment_id, time.perf_counter())
+        async def receive() -> None:
+            while len(arrived) < len(needs):
+                msg = (await out.recv(timeout=60)).message
+                arrived.setdefault(msg.segment_id, time.perf_counter())
 
-            receiver = asyncio.get_running_loop().create_task(receive())
-            loop = asyncio.get_running_loop()
-            t0_wall, t0_stamp = loop.time(), items[0].header.stamp
-            for msg in items:
-                delay = t0_wall + (msg.header.stamp - t0_stamp) / 1e9 - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-                if isinstance(msg, s.SkeletonFrame):
-                    skeleton.put(msg)
-                else:
-                    camera.put(msg)  # type: ignore[arg-type]
-                sent_at.append(time.perf_counter())
-            await asyncio.wait_for(receiver, 60)
+        receiver = asyncio.get_running_loop().create_task(receive())
+        loop = asyncio.get_running_loop()
+        t0_wall, t0_stamp = loop.time(), items[0].header.stamp
+        for msg in items:
+            delay = t0_wall + (msg.header.stamp - t0_stamp) / 1e9 - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            if isinstance(msg, s.SkeletonFrame):
+                skeleton.put(msg)
+            else:
+                camera.put(msg)  # type: ignore[arg-type]
+            sent_at.append(time.perf_counter())
+        await asyncio.wait_for(receiver, 60)
     finally:
-        await stop_services(procs)
+        await pipeline.stop()
     from_last, from_trigger = [], []
     for segment_id, (trigger, end_stamp) in needs.items():
         first_cam = next(

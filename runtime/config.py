@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -68,10 +68,13 @@ class BusConfig:
     listen: tuple[str, ...] | None = None
     port: int = DEFAULT_PORT
     config_file: Path | None = None
-    extra: dict[str, Any] = field(default_factory=dict)  # zenoh config path -> JSON value
     routers: tuple[str, ...] = ()  # connected to in addition to the mode's or file's endpoints
     secure: Path | None = None  # keystore directory: mutual TLS and access rules
     identity: str | None = None  # certificate name in the keystore (None: by mode)
+    # How long open() waits for a first link (None: the mode's default). A one-shot tool's own
+    # choice (`beyond health` must answer in bounded time), never handed to the processes it
+    # starts, so it has no environment variable.
+    connect_timeout_ms: int | None = None
 
     def __post_init__(self) -> None:
         check_name("robot", self.robot)
@@ -87,6 +90,32 @@ class BusConfig:
 
     def with_(self, **changes: Any) -> BusConfig:
         return replace(self, **changes)
+
+    def to_env(self) -> dict[str, str]:
+        """The variables that make `load_config` in another process build this same
+        configuration (`load_config(env=c.to_env()) == c`): `beyond up` hands them to the
+        services it starts. Written here, beside their reader, so writer and reader cannot
+        drift apart. What the environment cannot carry is refused rather than silently lost."""
+        if self.connect_timeout_ms is not None:
+            raise ValueError("connect_timeout_ms is a process's own choice: no variable holds it")
+        env = {
+            "BEYOND_ROBOT": self.robot,
+            "BEYOND_ZENOH_MODE": self.mode,
+            "BEYOND_ZENOH_PORT": str(self.port),
+        }
+        lists = {
+            "BEYOND_ZENOH_CONNECT": self.connect,
+            "BEYOND_ZENOH_LISTEN": self.listen,
+            "BEYOND_ZENOH_ROUTER": self.routers or None,
+        }
+        for name, endpoints in lists.items():
+            if endpoints is not None:
+                env[name] = _join(name, endpoints)
+        paths = {"BEYOND_ZENOH_CONFIG": self.config_file, "BEYOND_ZENOH_SECURE": self.secure}
+        env.update({name: str(path) for name, path in paths.items() if path is not None})
+        if self.identity is not None:
+            env["BEYOND_ZENOH_IDENTITY"] = self.identity
+        return env
 
     def endpoints(self) -> tuple[list[str], list[str]]:
         """(listen, connect) endpoints actually used."""
@@ -119,6 +148,15 @@ class BusConfig:
 
 def _split(value: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in value.split(",") if part.strip())
+
+
+def _join(name: str, endpoints: tuple[str, ...]) -> str:
+    """`endpoints` as `_split` reads them back; an empty list (an empty variable means the
+    mode's default) or an endpoint with a comma or blanks around it has no such form."""
+    value = ",".join(endpoints)
+    if not endpoints or _split(value) != endpoints:
+        raise ValueError(f"{name} cannot carry the endpoints {list(endpoints)!r}")
+    return value
 
 
 def load_config(
@@ -256,7 +294,8 @@ def zenoh_config(config: BusConfig) -> zenoh.Config:
         )
         identity = config.identity or default_identity(config.mode)
         sets.update(tls_settings(config.secure, identity, config.mode))
-    sets.update(config.extra)
+    if config.connect_timeout_ms is not None:
+        sets["connect/timeout_ms"] = config.connect_timeout_ms
     for key, value in sets.items():
         try:
             zc.insert_json5(key, json.dumps(value))

@@ -2,6 +2,7 @@
 
 Each service runs as `python -m beyond service NAME` with the bus settings in its environment,
 exactly as it would on another machine, so `beyond up` exercises the real deployment path.
+These are the parts `services.deployment.Deployment` runs a set of services with.
 
 A service's output is read in chunks, not lines: any line length and any bytes are fine (a line
 over asyncio's 64 KiB readline limit used to kill the reader; the pipe then filled and the
@@ -22,7 +23,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from runtime.config import BusConfig
+from runtime.config import ENV_VARS, BusConfig
 
 if TYPE_CHECKING:
     from runtime.bus import Bus
@@ -48,32 +49,13 @@ class ServiceProcess:
 
 
 def service_env(config: BusConfig, extra: Mapping[str, str] | None = None) -> dict[str, str]:
-    """The environment that makes a child join `config`'s group."""
-    env = dict(os.environ)
-    listen, _ = config.endpoints()
-    env.update(
-        BEYOND_ROBOT=config.robot,
-        BEYOND_ZENOH_MODE=config.mode,
-        BEYOND_ZENOH_PORT=str(config.port),
-        BEYOND_LOG_FORMAT=env.get("BEYOND_LOG_FORMAT", "text"),
-        PYTHONUNBUFFERED="1",
-    )
-    # `config` is authoritative: what it leaves unset must not leak in from our own environment
-    for name in ("BEYOND_ZENOH_CONNECT", "BEYOND_ZENOH_LISTEN", "BEYOND_ZENOH_CONFIG"):
-        env.pop(name, None)
-    env.pop("BEYOND_ZENOH_ROUTER", None)
-    if config.connect is not None:
-        env["BEYOND_ZENOH_CONNECT"] = ",".join(config.connect)
-    if config.listen is not None:
-        env["BEYOND_ZENOH_LISTEN"] = ",".join(listen)
-    if config.config_file is not None:
-        env["BEYOND_ZENOH_CONFIG"] = str(config.config_file)
-    if config.routers:
-        env["BEYOND_ZENOH_ROUTER"] = ",".join(config.routers)
-    env.pop("BEYOND_ZENOH_SECURE", None)
-    env.pop("BEYOND_ZENOH_IDENTITY", None)  # each child presents its own certificate
-    if config.secure is not None:
-        env["BEYOND_ZENOH_SECURE"] = str(config.secure)
+    """The environment that makes a child join `config`'s group: ours, with every bus variable
+    replaced by `config`'s own (`config` is authoritative: what it leaves unset must not leak in
+    from our environment). Identity is left out: each child presents its own certificate."""
+    env = {k: v for k, v in os.environ.items() if k not in ENV_VARS}
+    env.update(config.with_(identity=None).to_env())
+    env.setdefault("BEYOND_LOG_FORMAT", "text")
+    env["PYTHONUNBUFFERED"] = "1"
     env.update(extra or {})
     return env
 

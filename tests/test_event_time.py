@@ -20,21 +20,19 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 from busutil_net import private_config
 
 import schemas as s
 from beyond.commands.analyse import _inputs
+from beyond.monitor import PipelineMonitor
 from cognition.bn import learn_network, synthetic_dataset
 from cognition.episodes.offline import analyse_stream
 from cognition.gestures.default_models import default_models
 from cognition.vision.clusters import ClusterModel
-from runtime.bus import Bus
 from runtime.delivery import FRAMES
-from services.launcher import service_env, start_service, stop_services
-from services.monitor import PipelineMonitor
+from services.deployment import Deployment
 
 RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"
 SHIPPED = sorted(p.name for p in RECORDINGS.glob("*.mcap"))
@@ -77,61 +75,57 @@ def offline_lines(name: str) -> list[str]:
 async def run_pipeline(
     name: str, rate: float, seed: int, kill_during: int | None = None
 ) -> tuple[list[str], dict[str, list[bytes]]]:
-    config = private_config()
-    env = service_env(config, {"BEYOND_CLOCK": "recording", "BEYOND_LOG_FORMAT": "text"})
     rng = random.Random(seed)
     lines: list[str] = []
     captured: dict[str, list[bytes]] = {k: [] for k in DERIVED}
-    with Bus.open(config) as bus:
-        keys = bus.keys
-        monitor = PipelineMonitor(bus, lines.append)
-        monitor.start()
+    pipeline = Deployment(
+        private_config(),
+        [*CONSUMERS, "ingest"],
+        options={"ingest": {"recording": str(RECORDINGS / name), "rate": rate}},
+        watcher="monitor",
+        clock="recording",
+        env={"BEYOND_LOG_FORMAT": "text"},
+    )
+    bus = await pipeline.open()
+    keys = bus.keys
+    monitor = PipelineMonitor(bus, lines.append)
+    monitor.start()
 
-        async def capture(stream: str) -> None:
-            cls = s.STREAMS[stream][1]
-            async for received in bus.subscribe(keys.stream(stream), cls, FRAMES):
-                captured[stream].append(s.encode(received.message))
+    async def capture(stream: str) -> None:
+        cls = s.STREAMS[stream][1]
+        async for received in bus.subscribe(keys.stream(stream), cls, FRAMES):
+            captured[stream].append(s.encode(received.message))
 
-        tasks = [asyncio.get_running_loop().create_task(capture(k)) for k in DERIVED]
-        bus.declare_token(keys.alive("monitor"))
-        options: dict[str, dict[str, Any]] = {
-            "ingest": {
-                "recording": str(RECORDINGS / name),
-                "rate": rate,
-                "wait_for": [*CONSUMERS, "monitor"],
-            }
-        }
-        order = [*CONSUMERS, "ingest"]
-        rng.shuffle(order)
-        procs = []
-        killed = []
-        try:
-            for service in order:
-                await asyncio.sleep(rng.uniform(0.0, 0.8))
-                procs.append(await start_service(service, env, options=options.get(service)))
-            deadline = asyncio.get_running_loop().time() + 240
-            while not monitor.done():
-                assert asyncio.get_running_loop().time() < deadline, (name, rate, lines)
-                g = monitor.report.gestures.get(kill_during or 0)
-                if g is not None and g.started is not None and not killed:
-                    victim = next(p for p in procs if p.name == "objects")
-                    victim.process.kill()  # SIGKILL: no clean-up, mid-gesture
-                    await victim.process.wait()
-                    killed.append(victim)
-                    procs.remove(victim)
-                    await bus.wait_gone(keys.alive("objects"), timeout=30)
-                    procs.append(await start_service("objects", env))
-                dead = [p.name for p in procs if not p.running]
-                assert not dead, (dead, [p.lines[-10:] for p in procs])
-                monitor.changed.clear()
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(monitor.changed.wait(), 0.5)
-        finally:
-            codes = await stop_services(procs)
-            monitor.stop()
-            for task in tasks:
-                task.cancel()
-    assert set(codes.values()) == {0}, (codes, [p.lines[-10:] for p in procs])
+    tasks = [asyncio.get_running_loop().create_task(capture(k)) for k in DERIVED]
+    order = [*CONSUMERS, "ingest"]
+    rng.shuffle(order)  # any start order: the source waits for its consumers itself
+    killed = []
+    try:
+        for service in order:
+            await asyncio.sleep(rng.uniform(0.0, 0.8))
+            await pipeline.launch(service)
+        deadline = asyncio.get_running_loop().time() + 240
+        while not monitor.done():
+            assert asyncio.get_running_loop().time() < deadline, (name, rate, lines)
+            g = monitor.report.gestures.get(kill_during or 0)
+            if g is not None and g.started is not None and not killed:
+                victim = next(p for p in pipeline.processes if p.name == "objects")
+                victim.process.kill()  # SIGKILL: no clean-up, mid-gesture
+                await victim.process.wait()
+                killed.append(victim)
+                await bus.wait_gone(keys.alive("objects"), timeout=30)
+                await pipeline.launch("objects")
+            dead = pipeline.exited()
+            assert not dead, (dead, [p.lines[-10:] for p in pipeline.processes])
+            monitor.changed.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(monitor.changed.wait(), 0.5)
+    finally:
+        monitor.stop()
+        for task in tasks:
+            task.cancel()
+        codes = await pipeline.stop()
+    assert set(codes.values()) == {0}, (codes, [p.lines[-10:] for p in pipeline.processes])
     assert len(killed) == (kill_during is not None), "the gesture to kill during never started"
     return lines, captured
 

@@ -14,9 +14,8 @@ from busutil_net import env_for, private_config, skeleton_recording
 
 import schemas as s
 from cognition.grammar import DEFAULT_GRAMMAR
-from runtime.bus import Bus
 from runtime.config import BusConfig
-from services.launcher import service_env, start_service, stop_services
+from services.deployment import Deployment
 
 VERBS = {
     "tap": r"\b(taps|tapped|tapping|pushes|pushed|pushing|pokes|poked|poking)\b",
@@ -56,33 +55,32 @@ def test_up_describes_every_gesture_with_the_right_verb_and_twice_the_same(tmp_p
 
 
 async def test_a_killed_service_restarts_and_is_picked_up() -> None:
-    config = private_config()
-    env = service_env(config, {"BEYOND_LOG_FORMAT": "text"})
-    env["PYTHONPATH"] = str(Path(__file__).resolve().parent.parent)
+    env = {"BEYOND_LOG_FORMAT": "text", "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
     words = {w: 0.5 for w in DEFAULT_GRAMMAR.vocabulary}
     words.update({"he": 0.99, "taps": 0.99, "the": 0.99, "box": 0.99, "and": 0.99, "slides": 0.99})
-    with Bus.open(config) as bus:
-        out = bus.subscribe(bus.keys.description, s.Description)
-        pub = bus.publisher(bus.keys.words, s.WordProbabilities)
-        processes = [await start_service("describer", env)]
-        try:
-            for round_ in range(2):
-                await bus.wait_alive(bus.keys.alive("describer"), timeout=30)
-                await pub.wait_matching(timeout=30)
-                header = s.Header(version=1, source="test", seq=round_, stamp=round_)
-                pub.put(s.WordProbabilities(header=header, segment_id=round_, words=words))
-                got = (await out.recv(timeout=20)).message
-                assert got.segment_id == round_
-                assert got.sentences[0].text == "he taps the box and the box slides"
-                if round_ == 0:  # kill it hard, and start a new one: the bus picks it up
-                    processes[0].process.send_signal(signal.SIGKILL)
-                    await processes[0].process.wait()
-                    await bus.wait_gone(bus.keys.alive("describer"), timeout=30)
-                    processes.append(await start_service("describer", env))
-        finally:
-            await stop_services(processes)
-    assert processes[0].process.returncode == -signal.SIGKILL
-    assert processes[1].process.returncode == 0
+    pipeline = Deployment(private_config(), ["describer"], env=env)
+    bus = await pipeline.open()
+    out = bus.subscribe(bus.keys.description, s.Description)
+    pub = bus.publisher(bus.keys.words, s.WordProbabilities)
+    first = await pipeline.launch("describer")
+    try:
+        for round_ in range(2):
+            await bus.wait_alive(bus.keys.alive("describer"), timeout=30)
+            await pub.wait_matching(timeout=30)
+            header = s.Header(version=1, source="test", seq=round_, stamp=round_)
+            pub.put(s.WordProbabilities(header=header, segment_id=round_, words=words))
+            got = (await out.recv(timeout=20)).message
+            assert got.segment_id == round_
+            assert got.sentences[0].text == "he taps the box and the box slides"
+            if round_ == 0:  # kill it hard, and start a new one: the bus picks it up
+                first.process.send_signal(signal.SIGKILL)
+                await first.process.wait()
+                await bus.wait_gone(bus.keys.alive("describer"), timeout=30)
+                await pipeline.launch("describer")
+    finally:
+        codes = await pipeline.stop()
+    assert first.process.returncode == -signal.SIGKILL
+    assert codes == {"describer": 0}  # the new process, stopped cleanly
     await asyncio.sleep(0)
 
 

@@ -6,9 +6,11 @@ import json
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from core.errors import InputError
-from runtime.config import DEFAULT_PORT, BusConfig, load_config, zenoh_config
+from runtime.config import DEFAULT_PORT, ENV_VARS, BusConfig, load_config, zenoh_config
 
 
 def get(zc: object, key: str) -> object:
@@ -76,3 +78,57 @@ def test_bad_settings_are_input_errors(env: dict[str, str], message: str) -> Non
 def test_bad_endpoint_is_reported() -> None:
     with pytest.raises(InputError, match="bad Zenoh setting"):
         zenoh_config(BusConfig(connect=("not an endpoint",)))
+
+
+ENDPOINT = st.builds(
+    "{}/{}:{}".format,
+    st.sampled_from(["tcp", "udp", "tls"]),
+    st.sampled_from(["127.0.0.1", "10.0.0.2", "[::]", "router"]),
+    st.integers(1, 65535),
+)
+ENDPOINTS = st.lists(ENDPOINT, min_size=1, max_size=3).map(tuple)
+NAME = st.from_regex(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,15}", fullmatch=True)
+
+
+@st.composite
+def bus_configs(draw: st.DrawFn) -> BusConfig:
+    secure = draw(st.sampled_from([None, Path("keys"), Path("/etc/beyond/keys")]))
+    modes = ("client", "router") if secure is not None else ("peer", "client", "router")
+    return BusConfig(
+        robot=draw(NAME),
+        mode=draw(st.sampled_from(modes)),
+        connect=draw(st.none() | ENDPOINTS),
+        listen=draw(st.none() | ENDPOINTS),
+        port=draw(st.integers(1, 65535)),
+        config_file=draw(st.sampled_from([None, Path(__file__)])),  # load_config checks it exists
+        routers=draw(st.just(()) | ENDPOINTS),
+        secure=secure,
+        identity=draw(st.none() | NAME),
+    )
+
+
+@given(bus_configs())
+@settings(max_examples=300, deadline=None)
+def test_the_environment_written_for_a_config_reads_back_as_the_same_config(
+    config: BusConfig,
+) -> None:
+    env = config.to_env()
+    assert set(env) <= set(ENV_VARS)  # only the variables load_config reads (and documents)
+    assert load_config(env) == config
+
+
+def test_what_the_environment_cannot_carry_is_refused_not_lost() -> None:
+    with pytest.raises(ValueError, match="BEYOND_ZENOH_LISTEN"):
+        BusConfig(listen=()).to_env()  # an empty variable would mean the mode's default
+    with pytest.raises(ValueError, match="BEYOND_ZENOH_CONNECT"):
+        BusConfig(connect=("tcp/a:1,tcp/b:2",)).to_env()
+    with pytest.raises(ValueError, match="connect_timeout_ms"):
+        BusConfig(connect_timeout_ms=500).to_env()
+
+
+def test_a_connect_timeout_bounds_the_first_link_whatever_the_mode_or_file() -> None:
+    assert get(zenoh_config(BusConfig(mode="client")), "connect/timeout_ms") == 30_000
+    assert get(zenoh_config(BusConfig(connect_timeout_ms=1500)), "connect/timeout_ms") == 1500
+    robot = Path(__file__).resolve().parent.parent / "deploy/zenoh/robot.json5"
+    from_file = BusConfig(config_file=robot, connect_timeout_ms=1500)
+    assert get(zenoh_config(from_file), "connect/timeout_ms") == 1500

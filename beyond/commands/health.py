@@ -71,9 +71,7 @@ def run(args: argparse.Namespace) -> int:
         config = config.with_(mode="client", connect=("tcp/127.0.0.1:7447",), config_file=None)
     # Never a listener of our own (a robot peer would advertise it to the group), and a bounded
     # wait for the first link: a workstation client would otherwise wait for its router forever.
-    config = config.with_(
-        listen=(), extra={**config.extra, "connect/timeout_ms": int(args.timeout * 1000)}
-    )
+    config = config.with_(listen=(), connect_timeout_ms=int(args.timeout * 1000))
     try:
         bus = Bus.open(config)
     except Exception as exc:  # zenoh's own error when no link opens in time

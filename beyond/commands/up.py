@@ -4,11 +4,13 @@
               [--profile all|robot|workstation] [--rate R] [--no-live] [--timeout S]
               [--wait-for NAME,...] [--until-stream-end] [bus options]
 
-Starts the services of the profile on the configured bus (default: Zenoh peers on loopback),
-waits for their liveliness, then starts the source. Service logs go to stderr with the service
-name; pipeline events (recognised action, anticipated effect, description) to stdout, and a live
-view when stdout is a terminal. With a recording or log it exits once every gesture has its
-final description (status 0) or after --timeout (status 1); Ctrl-C stops everything cleanly.
+Starts the services of the profile on the configured bus (default: Zenoh peers on loopback), the
+source last (it waits for their liveliness before it publishes), as a `services.deployment.
+Deployment`: this module is the command line and the terminal around it. Service logs go to
+stderr with the service name; pipeline events (recognised action, anticipated effect,
+description) to stdout, and a live view when stdout is a terminal. With a recording or log it
+exits once every gesture has its final description (status 0) or after --timeout (status 1);
+Ctrl-C stops everything cleanly.
 
 Two machines (see README, Deployment): `--profile robot` (ingest, gestures, objects) and
 `--profile workstation` (reasoner, describer, speech) start one side each, against a router
@@ -32,9 +34,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import os
-import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -43,24 +43,17 @@ from rich.console import Console
 from rich.live import Live
 
 from beyond.commands import argtypes
+from beyond.live_view import render
+from beyond.monitor import PipelineMonitor
 from cognition.paths import REPO_ROOT
 from core.errors import InputError
-from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import BusConfig
 from runtime.process import exit_process
 from schemas.keys import check_name
-from services.launcher import (
-    HealthWatch,
-    ServiceProcess,
-    service_env,
-    start_service,
-    stop_services,
-)
-from services.live_view import render
-from services.monitor import PipelineMonitor
-from services.options import check_options, load_options
-from services.registry import PROFILES, service_class
+from services.deployment import Deployment, Ending
+from services.options import load_options
+from services.registry import PROFILES
 
 HELP = "start the pipeline's services as separate processes and watch them"
 SECURE_LOCAL_ROUTER = "tls/127.0.0.1:7447"  # a side's own router, when it links to another
@@ -179,161 +172,127 @@ def wait_list(values: list[str]) -> list[str]:
     return names
 
 
-async def up(args: argparse.Namespace, config: BusConfig) -> int:
-    names = [n for n in PROFILES[args.profile] if n not in args.skip]
-    monitor = monitor_name(args.profile)
-    file_options = load_options(args.config)
-    options: dict[str, dict[str, Any]] = {n: dict(file_options.get(n, {})) for n in names}
-    source = _source(args)
-    finite = (bool(source) and "log" in source) or "recording" in source
-    if "ingest" in names:
-        if not source and not any(k in options["ingest"] for k in ("recording", "log", "plugin")):
-            source = {"recording": str(DEMO_RECORDING)}
-            finite = True
-        options["ingest"].update(source)
-        options["ingest"].setdefault("rate", args.rate)
-        local = [n for n in names if n != "ingest"] + [monitor]
-        options["ingest"]["wait_for"] = local + wait_list(args.wait_for)
-    replayed = finite  # services follow the recording's clock
-    finite = finite or args.until_stream_end
-    timeout = args.timeout
-    if timeout is None and ("ingest" in names or finite):
-        timeout = DEFAULT_TIMEOUT
-    if "reasoner" in names and "objects" not in names and args.profile == "all":
-        # no object segmenter in this deployment: the reasoner must not wait for one
-        options["reasoner"].setdefault("objects", False)
-    for name in names:
-        check_options(name, service_class(name), options[name])
-    out = Console()
-    router_command = None
-    if config.secure is not None:
-        router_command = secure_router(config, names, args.profile)
-        config = config.with_(connect=None, routers=())  # this side's router links elsewhere
-    extra = {"BEYOND_CLOCK": "recording"} if replayed else {}
-    env = service_env(config, extra)
-    processes: list[ServiceProcess] = []
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        with contextlib.suppress(NotImplementedError, RuntimeError):
-            loop.add_signal_handler(sig, stop.set)
-    live: Live | None = None
-    watch: HealthWatch | None = None
+class EventLines:
+    """Where pipeline events go: above the live view while it runs, else plain stdout lines."""
 
-    def log_line(name: str, line: str) -> None:
-        print(f"[{name}] {line}", file=sys.stderr, flush=True)
+    def __init__(self) -> None:
+        self.live: Live | None = None
 
-    def emit(line: str) -> None:
-        if live is not None:
-            live.console.print(line, markup=False, highlight=False)
+    def emit(self, line: str) -> None:
+        if self.live is not None:
+            self.live.console.print(line, markup=False, highlight=False)
         else:
             print(line, flush=True)
 
-    status = 1
-    router: ServiceProcess | None = None
-    if router_command is not None:  # secure defaults and its own endpoints, not the clients'
-        own = BusConfig(robot=config.robot, mode="router", secure=config.secure)
-        env_router = service_env(own)
-        router = await start_service("router", env_router, command=router_command, sink=log_line)
+
+def log_line(name: str, line: str) -> None:
+    print(f"[{name}] {line}", file=sys.stderr, flush=True)
+
+
+def service_options(args: argparse.Namespace, names: list[str]) -> tuple[dict[str, Any], bool]:
+    """Each service's options (the config file's, then the command line's), and whether the
+    source replays something finite (its services then follow the recording's clock). Without
+    a source anywhere, the demo recording is the source."""
+    file_options = load_options(args.config)
+    options: dict[str, dict[str, Any]] = {n: dict(file_options.get(n, {})) for n in names}
+    source = _source(args)
+    replayed = "log" in source or "recording" in source
+    if "ingest" in names:
+        if not source and not any(k in options["ingest"] for k in ("recording", "log", "plugin")):
+            source = {"recording": str(DEMO_RECORDING)}
+            replayed = True
+        options["ingest"].update(source)
+        options["ingest"].setdefault("rate", args.rate)
+    if "reasoner" in names and "objects" not in names and args.profile == "all":
+        # no object segmenter in this deployment: the reasoner must not wait for one
+        options["reasoner"].setdefault("objects", False)
+    return options, replayed
+
+
+def deployment(
+    args: argparse.Namespace, config: BusConfig, lines: EventLines
+) -> tuple[Deployment, bool]:
+    """The side's Deployment, and whether it replays a finite source."""
+    names = [n for n in PROFILES[args.profile] if n not in args.skip]
+    options, replayed = service_options(args, names)
+    router = None
+    if config.secure is not None:
+        router = secure_router(config, names, args.profile)
+        config = config.with_(connect=None, routers=())  # this side's router links elsewhere
+    side = Deployment(
+        config,
+        names,
+        options=options,
+        wait_for=wait_list(args.wait_for),
+        watcher=monitor_name(args.profile),
+        clock="recording" if replayed else "wall",
+        router=router,
+        log=log_line,
+        on_stuck=lambda n, why: lines.emit(f"service {n} is stuck ({why}); stopping it"),
+        stop_on_signals=True,
+    )
+    return side, replayed
+
+
+async def up(args: argparse.Namespace, config: BusConfig) -> int:
+    lines = EventLines()
+    side, replayed = deployment(args, config, lines)
+    finite = replayed or args.until_stream_end
+    timeout = args.timeout
+    if timeout is None and ("ingest" in side.services or finite):
+        timeout = DEFAULT_TIMEOUT
+    bus = await side.open()
+    pipeline = PipelineMonitor(bus, lines.emit)
     try:
-        bus = Bus.open(config)  # a secure client waits here for its router
-    except BaseException:
-        await stop_services([router] if router else [])
-        raise
-    with bus:
-        foxglove = None
         if args.foxglove:  # imported only when asked for: the SDK is not free to load
             from runtime.foxglove_bridge import start_in_background
 
-            foxglove = await start_in_background(bus, args.foxglove)
-            emit(f"Foxglove: open a WebSocket connection to ws://localhost:{args.foxglove}")
-        pipeline = PipelineMonitor(bus, emit)
+            side.attach(await start_in_background(bus, args.foxglove))
+            lines.emit(f"Foxglove: open a WebSocket connection to ws://localhost:{args.foxglove}")
         pipeline.start()
-        token = bus.declare_token(bus.keys.alive(monitor))
-        try:
-            for name in names:  # the source last, once its consumers are up
-                if name != "ingest":
-                    processes.append(
-                        await start_service(name, env, options=options[name], sink=log_line)
-                    )
-            # by name: on a shared bus the other machine's services are alive too
-            for name in [n for n in names if n != "ingest"] + [monitor]:
-                await bus.wait_alive(bus.keys.alive(name), timeout=60)
-            if "ingest" in names:
-                source_sp = await start_service(
-                    "ingest", env, options=options["ingest"], sink=log_line
-                )
-                processes.append(source_sp)
-                await alive_or_exited(bus, source_sp, timeout=60)
-            if all(p.running for p in processes):
-                emit(f"pipeline up: {', '.join(names)} on robot {config.robot!r}")
-            watch = HealthWatch(
-                bus, processes, lambda n, why: emit(f"service {n} is stuck ({why}); stopping it")
-            )
-            watch.start()
-            use_live = out.is_terminal and not args.no_live
-            if use_live:
-                live = Live(render(pipeline, names), console=out, refresh_per_second=8)
-                live.start()
-            deadline = None if timeout is None else loop.time() + timeout
-            while not stop.is_set():
-                if finite and pipeline.done():
-                    status = 0
-                    break
-                crashed = [
-                    p.name for p in processes + ([router] if router else []) if not p.running
-                ]
-                if crashed:
-                    emit(f"service(s) exited early: {', '.join(crashed)}")
-                    break
-                if deadline is not None and loop.time() > deadline:
-                    emit(f"timed out after {timeout:.0f} s")
-                    break
-                pipeline.changed.clear()
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(pipeline.changed.wait(), 0.25)
-                if live is not None:
-                    live.update(render(pipeline, names))
-            else:
-                status = 0  # stopped by the user
-        finally:
-            if watch is not None:
-                await watch.stop()
-            if live is not None:
-                live.update(render(pipeline, names))
-                live.stop()
-            token()
-            pipeline.stop()
-            codes = await stop_services(processes)
-            if foxglove is not None:
-                await foxglove()
-            codes.update(await stop_services([router] if router else []))  # the router last
-    emit(pipeline.summary())
+        await side.start()
+        if not side.exited():
+            lines.emit(f"pipeline up: {', '.join(side.services)} on robot {side.config.robot!r}")
+        ending = await watch(side, pipeline, lines, timeout, finite, live=not args.no_live)
+    finally:
+        pipeline.stop()
+        codes = await side.stop()
+    lines.emit(pipeline.summary())
     err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
     print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)
-    failed = {n: c for n, c in codes.items() if c not in (0, -signal.SIGTERM)}
-    if failed:
-        emit(f"services that did not stop cleanly: {failed}")
-        status = status or 1
-    return status
+    if failed := side.unclean():
+        lines.emit(f"services that did not stop cleanly: {failed}")
+        return 1
+    return 0 if ending.ok else 1
 
 
-async def alive_or_exited(bus: Bus, sp: ServiceProcess, timeout: float) -> None:
-    """Until `sp`'s liveliness token is seen (declared after its health queryable, so it now
-    answers health), or until it exited (the watch loop then reports it). "pipeline up" used to
-    be printed as soon as the source's process was spawned: whoever took the line at its word
-    and asked the source for its health found nothing serving yet."""
-    alive = asyncio.ensure_future(bus.wait_alive(bus.keys.alive(sp.name), timeout=timeout))
-    exited = asyncio.ensure_future(sp.process.wait())
+async def watch(
+    side: Deployment,
+    pipeline: PipelineMonitor,
+    lines: EventLines,
+    timeout: float | None,
+    finite: bool,
+    *,
+    live: bool,
+) -> Ending:
+    """Wait for the side to end, with the live view drawn meanwhile on a terminal; say why it
+    ended unless it was asked to or done."""
+    console = Console()
+    if live and console.is_terminal:
+        view = lambda: render(pipeline, side.services)  # noqa: E731
+        lines.live = Live(get_renderable=view, console=console, refresh_per_second=8)
+        lines.live.start()
     try:
-        await asyncio.wait({alive, exited}, return_when=asyncio.FIRST_COMPLETED)
+        ending = await side.wait(timeout, done=pipeline.done if finite else None)
     finally:
-        alive.cancel()
-        exited.cancel()
-    if alive.done() and not alive.cancelled():
-        error = alive.exception()  # no token in time: a TimeoutError, as for the others
-        if error is not None and not (exited.done() and not exited.cancelled()):
-            raise error
+        if lines.live is not None:
+            lines.live.stop()  # drawn once more, as it ends
+            lines.live = None
+    if ending.reason == "exited":
+        lines.emit(f"service(s) exited early: {', '.join(ending.exited)}")
+    elif ending.reason == "timeout":
+        lines.emit(f"timed out after {timeout:.0f} s")
+    return ending
 
 
 def _source(args: argparse.Namespace) -> dict[str, str]:

@@ -7,7 +7,7 @@ from rich.console import Group, RenderableType
 from rich.panel import Panel
 from rich.table import Table
 
-from services.monitor import PipelineMonitor
+from beyond.monitor import PipelineMonitor
 
 BAR = 28
 

@@ -1,0 +1,284 @@
+"""A set of services run as processes on one bus: what `beyond up` starts, watches and stops,
+and what the tests and benchmarks that run several services launch, so a pipeline is run one way.
+
+    deployment = Deployment(config, ["gestures", "reasoner"], options={"reasoner": {...}})
+    bus = await deployment.open()  # optional: subscribe here to see the services' first output
+    await deployment.start()  # every process alive on the bus, or exited
+    ending = await deployment.wait(timeout=60, done=lambda: ...)  # why it returned
+    codes = await deployment.stop()  # each process's exit code
+
+Order: a secure side's own router first (its clients wait for it), then this process's session,
+then the services in the order given (the source, `ingest`, last). The watcher's liveliness
+token is declared as the first service is launched, after whatever the caller subscribed between
+`open` and `start`: the source waits for it, so nothing it publishes is missed. The source waits
+itself for every local consumer (its `wait_for`) before it publishes, so the deployment awaits
+liveliness once, for all its processes together, only to know when it is up.
+
+It lives in `services/` beside the launcher and the registry it builds on: it runs services and
+prints nothing (what to show is the caller's: `beyond up`'s terminal views are in `beyond/`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+from collections.abc import Awaitable, Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
+
+from core.errors import InputError, unknown
+from runtime.config import BusConfig
+from services.launcher import (
+    HealthWatch,
+    LogSink,
+    ServiceProcess,
+    service_env,
+    start_service,
+    stop_services,
+)
+from services.options import check_options
+from services.registry import service_class
+
+if TYPE_CHECKING:
+    from runtime.bus import Bus
+
+SOURCE = "ingest"  # the service that publishes sensor streams, started last
+ALIVE_TIMEOUT_S = 60.0  # a process neither alive nor exited after this long: start() fails
+POLL_S = 0.25  # how often wait() looks at the processes and the caller's `done`
+CLOCKS = ("wall", "recording")
+
+
+@dataclass(frozen=True)
+class Ending:
+    """Why `Deployment.wait` returned: `done` (the caller's condition), `stopped` (a signal or
+    `request_stop`), `exited` (these processes ended on their own) or `timeout`."""
+
+    reason: Literal["done", "stopped", "exited", "timeout"]
+    exited: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.reason in ("done", "stopped")
+
+
+class Deployment:
+    """The services `services` (names of `services.registry`) on the bus `config`.
+
+    `options` are each service's keyword options, checked here, before anything starts. The
+    source, if there is one, waits for every other service of the deployment, for `watcher`
+    (the liveliness name this process declares once it watches) and for `wait_for` (services
+    elsewhere). `clock="recording"`: the services follow the source's stamps (a replay).
+    `router`: arguments of `beyond router` for a secure side's own router, started first and
+    stopped last. `env`: extra environment of the services (log format, level). `log` receives
+    every line a process prints. With `on_stuck`, a health watch asks every process for its
+    health and reports there, then stops, one that no longer answers (without it nothing is
+    stopped behind the caller's back: a benchmark on a loaded machine is slow, not stuck).
+    `stop_on_signals`: SIGINT/SIGTERM end `wait` (as Ctrl-C ends `beyond up`)."""
+
+    def __init__(
+        self,
+        config: BusConfig,
+        services: Sequence[str],
+        *,
+        options: Mapping[str, Mapping[str, Any]] | None = None,
+        wait_for: Sequence[str] = (),
+        watcher: str | None = None,
+        clock: str = "wall",
+        router: Sequence[str] | None = None,
+        env: Mapping[str, str] | None = None,
+        log: LogSink | None = None,
+        on_stuck: Callable[[str, str], None] | None = None,
+        stop_on_signals: bool = False,
+    ) -> None:
+        if clock not in CLOCKS:
+            raise unknown("clock", clock, CLOCKS)
+        self.config = config
+        self.services = list(services)
+        self.options = _checked_options(self.services, options or {})
+        if SOURCE in self.services:
+            local = [n for n in self.services if n != SOURCE] + ([watcher] if watcher else [])
+            self.options[SOURCE]["wait_for"] = local + list(wait_for)
+        self.watcher = watcher
+        self.router_command = list(router) if router is not None else None
+        clock_env = {"BEYOND_CLOCK": "recording"} if clock == "recording" else {}
+        self.env = service_env(config, {**(env or {}), **clock_env})
+        self.log = log
+        self.on_stuck = on_stuck
+        self.stop_on_signals = stop_on_signals
+        self.bus: Bus | None = None
+        self.router: ServiceProcess | None = None
+        self.processes: list[ServiceProcess] = []  # the services' current processes
+        self.health: HealthWatch | None = None
+        self.codes: dict[str, int] = {}  # exit codes, once stopped
+        self._stopping = asyncio.Event()
+        self._token: Callable[[], None] | None = None
+        self._closers: list[Callable[[], Awaitable[object]]] = []
+
+    # -- starting --------------------------------------------------------------------------
+
+    async def open(self) -> Bus:
+        """This process's session (after the router, if any): call it before `start` to
+        subscribe before the services publish. Idempotent."""
+        if self.bus is not None:
+            return self.bus
+        if self.stop_on_signals:
+            _handle_signals(self._stopping.set)
+        if self.router_command is not None:
+            command, env = self.router_command, self._router_env()
+            self.router = await start_service("router", env, command=command, sink=self.log)
+        from runtime.bus import Bus  # here: zenoh is slow to import, building a plan needs none
+
+        try:
+            self.bus = Bus.open(self.config)  # a secure client waits here for its router
+        except BaseException:
+            await self._stop_router()
+            raise
+        return self.bus
+
+    async def start(self) -> None:
+        """Start every service, the source last, and return once each is alive on the bus (its
+        health then answers) or has exited (`wait` reports it); TimeoutError if one is
+        neither after ALIVE_TIMEOUT_S."""
+        bus = await self.open()
+        for name in sorted(self.services, key=lambda n: n == SOURCE):
+            await self.launch(name)
+        await asyncio.gather(*(_alive_or_exited(bus, sp, ALIVE_TIMEOUT_S) for sp in self.processes))
+        if self.on_stuck is not None:
+            self.health = HealthWatch(bus, self.processes, self.on_stuck)
+            self.health.start()
+
+    async def launch(self, name: str) -> ServiceProcess:
+        """Start service `name` of this deployment, or start it again after it exited: the new
+        process takes the old one's place in `processes` (and in the health watch). `start`
+        launches them all; launch them one by one instead to choose the order (tests)."""
+        if name not in self.options:
+            raise unknown("service of this deployment", name, self.services)
+        bus = await self.open()
+        if self.watcher is not None and self._token is None:
+            # after the caller's subscriptions, before any service: the source waits for it
+            self._token = bus.declare_token(bus.keys.alive(self.watcher))
+        old = next((i for i, sp in enumerate(self.processes) if sp.name == name), None)
+        if old is not None and self.processes[old].running:
+            raise InputError(f"service {name} is already running in this deployment")
+        sp = await start_service(name, self.env, options=self.options[name], sink=self.log)
+        if old is None:
+            self.processes.append(sp)
+        else:
+            self.processes[old] = sp
+        return sp
+
+    def attach(self, close: Callable[[], Awaitable[object]]) -> None:
+        """`close` runs in `stop`, once the services have stopped and before the router and the
+        session: for what rides on this deployment's session (a Foxglove bridge)."""
+        self._closers.append(close)
+
+    # -- watching --------------------------------------------------------------------------
+
+    def exited(self) -> list[str]:
+        """Names of the processes (router included) that are no longer running."""
+        router = [self.router] if self.router is not None else []
+        return [sp.name for sp in self.processes + router if not sp.running]
+
+    def request_stop(self) -> None:
+        """End `wait` as a signal would."""
+        self._stopping.set()
+
+    async def wait(
+        self, timeout: float | None = None, *, done: Callable[[], bool] | None = None
+    ) -> Ending:
+        """Until `done()` holds, a process exits, `timeout` s pass or a stop is requested (a
+        signal, with `stop_on_signals`). A stop requested first wins: Ctrl-C is never reported
+        as a failure."""
+        loop = asyncio.get_running_loop()
+        deadline = None if timeout is None else loop.time() + timeout
+        while not self._stopping.is_set():
+            if done is not None and done():
+                return Ending("done")
+            if exited := self.exited():
+                return Ending("exited", tuple(exited))
+            if deadline is not None and loop.time() > deadline:
+                return Ending("timeout")
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._stopping.wait(), POLL_S)
+        return Ending("stopped")
+
+    # -- stopping --------------------------------------------------------------------------
+
+    async def stop(self) -> dict[str, int]:
+        """Stop everything cleanly, in reverse order of start: the health watch, the watcher's
+        token, the services (SIGTERM, then SIGKILL if hung), what was attached, the router last,
+        then the session. Returns (and keeps in `codes`) every process's exit code."""
+        try:
+            if self.health is not None:
+                await self.health.stop()
+            if self._token is not None:
+                self._token()
+                self._token = None
+            self.codes = await stop_services(self.processes)
+            for close in self._closers:
+                await close()
+            self._closers.clear()
+            self.codes.update(await self._stop_router())
+        finally:
+            if self.bus is not None:
+                self.bus.close()
+                self.bus = None
+            if self.stop_on_signals:
+                _handle_signals(None)
+        return self.codes
+
+    def unclean(self) -> dict[str, int]:
+        """The processes that did not stop cleanly. Killed by our SIGTERM counts as clean: a
+        process still starting has no handler of its own yet."""
+        return {n: c for n, c in self.codes.items() if c not in (0, -signal.SIGTERM)}
+
+    async def _stop_router(self) -> dict[str, int]:
+        router, self.router = self.router, None
+        return await stop_services([router]) if router is not None else {}
+
+    def _router_env(self) -> dict[str, str]:
+        """A secure side's router: secure defaults and its own endpoints, not the clients'."""
+        own = BusConfig(robot=self.config.robot, mode="router", secure=self.config.secure)
+        return service_env(own)
+
+
+def _checked_options(
+    names: list[str], options: Mapping[str, Mapping[str, Any]]
+) -> dict[str, dict[str, Any]]:
+    """Each service's options, refused (one line) before anything starts if a service or an
+    option is unknown: a typo found after the others have started would leave them running."""
+    checked = {name: dict(options.get(name, {})) for name in names}
+    for name in names:
+        check_options(name, service_class(name), checked[name])
+    return checked
+
+
+def _handle_signals(handler: Callable[[], None] | None) -> None:
+    """SIGINT and SIGTERM call `handler` (None: their default again). Services run in their own
+    sessions, so Ctrl-C reaches only us, and we stop them in order."""
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            if handler is None:
+                loop.remove_signal_handler(sig)
+            else:
+                loop.add_signal_handler(sig, handler)
+
+
+async def _alive_or_exited(bus: Bus, sp: ServiceProcess, timeout: float) -> None:
+    """Until `sp`'s liveliness token is seen (declared after its health queryable, so it then
+    answers health) or it exited (`wait` then reports it). "pipeline up" used to be printed as
+    soon as the source's process was spawned: whoever took the line at its word and asked the
+    source for its health found nothing serving yet."""
+    alive = asyncio.ensure_future(bus.wait_alive(bus.keys.alive(sp.name), timeout=timeout))
+    exited = asyncio.ensure_future(sp.process.wait())
+    try:
+        await asyncio.wait({alive, exited}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        alive.cancel()
+        exited.cancel()
+    if alive.done() and not alive.cancelled():
+        error = alive.exception()  # no token in time: a TimeoutError
+        if error is not None and not (exited.done() and not exited.cancelled()):
+            raise error
