@@ -22,7 +22,7 @@ def render(monitor: PipelineMonitor, expected: list[str]) -> RenderableType:
     for col in ("service", "in", "out", "dropped", "malformed", "errors", "last error"):
         health.add_column(col, justify="left" if col in ("service", "last error") else "right")
     for name in expected:
-        h = monitor.health.get(name)
+        h = monitor.health_reports.get(name)
         if h is None:
             health.add_row(name, "-", "-", "-", "-", "-", "starting")
             continue

@@ -42,7 +42,7 @@ class PipelineMonitor:
         self.bus = bus
         self.emit = emit
         self.report = GestureReport()
-        self.health: dict[str, ServiceHealth] = {}
+        self.health_reports: dict[str, ServiceHealth] = {}
         self.progress: dict[str, dict[str, int]] = {}
         self.posterior: ActionPosterior | None = None
         self.prediction: AffordancePrediction | None = None
@@ -127,7 +127,7 @@ class PipelineMonitor:
         self.stream_end = msg
 
     def on_health(self, msg: ServiceHealth) -> None:
-        self.health[msg.service] = msg
+        self.health_reports[msg.service] = msg
 
     # -- completion ----------------------------------------------------------------------
 

@@ -109,7 +109,7 @@ class Deployment:
         self.bus: Bus | None = None
         self.router: ServiceProcess | None = None
         self.processes: list[ServiceProcess] = []  # the services' current processes
-        self.health: HealthWatch | None = None
+        self.health_watch: HealthWatch | None = None
         self.codes: dict[str, int] = {}  # exit codes, once stopped
         self._stopping = asyncio.Event()
         self._token: Callable[[], None] | None = None
@@ -145,8 +145,8 @@ class Deployment:
             await self.launch(name)
         await asyncio.gather(*(_alive_or_exited(bus, sp, ALIVE_TIMEOUT_S) for sp in self.processes))
         if self.on_stuck is not None:
-            self.health = HealthWatch(bus, self.processes, self.on_stuck)
-            self.health.start()
+            self.health_watch = HealthWatch(bus, self.processes, self.on_stuck)
+            self.health_watch.start()
 
     async def launch(self, name: str) -> ServiceProcess:
         """Start service `name` of this deployment, or start it again after it exited: the new
@@ -210,8 +210,8 @@ class Deployment:
         token, the services (SIGTERM, then SIGKILL if hung), what was attached, the router last,
         then the session. Returns (and keeps in `codes`) every process's exit code."""
         try:
-            if self.health is not None:
-                await self.health.stop()
+            if self.health_watch is not None:
+                await self.health_watch.stop()
             if self._token is not None:
                 self._token()
                 self._token = None
