@@ -540,12 +540,13 @@ def run_path(path: str, kind: str, keys_dir: Path) -> dict[str, float]:
 
 def secure_path() -> dict[str, float]:
     """Plain, router and secure paths, interleaved REPEATS times, medians and ratios."""
-    from runtime import acl, keystore
+    from runtime import keystore
+    from services import registry
 
     figures: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
         keys_dir = Path(tmp) / "keys"
-        keystore.init(keys_dir, acl.identities())
+        keystore.init(keys_dir, registry.identities())
         for kind in KINDS:
             runs: dict[str, list[dict[str, float]]] = {p: [] for p in PATHS}
             for _ in range(REPEATS):

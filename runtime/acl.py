@@ -91,13 +91,6 @@ def declaration_of(name: str, cls: type) -> Declaration:
     return Declaration(name, subscribes, publishes, serves)
 
 
-def registry_declarations() -> list[Declaration]:
-    """The declarations of every service `beyond up` starts."""
-    from services.registry import SERVICES, service_class
-
-    return [declaration_of(n, service_class(n)) for n in SERVICES]
-
-
 def _key(suffix: str) -> str:
     return f"{_ANY_ROBOT}/{suffix}"
 
@@ -161,9 +154,11 @@ def _reader_grants(declarations: list[Declaration]) -> list[tuple[str, list[str]
     ]
 
 
-def access_control(declarations: list[Declaration] | None = None) -> dict[str, Any]:
-    """The `access_control` block of the router's Zenoh configuration."""
-    declarations = registry_declarations() if declarations is None else declarations
+def access_control(
+    declarations: list[Declaration], profiles: Mapping[str, Sequence[str]]
+) -> dict[str, Any]:
+    """The `access_control` block of the router's Zenoh configuration, for the services
+    `declarations` describe, `profiles` saying which run on which side (services.registry)."""
     published = {s: d.name for d in declarations for s in d.publishes}
     names = [d.name for d in declarations]
     reserved = [TOOLS_ROLE, *SIDE_MONITORS]
@@ -204,11 +199,9 @@ def access_control(declarations: list[Declaration] | None = None) -> dict[str, A
             ],
         )
     rules.role(TOOLS_ROLE, _reader_grants(declarations))
-    from services.registry import PROFILES
-
     for side, monitors in SIDE_MONITORS.items():
         tokens = [_key(f"{ALIVE}/{m}") for m in monitors]
-        services = [n for n in PROFILES[SIDE_PROFILES[side]] if n in own]
+        services = [n for n in profiles[SIDE_PROFILES[side]] if n in own]
         rules.role(
             side,
             [*_reader_grants(declarations), ("alive", ["liveliness_token"], "ingress", tokens)],
@@ -223,9 +216,8 @@ def access_control(declarations: list[Declaration] | None = None) -> dict[str, A
     }
 
 
-def identities(declarations: list[Declaration] | None = None) -> list[str]:
+def identities(declarations: list[Declaration]) -> list[str]:
     """Every identity the rules know: the services, the tools, the sides (and the router)."""
-    declarations = registry_declarations() if declarations is None else declarations
     return [d.name for d in declarations] + [TOOLS_ROLE, *SIDE_MONITORS]
 
 

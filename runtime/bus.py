@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, TypeVar, overload
 
 import zenoh
@@ -41,11 +41,14 @@ class Bus:
         self._tasks: set[asyncio.Task[None]] = set()
 
     @classmethod
-    def open(cls, config: BusConfig | None = None) -> Bus:
+    def open(
+        cls, config: BusConfig | None = None, *, access_rules: Mapping[str, Any] | None = None
+    ) -> Bus:
+        """A session as `config` says; a secure router enforces `access_rules`."""
         config = config or load_config()
         log.debug("opening Zenoh session: %s", describe(config))
         try:
-            session = zenoh.open(zenoh_config(config))
+            session = zenoh.open(zenoh_config(config, access_rules))
         except zenoh.ZError as exc:
             raise InputError(f"cannot open the Zenoh session ({describe(config)}): {exc}") from None
         return cls(session, config)

@@ -237,8 +237,9 @@ def _refuse_deep_nesting(path: Path) -> None:
         )
 
 
-def zenoh_config(config: BusConfig) -> zenoh.Config:
-    """A zenoh.Config for this BusConfig (imported lazily: zenoh is slow to import)."""
+def zenoh_config(config: BusConfig, access_rules: Mapping[str, Any] | None = None) -> zenoh.Config:
+    """A zenoh.Config for this BusConfig (imported lazily: zenoh is slow to import); a secure
+    router enforces `access_rules`."""
     import zenoh
 
     if config.config_file:
@@ -293,7 +294,7 @@ def zenoh_config(config: BusConfig) -> zenoh.Config:
             connect or (_file_endpoints(zc, "connect/endpoints") if from_file else []),
         )
         identity = config.identity or default_identity(config.mode)
-        sets.update(tls_settings(config.secure, identity, config.mode))
+        sets.update(tls_settings(config.secure, identity, config.mode, access_rules))
     if config.connect_timeout_ms is not None:
         sets["connect/timeout_ms"] = config.connect_timeout_ms
     for key, value in sets.items():

@@ -19,6 +19,9 @@ much the caches saved, and the distributed test checks it.
 Sequence numbers need no clock; `max_age_s` (history by age) uses sample timestamps, which a
 session adds only with `timestamping` enabled (as in `deploy/zenoh/*.json5`); without them the
 history is bounded by count alone.
+
+zenoh-ext 1.10 can drop a late subscriber's history when a live sample overtakes it;
+runtime.history_repair asks the cache again for what came before each publisher's first sample.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import zenoh
 from zenoh import ext
 
 from runtime.delivery import Delivery
+from runtime.history_repair import HistoryRepair
 from runtime.inbox import Inbox, direct_callback, undeclare
 
 log = logging.getLogger("beyond.recovery")
@@ -58,11 +62,16 @@ class RecoveringSource:
         self._recovered = 0
         push = inbox.push
 
-        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh thread
+        def deliver(sample: zenoh.Sample) -> None:  # Zenoh thread (or the repair's)
             info = sample.source_info
             if info is not None:
                 self._delivered((str(info.source_id), int(info.source_sn)))
             push((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+        def missed(count: int) -> None:
+            self.missed += count
+
+        repair = HistoryRepair(session, key, delivery, deliver, missed)
 
         def on_live(sample: zenoh.Sample) -> None:  # Zenoh thread: the witness
             info = sample.source_info
@@ -84,7 +93,7 @@ class RecoveringSource:
         self._sub = ext.declare_advanced_subscriber(
             session,
             key,
-            direct_callback(on_sample),
+            direct_callback(repair.offer),
             history=ext.HistoryConfig(
                 detect_late_publishers=True,
                 max_samples=delivery.history,

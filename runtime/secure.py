@@ -15,6 +15,7 @@ certificate is one line naming the file, not a handshake Zenoh retries forever.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -39,8 +40,11 @@ def check_endpoints(listen: list[str], connect: list[str]) -> None:
         )
 
 
-def tls_settings(directory: Path, identity: str, mode: str) -> dict[str, Any]:
-    """Zenoh config entries (path -> value) for `identity` from the keystore in `directory`."""
+def tls_settings(
+    directory: Path, identity: str, mode: str, access_rules: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """Zenoh config entries (path -> value) for `identity` from the keystore in `directory`; a
+    router's include its `access_rules` (services.registry.access_rules)."""
     ca, cert, key = keystore.check(directory, identity)
     tls: dict[str, Any] = {
         "root_ca_certificate": str(ca),
@@ -55,7 +59,10 @@ def tls_settings(directory: Path, identity: str, mode: str) -> dict[str, Any]:
         tls["listen_private_key"] = str(key)
     sets: dict[str, Any] = {"transport/link/tls": tls}
     if mode == "router":
-        from runtime.acl import access_control
-
-        sets["access_control"] = access_control()
+        if access_rules is None:
+            raise InputError(
+                "a secure router needs the deployment's access rules: start it with "
+                "`beyond router --secure DIR`"
+            )
+        sets["access_control"] = dict(access_rules)
     return sets

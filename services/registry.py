@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import importlib
+from typing import Any
 
 from core.errors import unknown
+from runtime import acl
 from runtime.service import Service
 
 SERVICES: dict[str, str] = {
@@ -28,3 +30,18 @@ def service_class(name: str) -> type[Service]:
     module, _, cls = SERVICES[name].partition(":")
     found: type[Service] = getattr(importlib.import_module(module), cls)
     return found
+
+
+def declarations() -> list[acl.Declaration]:
+    """What every service touches, from its class (the access rules are made of these)."""
+    return [acl.declaration_of(n, service_class(n)) for n in SERVICES]
+
+
+def identities() -> list[str]:
+    """Every identity a secure deployment's keystore needs a certificate for."""
+    return acl.identities(declarations())
+
+
+def access_rules() -> dict[str, Any]:
+    """The secure router's `access_control` block for these services and profiles."""
+    return acl.access_control(declarations(), PROFILES)

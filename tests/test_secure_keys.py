@@ -24,6 +24,7 @@ from runtime.bus import Bus
 from runtime.config import BusConfig, load_config, zenoh_config
 from runtime.service import Service
 from schemas import Description, WordProbabilities
+from services import registry
 from services.registry import SERVICES, service_class
 
 REPO = Path(__file__).resolve().parent.parent
@@ -32,7 +33,7 @@ REPO = Path(__file__).resolve().parent.parent
 @pytest.fixture(scope="module")
 def store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     directory = tmp_path_factory.mktemp("keys") / "store"
-    keystore.init(directory, acl.identities())
+    keystore.init(directory, registry.identities())
     return directory
 
 
@@ -75,7 +76,7 @@ def test_keys_cli_show_lists_expiry_and_add_renews(store: Path, tmp_path: Path) 
 
 
 def test_rules_follow_the_declarations() -> None:
-    rules = acl.access_control()
+    rules = registry.access_rules()
     assert rules["default_permission"] == "deny" and rules["enabled"] is True
     by_id = {r["id"]: r for r in rules["rules"]}
     describer_puts = by_id["describer-out-ingress"]["key_exprs"]
@@ -99,13 +100,13 @@ def test_rules_follow_the_declarations() -> None:
 
 
 def test_a_rule_naming_an_undeclared_key_is_an_error() -> None:
-    decls = acl.registry_declarations()
+    decls = registry.declarations()
     with pytest.raises(InputError, match="unknown stream declared by service 'x'"):
         acl.Declaration("x", publishes=("sensors",))
     orphan = [d for d in decls if d.name != "describer"]  # now nobody publishes descriptions
     speech_only = [*orphan, acl.Declaration("listener", subscribes=("description",))]
     with pytest.raises(InputError, match="subscribes to 'description', which no service"):
-        acl.access_control(speech_only)
+        acl.access_control(speech_only, registry.PROFILES)
 
 
 class Undeclared(Service):
@@ -197,7 +198,9 @@ def test_secure_deploy_files_load_and_refuse_plain_endpoints(store: Path) -> Non
     with pytest.raises(InputError, match="links only over TLS"):
         zenoh_config(load_config({**env, "BEYOND_ZENOH_ROUTER": "tcp/10.0.0.2:7447"}))
     router = load_config({**env, "BEYOND_ZENOH_CONFIG": str(secure / "router.json5")})
-    zc = zenoh_config(router.with_(mode="router"))
+    with pytest.raises(InputError, match="needs the deployment's access rules"):
+        zenoh_config(router.with_(mode="router"))
+    zc = zenoh_config(router.with_(mode="router"), registry.access_rules())
     assert '"default_permission":"deny"' in zc.get_json("access_control").replace(" ", "")
     with pytest.raises(InputError, match="links only over TLS"):
         plain = load_config({**env, "BEYOND_ZENOH_CONFIG": str(REPO / "deploy/zenoh/router.json5")})

@@ -21,7 +21,8 @@ import pytest
 from busutil_net import skeleton_recording
 from netns_util import REPO, TwoHosts
 
-from runtime import acl, keystore
+from runtime import keystore
+from services import registry
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(170)]
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
@@ -36,7 +37,7 @@ VERBS = {
 @pytest.fixture
 def stores(tmp_path: Path) -> tuple[Path, Path]:
     ours, theirs = tmp_path / "keys", tmp_path / "other-keys"
-    keystore.init(ours, acl.identities())
+    keystore.init(ours, registry.identities())
     keystore.init(theirs, ["describer"])
     return ours, theirs
 

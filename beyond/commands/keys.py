@@ -46,13 +46,14 @@ def _directory(args: argparse.Namespace) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime import acl, keystore
+    from runtime import keystore
+    from services import registry
 
     if args.keys_command == "acl":
-        print(json.dumps(acl.access_control(), indent=2))
+        print(json.dumps(registry.access_rules(), indent=2))
         return 0
     if args.keys_command == "init":
-        for path in keystore.init(args.dir, acl.identities(), days=args.days):
+        for path in keystore.init(args.dir, registry.identities(), days=args.days):
             print(path)
         return 0
     directory = _directory(args)

@@ -10,6 +10,7 @@ import threading
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.config import ROUTER_LISTEN, describe
+from services import registry
 
 HELP = "run a Zenoh router (multi-host deployments); peers/clients connect to it"
 
@@ -24,7 +25,8 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with Bus.open(config) as bus:
+    rules = registry.access_rules() if config.secure is not None else None
+    with Bus.open(config, access_rules=rules) as bus:
         print(f"zenoh router {bus.zid} up: {describe(config)}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
