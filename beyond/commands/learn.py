@@ -88,7 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cognition.development import LearningConfig, plan_units, run_learning, write_outputs
+    from cognition.development.learning import LearningConfig, plan_units, run_learning
+    from cognition.development.report import write_outputs
 
     if not 0.0 <= args.threshold <= 1.0:
         raise InputError(f"--threshold {args.threshold}; valid: a probability in [0, 1]")
