@@ -67,6 +67,13 @@ def count(lo: int = 1, hi: int = 2**62, what: str = "") -> Callable[[str], float
 
 
 seed = number(int, lo=0, hi=SEED_MAX, what="seed")
+
+
+def add_seed(parser: argparse.ArgumentParser, help: str, default: int = 0) -> None:
+    """--seed: every command that generates anything takes the same flag with the same range."""
+    parser.add_argument("--seed", type=seed, default=default, help=help)
+
+
 port = number(int, lo=1, hi=65535, what="TCP port")
 
 

@@ -49,9 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="re-score N random sentences",
     )
-    parser.add_argument(
-        "--seed", type=argtypes.seed, default=0, help="seed for --samples (default 0)"
-    )
+    argtypes.add_seed(parser, "seed for --samples (default 0)")
     parser.add_argument(
         "--legacy-offset",
         action="store_true",

@@ -60,9 +60,7 @@ def _data_args(p: argparse.ArgumentParser, seed: int) -> None:
         default=30,
         help="synthetic gestures per action (default 30)",
     )
-    p.add_argument(
-        "--seed", type=argtypes.seed, default=seed, help=f"synthetic data seed (default {seed})"
-    )
+    argtypes.add_seed(p, f"synthetic data seed (default {seed})", default=seed)
     p.add_argument(
         "--push-as",
         choices=("grasp", "tap", "touch"),

@@ -82,9 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="do not calibrate the gesture evidence's temper (use kappa = 1)",
     )
-    parser.add_argument(
-        "--seed", type=argtypes.seed, default=0, help="seed of everything synthetic"
-    )
+    argtypes.add_seed(parser, "seed of everything synthetic")
 
 
 def run(args: argparse.Namespace) -> int:

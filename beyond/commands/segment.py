@@ -62,7 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--stills", type=argtypes.count(0, 100_000), default=60, help="--evaluate: still scenes"
     )
-    parser.add_argument("--seed", type=argtypes.seed, default=0, help="seed of the simulation")
+    argtypes.add_seed(parser, "seed of the simulation")
 
 
 def run(args: argparse.Namespace) -> int:
