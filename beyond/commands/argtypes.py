@@ -69,6 +69,12 @@ def count(lo: int = 1, hi: int = 2**62, what: str = "") -> Callable[[str], float
 seed = number(int, lo=0, hi=SEED_MAX, what="seed")
 
 
+def add_listen_seconds(parser: argparse.ArgumentParser, help: str) -> None:
+    """--duration of a command that listens to the bus for a while and then reports what it saw:
+    the same flag and default (2 s, long enough for a 1 Hz health beat) wherever it is."""
+    parser.add_argument("--duration", type=seconds(), default=2.0, help=help)
+
+
 def add_seed(parser: argparse.ArgumentParser, help: str, default: int = 0) -> None:
     """--seed: every command that generates anything takes the same flag with the same range."""
     parser.add_argument("--seed", type=seed, default=default, help=help)
