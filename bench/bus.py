@@ -567,13 +567,7 @@ def secure_path() -> dict[str, float]:
             figures[f"path_{kind}_secure_vs_router_throughput_ratio"] = round(tls_thr, 3)
             print(f"{kind}: plain peers / plain router / secure router (mTLS + rules):", flush=True)
             for p in PATHS:
-                r = row[p]
-                print(
-                    f"  {p:7s} latency median {r['latency_median_us']:7.1f} us, p99 "
-                    f"{r['latency_p99_us']:8.1f} us | throughput "
-                    f"{r['throughput_msgs_per_s']:8.0f}/s",
-                    flush=True,
-                )
+                print(_row_line(f"{p:7s}", row[p]), flush=True)
             print(
                 f"  secure/plain: latency x{lat:.2f} (goal <= 1.3), throughput x{thr:.2f} "
                 f"(goal >= 0.7); secure/plain router: latency x{tls_lat:.2f}, throughput "
@@ -581,6 +575,30 @@ def secure_path() -> dict[str, float]:
                 flush=True,
             )
     return figures
+
+
+def _row_line(name: str, r: dict[str, float]) -> str:
+    """One measured route or mode: latency and throughput, as every table of this bench shows."""
+    return (
+        f"  {name} latency median {r['latency_median_us']:7.1f} us, p99 "
+        f"{r['latency_p99_us']:8.1f} us | throughput {r['throughput_msgs_per_s']:8.0f}/s"
+    )
+
+
+# What main prints of the hand-off floor and of the replay speeds (str.format over their figures).
+HANDOFF_LINE = (
+    "hand-off from a thread to a parked consumer, no Zenoh (median): thread "
+    "{handoff_thread_median_us:.1f} us, asyncio task via the runtime's Inbox "
+    "{handoff_asyncio_eventfd_median_us:.1f} us (call_soon_threadsafe "
+    "{handoff_asyncio_call_soon_threadsafe_median_us:.1f} us)"
+)
+REPLAY_LINE = (
+    "replay as fast as possible into another process (x real time), ours / raw reference: "
+    "skeleton only {replay_skeleton_ours_speed_x_realtime:.0f} / "
+    "{replay_skeleton_reference_speed_x_realtime:.0f}, skeleton + 320x240 camera "
+    "{replay_all_ours_speed_x_realtime:.0f} / {replay_all_reference_speed_x_realtime:.0f} "
+    "(goal >= 50)"
+)
 
 
 def main() -> int:
@@ -636,13 +654,8 @@ def main() -> int:
         figures.update({f"{kind}_{k}": round(v, 3) for k, v in ratios.items()})
         print(f"{kind} ({raw['bytes']:.0f} B), median of {REPEATS} interleaved runs:", flush=True)
         for mode in MODES:
-            r = row[mode]
-            print(
-                f"  {mode:10s} latency median {r['latency_median_us']:7.1f} us, p99 "
-                f"{r['latency_p99_us']:8.1f} us | throughput {r['throughput_msgs_per_s']:8.0f}/s "
-                f"({r['throughput_mb_per_s']:6.0f} MB/s)",
-                flush=True,
-            )
+            mb = f" ({row[mode]['throughput_mb_per_s']:6.0f} MB/s)"
+            print(_row_line(f"{mode:10s}", row[mode]) + mb, flush=True)
         print(
             f"  typed/raw: latency x{ratios['latency_ratio']:.2f} (goal <= 1.2), p99 "
             f"x{ratios['p99_ratio']:.2f}, throughput x{ratios['throughput_ratio']:.2f} "
@@ -650,25 +663,10 @@ def main() -> int:
             f", throughput x{ratios['throughput_ratio_vs_raw_decode']:.2f}",
             flush=True,
         )
-    floor = handoff_floor()
-    figures.update({k: round(v, 3) for k, v in floor.items()})
-    print(
-        "hand-off from a thread to a parked consumer, no Zenoh (median): thread "
-        f"{floor['handoff_thread_median_us']:.1f} us, asyncio task via the runtime's Inbox "
-        f"{floor['handoff_asyncio_eventfd_median_us']:.1f} us (call_soon_threadsafe "
-        f"{floor['handoff_asyncio_call_soon_threadsafe_median_us']:.1f} us)",
-        flush=True,
-    )
-    replay_figures = replay_speed()
-    figures.update({k: round(v, 3) for k, v in replay_figures.items()})
-    print(
-        "replay as fast as possible into another process (x real time), ours / raw reference: "
-        f"skeleton only {replay_figures['replay_skeleton_ours_speed_x_realtime']:.0f} / "
-        f"{replay_figures['replay_skeleton_reference_speed_x_realtime']:.0f}, skeleton + 320x240 "
-        f"camera {replay_figures['replay_all_ours_speed_x_realtime']:.0f} / "
-        f"{replay_figures['replay_all_reference_speed_x_realtime']:.0f} (goal >= 50)",
-        flush=True,
-    )
+    for measure, line in ((handoff_floor, HANDOFF_LINE), (replay_speed, REPLAY_LINE)):
+        measured = measure()
+        figures.update({k: round(v, 3) for k, v in measured.items()})
+        print(line.format_map(measured), flush=True)
     figures.update(secure_path())
     print(json.dumps(figures))
     return 0

@@ -177,29 +177,31 @@ class Log(_View, frozen=True):
     line: int
 
 
-class PosteriorView(_View, frozen=True):
-    """The streaming action posterior by action name (plottable: `.posterior.tap`)."""
-
-    SCHEMA_NAME: ClassVar[str] = "beyond.view.ActionPosterior"
+class _GestureView(_View, frozen=True):
+    """What a plot of a gesture's beliefs keys on: when, which gesture, which skeleton frame, and
+    whether it is the gesture's last word (the fields come first in every such view)."""
 
     timestamp: Time
     segment_id: int
     frame: int
     final: bool
+
+
+class PosteriorView(_GestureView, frozen=True):
+    """The streaming action posterior by action name (plottable: `.posterior.tap`)."""
+
+    SCHEMA_NAME: ClassVar[str] = "beyond.view.ActionPosterior"
+
     posterior: dict[str, float]
     normalised_log_likelihood: dict[str, float]
     best: str
 
 
-class AffordanceView(_View, frozen=True):
+class AffordanceView(_GestureView, frozen=True):
     """Predicted effects as nested maps (plottable: `.effects.ObjVel.fast`) and their argmax."""
 
     SCHEMA_NAME: ClassVar[str] = "beyond.view.AffordancePrediction"
 
-    timestamp: Time
-    segment_id: int
-    frame: int
-    final: bool
     action_belief: dict[str, float]
     effects: dict[str, dict[str, float]]
     most_likely: dict[str, str]

@@ -8,6 +8,7 @@ Services catch it, count it and keep running.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from typing import Any, TypeVar
 
 import msgspec
@@ -59,8 +60,22 @@ def type_from_encoding(encoding: str) -> type[Message] | None:
 
 _encoder = msgspec.msgpack.Encoder()
 _json_encoder = msgspec.json.Encoder()
-_msgpack_decoders: dict[type[Message], msgspec.msgpack.Decoder[Any]] = {}
-_json_decoders: dict[type[Message], msgspec.json.Decoder[Any]] = {}
+
+
+class _Decoders(dict[type[Message], Any]):
+    """Strict decoders by message type, made on first use (`make` is msgspec's Decoder class)."""
+
+    def __init__(self, make: Callable[[type[Message]], Any]) -> None:
+        super().__init__()
+        self.make = make
+
+    def __missing__(self, cls: type[Message]) -> Any:
+        decoder = self[cls] = self.make(cls)
+        return decoder
+
+
+_msgpack_decoders = _Decoders(msgspec.msgpack.Decoder)
+_json_decoders = _Decoders(msgspec.json.Decoder)
 
 
 def encode(message: Message) -> bytes:
@@ -105,35 +120,33 @@ def _check(message: M, cls: type[M], key: str) -> M:
     return message
 
 
+def _schema_error(
+    cls: type[Message], key: str, exc: Exception, raw: Callable[[], object]
+) -> SchemaError:
+    """The one-line error for a payload that did not decode as `cls`: an old schema version is
+    named as such, found by reading the payload loosely again (`raw`), only once it has failed."""
+    try:
+        problem = _version_problem(raw(), cls)
+    except msgspec.DecodeError:
+        problem = None
+    return SchemaError(f"bad {_where(key, cls)}: {problem or exc}")
+
+
 def decode(data: bytes | bytearray | memoryview, cls: type[M], key: str = "") -> M:
     """Strictly decode msgpack bytes as `cls`; SchemaError names the key and what was wrong."""
-    decoder = _msgpack_decoders.get(cls)
-    if decoder is None:
-        decoder = _msgpack_decoders[cls] = msgspec.msgpack.Decoder(cls)
     try:
-        message: M = decoder.decode(data)
+        message: M = _msgpack_decoders[cls].decode(data)
     except msgspec.DecodeError as exc:
-        try:
-            problem = _version_problem(msgspec.msgpack.decode(data), cls)
-        except msgspec.DecodeError:
-            problem = None
-        raise SchemaError(f"bad {_where(key, cls)}: {problem or exc}") from None
+        raise _schema_error(cls, key, exc, lambda: msgspec.msgpack.decode(data)) from None
     return _check(message, cls, key)
 
 
 def from_json(data: bytes | str, cls: type[M], key: str = "") -> M:
     """Strictly decode JSON as `cls` (the form stored in recordings)."""
-    decoder = _json_decoders.get(cls)
-    if decoder is None:
-        decoder = _json_decoders[cls] = msgspec.json.Decoder(cls)
     try:
-        message: M = decoder.decode(data)
+        message: M = _json_decoders[cls].decode(data)
     except msgspec.DecodeError as exc:
-        try:
-            problem = _version_problem(msgspec.json.decode(data), cls)
-        except msgspec.DecodeError:
-            problem = None
-        raise SchemaError(f"bad {_where(key, cls)}: {problem or exc}") from None
+        raise _schema_error(cls, key, exc, lambda: msgspec.json.decode(data)) from None
     return _check(message, cls, key)
 
 
@@ -143,7 +156,7 @@ def from_object(obj: Any, cls: type[M], key: str = "") -> M:
     try:
         message: M = msgspec.convert(obj, cls)
     except msgspec.ValidationError as exc:
-        raise SchemaError(f"bad {_where(key, cls)}: {_version_problem(obj, cls) or exc}") from None
+        raise _schema_error(cls, key, exc, lambda: obj) from None
     return _check(message, cls, key)
 
 

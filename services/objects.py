@@ -142,15 +142,7 @@ class ObjectSegmenter(Service):
                     )
                 )
             elif isinstance(out, ObjectAtStart):
-                self.at_start_out.put(
-                    GestureObject(
-                        header=self.derive(out.ref, GestureObject),
-                        segment_id=out.segment_id,
-                        frame=out.frame,
-                        labels=out.labels,
-                        reason=out.reason,
-                    )
-                )
+                self.at_start_out.put(_gesture_object(self.derive(out.ref, GestureObject), out))
             elif isinstance(out, GestureEffects):
                 self.effects_out.put(_effects(self.derive(out.ref, ObjectEffects), out))
 
@@ -172,6 +164,17 @@ def _detected(o: Any) -> DetectedObject:
         colour_label=o.labels.get("Color", ""),
         shape_label=o.labels.get("Shape", ""),
         size_label=o.labels.get("Size", ""),
+    )
+
+
+def _gesture_object(header: Header, out: ObjectAtStart[Header]) -> GestureObject:
+    """The object a gesture is about, as the reasoner joins it to the gesture's beliefs."""
+    return GestureObject(
+        header=header,
+        segment_id=out.segment_id,
+        frame=out.frame,
+        labels=out.labels,
+        reason=out.reason,
     )
 
 

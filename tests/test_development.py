@@ -12,23 +12,25 @@ import pytest
 from beyond.cli import main as cli
 from cognition.bn import learn_network, synthetic_dataset
 from cognition.bn.model import BayesNet
-from cognition.development import (
+from cognition.development.demonstrations import (
     Demonstration,
-    LearningConfig,
-    LearningResults,
     ObservationConfig,
     RecordedEffects,
+    synthesize_demonstrations,
+)
+from cognition.development.learning import (
+    LearningConfig,
+    LearningResults,
     fit_kappa,
     fused_posteriors,
     infer_labels,
     load_robot_data,
     network_posteriors,
     run_learning,
-    synthesize_demonstrations,
     tempered_posterior,
     word_evidence,
-    write_outputs,
 )
+from cognition.development.report import write_outputs
 from cognition.fusion import fuse
 from cognition.gestures.hmm import TrainingConfig
 from cognition.grammar import DEFAULT_GRAMMAR

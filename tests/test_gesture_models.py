@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 import scipy.io
 
-from cognition.gestures.hmm import (
+from cognition.gestures import (
     GestureHMM,
     GestureModels,
     TrainingConfig,
+    load_matlab_models,
     load_models,
     save_models,
     train_hmm,
 )
-from cognition.gestures.matlab import load_matlab_models
 from core.errors import InputError
 
 

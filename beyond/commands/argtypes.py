@@ -72,6 +72,19 @@ seed = number(int, lo=0, hi=SEED_MAX, what="seed")
 # a replay's speed as typed: 0 means as fast as possible (runtime.replay_control.rate_option
 # turns it into the engine's None), so every command takes the same values
 rate = number(float, lo=0, hi=RATE_MAX, what="speed factor, 0: as fast as possible")
+
+
+def add_listen_seconds(parser: argparse.ArgumentParser, help: str) -> None:
+    """--duration of a command that listens to the bus for a while and then reports what it saw:
+    the same flag and default (2 s, long enough for a 1 Hz health beat) wherever it is."""
+    parser.add_argument("--duration", type=seconds(), default=2.0, help=help)
+
+
+def add_seed(parser: argparse.ArgumentParser, help: str, default: int = 0) -> None:
+    """--seed: every command that generates anything takes the same flag with the same range."""
+    parser.add_argument("--seed", type=seed, default=default, help=help)
+
+
 port = number(int, lo=1, hi=65535, what="TCP port")
 
 

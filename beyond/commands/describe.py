@@ -25,6 +25,7 @@ from cognition.bn.model import load_model
 from cognition.descriptions import (
     NBEST_MAX,
     SAMPLES_MAX,
+    Ranking,
     ScoredSentence,
     nbest_exact,
     nbest_from_file,
@@ -48,9 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="re-score N random sentences",
     )
-    parser.add_argument(
-        "--seed", type=argtypes.seed, default=0, help="seed for --samples (default 0)"
-    )
+    argtypes.add_seed(parser, "seed for --samples (default 0)")
     parser.add_argument(
         "--legacy-offset",
         action="store_true",
@@ -67,7 +66,7 @@ def describe(args: argparse.Namespace) -> tuple[list[ScoredSentence], str]:
     model = load_model(args.model)
     ev = resolve_evidence(args, model)
     words = model.word_probabilities(ev.observed, ev.soft)
-    options = {"legacy_offset": args.legacy_offset, "require": args.require}
+    options: Ranking = {"legacy_offset": args.legacy_offset, "require": args.require}
     if args.sentences is not None:
         best = nbest_from_file(args.sentences, words, args.nbest, **options)
     elif args.samples is not None:

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from beyond.commands import argtypes
-from beyond.commands.terminal import stop_on_signals
+from beyond.commands.terminal import run_until_stopped
 from core.errors import InputError
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
@@ -80,8 +80,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     config = config_from_args(args)
 
-    async def go() -> int:
-        stop = stop_on_signals()
+    async def go(stop: asyncio.Event) -> str:
         with Bus.open(config) as bus:
             bridge = FoxgloveBridge(bus, host=args.host, port=args.ws_port)
             try:
@@ -96,11 +95,9 @@ def run(args: argparse.Namespace) -> int:
                 stats = await task
             finally:
                 bridge.close()
-        print(
+        return (
             f"bridge stopped: {stats.received} samples, {stats.forwarded} messages forwarded, "
-            f"{stats.malformed} malformed",
-            file=sys.stderr,
+            f"{stats.malformed} malformed"
         )
-        return 0
 
-    return asyncio.run(go())
+    return run_until_stopped(go)

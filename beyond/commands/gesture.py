@@ -29,6 +29,7 @@ from rich.progress import Progress
 from rich.table import Table
 
 from beyond.commands import argtypes
+from beyond.commands.hmm_options import add_training_options, training_config
 from beyond.commands.terminal import progress_bar
 from cognition.gestures.datasets import (
     SYNTHETIC,
@@ -38,7 +39,7 @@ from cognition.gestures.datasets import (
 )
 from cognition.gestures.evaluation import LabelledGesture
 from cognition.gestures.features import LOG_SCALE, extract_features
-from cognition.gestures.hmm import TrainingConfig, load_models, save_models, train_models
+from cognition.gestures.hmm import load_models, save_models, train_models
 from cognition.gestures.logs import parse_frames, read_hand_log
 from core.errors import InputError
 
@@ -52,21 +53,6 @@ def _progress(console: Console) -> Progress:
     return progress_bar(console)
 
 
-def _training_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--states", type=argtypes.count(1, 100), default=6, help="HMM states per action (default 6)"
-    )
-    p.add_argument(
-        "--mix", type=argtypes.count(1, 50), default=3, help="Gaussians per state (default 3)"
-    )
-    p.add_argument(
-        "--iter",
-        type=argtypes.count(1, 100_000),
-        default=30,
-        help="EM iterations at most (default 30)",
-    )
-
-
 def _data_args(p: argparse.ArgumentParser, seed: int) -> None:
     p.add_argument(
         "--count",
@@ -74,9 +60,7 @@ def _data_args(p: argparse.ArgumentParser, seed: int) -> None:
         default=30,
         help="synthetic gestures per action (default 30)",
     )
-    p.add_argument(
-        "--seed", type=argtypes.seed, default=seed, help=f"synthetic data seed (default {seed})"
-    )
+    argtypes.add_seed(p, f"synthetic data seed (default {seed})", default=seed)
     p.add_argument(
         "--push-as",
         choices=("grasp", "tap", "touch"),
@@ -98,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     train.add_argument(
         "--out", required=True, type=argtypes.output_file, help="model file to write (.json)"
     )
-    _training_args(train)
+    add_training_options(train, mix=3, iterations=30, states="HMM states per action")
     _data_args(train, TRAIN_SEED)
 
     stream = sub.add_parser("stream", help="run the streaming recogniser over a hand log")
@@ -130,7 +114,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=Path("gesture-evaluation"),
         help="folder for the PNG plots (default ./gesture-evaluation)",
     )
-    _training_args(ev)
+    add_training_options(ev, mix=3, iterations=30, states="HMM states per action")
     _data_args(ev, EVAL_SEED)
 
 
@@ -202,15 +186,11 @@ def _gestures(args: argparse.Namespace, spec: str) -> list[LabelledGesture]:
     return out
 
 
-def _config(args: argparse.Namespace, seed: int = 0) -> TrainingConfig:
-    return TrainingConfig(n_states=args.states, n_mix=args.mix, n_iter=args.iter, seed=seed)
-
-
 def _train(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     if args.out.suffix.lower() != ".json":
         raise InputError(f"--out {args.out} must end in .json")
-    cfg = _config(args)
+    cfg = training_config(args)
     with console.status(f"loading gestures from {args.data}"):
         gestures = _gestures(args, args.data)
     data: dict[str, list[Any]] = {}
@@ -295,7 +275,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     with _progress(console) as progress:
         if args.models == "cv":
             task = progress.add_task("cross-validation folds", total=len(gestures))
-            report = cross_validate(gestures, _config(args), on_fold=lambda: progress.advance(task))
+            report = cross_validate(
+                gestures, training_config(args), on_fold=lambda: progress.advance(task)
+            )
         else:
             models = load_models(args.models)
             task = progress.add_task("recognising gestures", total=len(gestures))

@@ -29,12 +29,7 @@ HELP = "publishers, subscribers, type and traffic of a key"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", help="key, e.g. beyond/robot/sensors/skeleton")
-    parser.add_argument(
-        "--duration",
-        type=argtypes.seconds(),
-        default=2.0,
-        help="seconds to listen for traffic (default 2)",
-    )
+    argtypes.add_listen_seconds(parser, "seconds to listen for traffic (default 2)")
     parser.add_argument("--json", action="store_true", help="one JSON object")
     add_bus_arguments(parser)
 

@@ -21,6 +21,7 @@ import time
 from rich.console import Console
 
 from beyond.commands import argtypes
+from beyond.commands.hmm_options import add_training_options, training_config
 from beyond.commands.terminal import progress_bar
 from core.errors import InputError
 
@@ -53,18 +54,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--out", type=argtypes.output_dir, required=True, help="output folder")
     parser.add_argument("--json", action="store_true", help="also print results.json on stdout")
-    parser.add_argument(
-        "--demos",
-        type=argtypes.count(1, 100_000),
-        default=20,
-        help="demonstrations watched per action (default 20)",
-    )
-    parser.add_argument(
-        "--test",
-        type=argtypes.count(1, 100_000),
-        default=60,
-        help="held-out demonstrations per action (default 60)",
-    )
+    for flag, default, what in (
+        ("--demos", 20, "demonstrations watched per action"),
+        ("--test", 60, "held-out demonstrations per action"),
+    ):
+        parser.add_argument(
+            flag,
+            type=argtypes.count(1, 100_000),
+            default=default,
+            help=f"{what} (default {default})",
+        )
     parser.add_argument(
         "--sizes",
         type=_sizes,
@@ -77,31 +76,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.9,
         help="keep a demonstration when max P_BN(A | ...) is at least this (default 0.9)",
     )
-    parser.add_argument(
-        "--states", type=argtypes.count(1, 100), default=6, help="HMM states (default 6)"
-    )
-    parser.add_argument(
-        "--mix", type=argtypes.count(1, 50), default=1, help="Gaussians per state (default 1)"
-    )
-    parser.add_argument(
-        "--iter",
-        type=argtypes.count(1, 100_000),
-        default=10,
-        help="EM iterations at most (default 10)",
-    )
+    add_training_options(parser, mix=1, iterations=10)
     parser.add_argument(
         "--no-calibrate",
         action="store_true",
         help="do not calibrate the gesture evidence's temper (use kappa = 1)",
     )
-    parser.add_argument(
-        "--seed", type=argtypes.seed, default=0, help="seed of everything synthetic"
-    )
+    argtypes.add_seed(parser, "seed of everything synthetic")
 
 
 def run(args: argparse.Namespace) -> int:
-    from cognition.development import LearningConfig, plan_units, run_learning, write_outputs
-    from cognition.gestures.hmm import TrainingConfig
+    from cognition.development.learning import LearningConfig, plan_units, run_learning
+    from cognition.development.report import write_outputs
 
     if not 0.0 <= args.threshold <= 1.0:
         raise InputError(f"--threshold {args.threshold}; valid: a probability in [0, 1]")
@@ -111,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
         sizes=args.sizes,
         threshold=args.threshold,
         calibrate=not args.no_calibrate,
-        training=TrainingConfig(n_states=args.states, n_mix=args.mix, n_iter=args.iter),
+        training=training_config(args),
         seed=args.seed,
     )
     console = Console(stderr=True)

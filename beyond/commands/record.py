@@ -7,7 +7,7 @@ import asyncio
 import sys
 
 from beyond.commands import argtypes
-from beyond.commands.terminal import stop_on_signals
+from beyond.commands.terminal import run_until_stopped
 from runtime.bus import Bus
 from runtime.cliargs import add_bus_arguments, config_from_args
 from runtime.log import setup_logging
@@ -55,8 +55,7 @@ def run(args: argparse.Namespace) -> int:
     setup_logging(fmt="text")
     config = config_from_args(args)
 
-    async def go() -> int:
-        stop = stop_on_signals()
+    async def go(stop: asyncio.Event) -> str:
         with Bus.open(config) as bus:
             keys = args.keys or [bus.keys.everything]
             print(f"recording {', '.join(keys)} -> {args.output}", file=sys.stderr, flush=True)
@@ -73,11 +72,9 @@ def run(args: argparse.Namespace) -> int:
                 metadata={"robot": config.robot, "keys": " ".join(keys)},
                 foxglove_views=args.foxglove,
             )
-        print(
+        return (
             f"wrote {stats.messages} messages to {args.output} "
-            f"({stats.malformed} malformed skipped, {stats.dropped} dropped)",
-            file=sys.stderr,
+            f"({stats.malformed} malformed skipped, {stats.dropped} dropped)"
         )
-        return 0
 
-    return asyncio.run(go())
+    return run_until_stopped(go)

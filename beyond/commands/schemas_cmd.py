@@ -14,15 +14,8 @@ from pathlib import Path
 import msgspec
 
 from core.errors import InputError
+from schemas import codec
 from schemas.base import Message
-from schemas.codec import (
-    RECORDING_JSON_FORM,
-    REGISTRY,
-    json_schema,
-    recording_json_schema,
-    stamp_fields,
-    wire_encoding,
-)
 from schemas.keys import HEALTH, STREAMS
 
 HELP = "list the message types, or export their JSON Schemas and a page on the wire encoding"
@@ -44,7 +37,7 @@ def _keys_of(cls: type[Message]) -> list[str]:
 
 def _page(types: list[type[Message]]) -> str:
     rows = "\n".join(
-        f"| `{c.type_name()}` | {c.VERSION} | `{wire_encoding(c)}` | "
+        f"| `{c.type_name()}` | {c.VERSION} | `{codec.wire_encoding(c)}` | "
         f"{', '.join(f'`{k}`' for k in _keys_of(c)) or '(query/reply)'} | "
         f"`{c.schema_name()}.json` |"
         for c in types
@@ -56,7 +49,7 @@ message type, for the two encodings of the same message:
 
 - `<schema name>.json`: the message as it travels on the bus (msgpack, below);
 - `recording/<schema name>.json`: the message as stored in MCAP recordings (JSON form
-  {RECORDING_JSON_FORM}: every stamp is a Foxglove `Time` `{{"sec", "nsec"}}`, because JSON
+  {codec.RECORDING_JSON_FORM}: every stamp is a Foxglove `Time` `{{"sec", "nsec"}}`, because JSON
   readers that use doubles, JavaScript's included, would round nanoseconds since the epoch).
 
 ## The wire encoding
@@ -89,12 +82,12 @@ def export(folder: Path) -> list[Path]:
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{folder} exists and is not a folder")
     (folder / "recording").mkdir(parents=True, exist_ok=True)
-    types = [REGISTRY[name] for name in sorted(REGISTRY)]
+    types = [codec.REGISTRY[name] for name in sorted(codec.REGISTRY)]
     written = []
     for cls in types:
         for path, schema in (
-            (folder / f"{cls.schema_name()}.json", json_schema(cls)),
-            (folder / "recording" / f"{cls.schema_name()}.json", recording_json_schema(cls)),
+            (folder / f"{cls.schema_name()}.json", codec.json_schema(cls)),
+            (folder / "recording" / f"{cls.schema_name()}.json", codec.recording_json_schema(cls)),
         ):
             path.write_bytes(msgspec.json.format(msgspec.json.encode(schema), indent=2) + b"\n")
             written.append(path)
@@ -106,11 +99,12 @@ def export(folder: Path) -> list[Path]:
 
 def run(args: argparse.Namespace) -> int:
     if args.action == "list":
-        for name in sorted(REGISTRY):
-            cls = REGISTRY[name]
-            stamps = ", ".join(("header.stamp", *stamp_fields(cls)))
+        for name in sorted(codec.REGISTRY):
+            cls = codec.REGISTRY[name]
+            stamps = ", ".join(("header.stamp", *codec.stamp_fields(cls)))
             keys = ", ".join(_keys_of(cls)) or "(query/reply)"
-            print(f"{name:<22} v{cls.VERSION}  {wire_encoding(cls):<48} {keys}  [stamps: {stamps}]")
+            encoding = codec.wire_encoding(cls)
+            print(f"{name:<22} v{cls.VERSION}  {encoding:<48} {keys}  [stamps: {stamps}]")
         return 0
     written = export(Path(args.dir))
     print(f"wrote {len(written)} files to {args.dir}")

@@ -44,25 +44,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--reference-mask", metavar="MASK", help="report foreground IoU against this mask image"
     )
     parser.add_argument("--effects", action="store_true", help="MCAP: also measure the effects")
-    parser.add_argument(
-        "--learn",
-        type=argtypes.output_file,
-        metavar="OUT.json",
-        help="run the exploration phase and write the clusters",
-    )
-    parser.add_argument(
-        "--evaluate",
-        type=argtypes.output_dir,
-        metavar="OUT_DIR",
-        help="score on simulated data; confusion matrices (PNG)",
-    )
+    for flag, output, metavar, what in (  # the two modes that simulate instead of reading SOURCE
+        (
+            "--learn",
+            argtypes.output_file,
+            "OUT.json",
+            "run the exploration phase and write the clusters",
+        ),
+        (
+            "--evaluate",
+            argtypes.output_dir,
+            "OUT_DIR",
+            "score on simulated data; confusion matrices (PNG)",
+        ),
+    ):
+        parser.add_argument(flag, type=output, metavar=metavar, help=what)
     parser.add_argument(
         "--experiments", type=argtypes.count(1, 100_000), default=216, help="simulated experiments"
     )
     parser.add_argument(
         "--stills", type=argtypes.count(0, 100_000), default=60, help="--evaluate: still scenes"
     )
-    parser.add_argument("--seed", type=argtypes.seed, default=0, help="seed of the simulation")
+    argtypes.add_seed(parser, "seed of the simulation")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -68,9 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE.mcap",
         help="output file",
     )
-    parser.add_argument(
-        "--seed", type=argtypes.seed, default=0, help="seed of the simulation (default 0)"
-    )
+    argtypes.add_seed(parser, "seed of the simulation (default 0)")
     parser.add_argument(
         "--camera-fps",
         type=argtypes.number(float),

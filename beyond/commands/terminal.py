@@ -1,11 +1,14 @@
 """What the commands share for talking to a terminal: one progress bar style, and the stop event
-that SIGINT/SIGTERM set so long-running commands end cleanly instead of with a traceback."""
+that SIGINT/SIGTERM set so long-running commands end cleanly instead of with a traceback (and
+with their summary, `run_until_stopped`)."""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
 import signal
+import sys
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 from rich.console import Console
@@ -43,3 +46,14 @@ def stop_on_signals() -> asyncio.Event:
         with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
             loop.add_signal_handler(sig, stop.set)  # fails off the main thread
     return stop
+
+
+def run_until_stopped(work: Callable[[asyncio.Event], Awaitable[str]]) -> int:
+    """Run `work` with the stop event of `stop_on_signals` until it returns, then print what it
+    returns, a summary of what it did, on stderr (stdout stays for data); exit status 0."""
+
+    async def go() -> str:
+        return await work(stop_on_signals())
+
+    print(asyncio.run(go()), file=sys.stderr)
+    return 0

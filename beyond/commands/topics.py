@@ -22,9 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=argtypes.keyexpr,
         help="key expression to watch (default: beyond/<robot>/**)",
     )
-    parser.add_argument(
-        "--duration", type=argtypes.seconds(), default=2.0, help="seconds to listen"
-    )
+    argtypes.add_listen_seconds(parser, "seconds to listen")
     add_bus_arguments(parser)
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from cognition.bn.definition import NetworkDefinition
-from core.errors import InputError
+from core.errors import InputError, read_text
 
 
 @dataclass(frozen=True)
@@ -100,10 +100,5 @@ def parse_bag(text: str, definition: NetworkDefinition, source: str = "<bag>") -
 
 def load_bag(path: str | Path, definition: NetworkDefinition) -> Dataset:
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"bag-of-words table {path} does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read bag-of-words table {path}: {exc}") from None
+    text = read_text(path, "bag-of-words table")
     return parse_bag(text, definition, str(path))

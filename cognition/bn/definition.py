@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from core.errors import InputError, unknown
+from core.errors import InputError, read_text, unknown
 
 ABSENT = "-"
 
@@ -138,10 +138,5 @@ def parse_definition(text: str, source: str = "<definition>") -> NetworkDefiniti
 
 def load_definition(path: str | Path) -> NetworkDefinition:
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"network definition {path} does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read network definition {path}: {exc}") from None
+    text = read_text(path, "network definition")
     return parse_definition(text, str(path))

@@ -65,6 +65,23 @@ def _number(text: str) -> float | None:
         return None
 
 
+def _named_numbers(
+    parts: Iterable[str], sep: str, flag: str, expected: str, got: str
+) -> dict[str, float]:
+    """NAME<sep>p pairs as {NAME: p}, each name once (--soft's values, --gesture's actions); a
+    malformed pair is refused with `expected` and the whole argument, `got`."""
+    out: dict[str, float] = {}
+    for part in parts:
+        name, found, number = part.partition(sep)
+        p = _number(number)
+        if not found or not name.strip() or p is None:
+            raise InputError(f"{expected}; got {got!r}")
+        if name.strip() in out:
+            raise InputError(f"{flag} gives {name.strip()} twice")
+        out[name.strip()] = p
+    return out
+
+
 def parse_evidence(items: Iterable[str]) -> dict[str, str]:
     """`["Shape=box", ...]` → {"Shape": "box"}; names are checked by `build_evidence`."""
     out: dict[str, str] = {}
@@ -87,18 +104,13 @@ def parse_soft(items: Iterable[str]) -> dict[str, dict[str, float]]:
                 f"--soft names each value now, {SOFT_FORM} (e.g. {_SOFT_EXAMPLE}); "
                 f"the positional form VAR=p1,p2,... is gone; got {item!r}"
             )
-        dist: dict[str, float] = {}
-        for part in parts:
-            value, sep, number = part.partition(":")
-            p = _number(number)
-            if not sep or not value.strip() or p is None:
-                raise InputError(
-                    f"--soft {name}: expected comma-separated value:p pairs with p a number "
-                    f"({SOFT_FORM}); got {text!r}"
-                )
-            if value.strip() in dist:
-                raise InputError(f"--soft {name} gives {value.strip()} twice")
-            dist[value.strip()] = p
+        dist = _named_numbers(
+            parts,
+            ":",
+            f"--soft {name}",
+            f"--soft {name}: expected comma-separated value:p pairs with p a number ({SOFT_FORM})",
+            text,
+        )
         if name in out:
             raise InputError(f"--soft gives {name} twice")
         out[name] = dist
@@ -119,19 +131,13 @@ def parse_gesture(items: Sequence[str]) -> dict[str, float]:
             "(bn query|words, describe); "
             f"got {' '.join(items)!r}"
         )
-    out: dict[str, float] = {}
-    for part in items[0].split(","):
-        action, sep, number = part.partition("=")
-        p = _number(number)
-        if not sep or not action.strip() or p is None:
-            raise InputError(
-                f"--gesture expects comma-separated ACTION=p pairs with p a number "
-                f"({GESTURE_FORM}); got {items[0]!r}"
-            )
-        if action.strip() in out:
-            raise InputError(f"--gesture gives {action.strip()} twice")
-        out[action.strip()] = p
-    return out
+    return _named_numbers(
+        items[0].split(","),
+        "=",
+        "--gesture",
+        f"--gesture expects comma-separated ACTION=p pairs with p a number ({GESTURE_FORM})",
+        items[0],
+    )
 
 
 def _soft_vector(model: BayesNet, name: str, dist: Mapping[str, float]) -> list[float]:

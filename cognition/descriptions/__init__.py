@@ -4,7 +4,7 @@ What other modules call (word_probs = {word: P(word present | evidence)} for eve
 
     nbest_exact(word_probs, n=10, *, legacy_offset=False, require=None, grammar=DEFAULT_GRAMMAR)
         -> list[ScoredSentence]        # exact N-best over all ~9.3M sentences, ~0.15 ms
-    nbest_from_file(path, word_probs, n=10, *, legacy_offset, require, grammar)
+    nbest_from_file(path, word_probs, n=10, **ranking)   # Ranking: legacy_offset, require, grammar
     nbest_from_sentences(lines, word_probs, n=10, *, legacy_offset, require, grammar, source)
     nbest_sampled(word_probs, samples, seed, n=10, *, legacy_offset, require, grammar)
     sample_sentences(count, seed, *, grammar) -> list[str]      # like HTK's HSGen -n count
@@ -35,6 +35,7 @@ from cognition.descriptions.sampling import (
 )
 from cognition.descriptions.search import (
     NBEST_MAX,
+    Ranking,
     brute_force_nbest,
     brute_force_nbest_plain,
     brute_force_scores,
@@ -49,6 +50,7 @@ from cognition.descriptions.space import ScoredSentence, SentenceSpace, score_se
 __all__ = [
     "NBEST_MAX",
     "SAMPLES_MAX",
+    "Ranking",
     "ScoredSentence",
     "SentenceSpace",
     "brute_force_nbest",

@@ -27,6 +27,7 @@ import math
 import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import TypedDict, Unpack
 
 import numpy as np
 
@@ -38,9 +39,18 @@ from cognition.descriptions.space import (
     final_scores,
 )
 from cognition.grammar import DEFAULT_GRAMMAR, Grammar
-from core.errors import InputError
+from core.errors import InputError, read_text
 
 Require = re.Pattern[str] | str | None
+
+
+class Ranking(TypedDict, total=False):
+    """The keyword options of the N-best searches, for a caller that passes them on as they are."""
+
+    legacy_offset: bool
+    require: Require
+    grammar: Grammar
+
 
 # A list longer than this is no description any more, and its work and memory grow with n
 # (n = 10**12 reached 5 GB before failing): refused with the limit in the message.
@@ -305,33 +315,14 @@ def nbest_from_sentences(
 
 
 def nbest_from_file(
-    path: str | Path,
-    word_probs: Mapping[str, float],
-    n: int = 10,
-    *,
-    legacy_offset: bool = False,
-    require: Require = None,
-    grammar: Grammar = DEFAULT_GRAMMAR,
+    path: str | Path, word_probs: Mapping[str, float], n: int = 10, **ranking: Unpack[Ranking]
 ) -> list[ScoredSentence]:
     """`nbest_from_sentences` over a file of sentences, one per line (HSGen's output format)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"sentence file {path} does not exist; give a file of sentences") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read sentence file {path}: {exc}") from None
+    text = read_text(path, "sentence file", missing="; give a file of sentences")
     if not text.strip():
         raise InputError(f"sentence file {path} is empty; valid: one sentence per line")
-    return nbest_from_sentences(
-        text.splitlines(),
-        word_probs,
-        n,
-        legacy_offset=legacy_offset,
-        require=require,
-        grammar=grammar,
-        source=str(path),
-    )
+    return nbest_from_sentences(text.splitlines(), word_probs, n, source=str(path), **ranking)
 
 
 def nbest_sampled(

@@ -220,22 +220,33 @@ def effect_model(config: ObservationConfig, robot_data: Dataset | None = None) -
     return RecordedEffects(robot_data, config.p_misperceived)
 
 
-def _scene(
+def _demonstration(
     action: str,
+    features: FloatArray,
+    source: str,
     rng: np.random.Generator,
     config: ObservationConfig,
     narrator: Narrator,
     effects_model: EffectModel,
-) -> tuple[dict[str, str], dict[str, str], dict[str, str], tuple[str, ...] | None]:
+) -> Demonstration:
+    """A demonstration of `action` with these gesture features, in a simulated scene: the
+    object, the effects the robot perceives (some missed) and, sometimes, the words heard."""
     objects = {name: _pick(rng, AFFORDANCE_VARIABLES[name]) for name in OBJECT_FEATURES}
     truth, measured = effects_model.draw(action, objects, rng)
     seen = rng.random(len(EFFECTS)) >= config.p_effect_missed
-    effects = {e: measured[e] for e, s in zip(EFFECTS, seen, strict=True) if s}
     words: tuple[str, ...] | None = None
     if rng.random() < config.p_words:
         values = {"Action": action, **objects, **truth}
         words = tuple(narrator.describe(values, rng))
-    return objects, effects, truth, words
+    return Demonstration(
+        action=action,
+        objects=objects,
+        effects={e: measured[e] for e, s in zip(EFFECTS, seen, strict=True) if s},
+        true_effects=truth,
+        words=words,
+        features=features,
+        source=source,
+    )
 
 
 def _rng(seed: int, action: str, i: int) -> np.random.Generator:
@@ -266,19 +277,9 @@ def synthesize_demonstrations(
         for a in actions:
             rng = _rng(seed, a, i)
             gesture_seed = int(rng.integers(2**31 - 1))
-            objects, seen, truth, words = _scene(a, rng, cfg, narrator, world)
             features = synthesize_gesture(a, gesture_seed, cfg.gestures).gesture_features()
-            out.append(
-                Demonstration(
-                    action=a,
-                    objects=objects,
-                    effects=seen,
-                    true_effects=truth,
-                    words=words,
-                    features=features,
-                    source=f"synthetic seed {seed} {a} #{i}",
-                )
-            )
+            source = f"synthetic seed {seed} {a} #{i}"
+            out.append(_demonstration(a, features, source, rng, cfg, narrator, world))
     return out
 
 
@@ -305,19 +306,9 @@ def demonstrations_from_gestures(
             raise unknown("action of a recorded gesture", g.action, ACTIONS)
         i = counts.get(g.action, 0)
         counts[g.action] = i + 1
+        features = np.asarray(g.features, dtype=np.float64)
         rng = _rng(seed, g.action, i)
-        objects, seen, truth, words = _scene(g.action, rng, cfg, narrator, world)
-        out.append(
-            Demonstration(
-                action=g.action,
-                objects=objects,
-                effects=seen,
-                true_effects=truth,
-                words=words,
-                features=np.asarray(g.features, dtype=np.float64),
-                source=g.source,
-            )
-        )
+        out.append(_demonstration(g.action, features, g.source, rng, cfg, narrator, world))
     return out
 
 

@@ -98,22 +98,18 @@ def plot_curves(results: LearningResults, path: Path) -> Path:
                 label=f"{SOURCE_NAMES[source].split(',')[0]}"
                 + ("" if source in ("hmm_true", "fused_untempered") else f", {tag}"),
             )
-        right.plot(
-            ns,
-            [100 * c.labelling["accuracy"] for c in conds],
-            style,
-            marker="o",
-            color="k",
-            label=f"all watched, {tag}",
-        )
-        right.plot(
-            ns,
-            [100 * c.labelling["kept_accuracy"] for c in conds],
-            style,
-            marker="s",
-            color="tab:purple",
-            label=f"kept (P ≥ {results.config.threshold:g}), {tag}",
-        )
+        for measure, marker, colour, what in (
+            ("accuracy", "o", "k", "all watched"),
+            ("kept_accuracy", "s", "tab:purple", f"kept (P ≥ {results.config.threshold:g})"),
+        ):
+            right.plot(
+                ns,
+                [100 * c.labelling[measure] for c in conds],
+                style,
+                marker=marker,
+                color=colour,
+                label=f"{what}, {tag}",
+            )
     for ax in (left, right):
         ax.set_xscale("log")
         ns_all = sorted({c.n_per_action for c in results.ablation})
