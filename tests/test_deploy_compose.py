@@ -491,7 +491,7 @@ def test_the_checker_reports_each_kind_of_problem(change: Any, expected: str | N
 
 def test_the_checker_reads_the_files_on_disk(tmp_path: Path) -> None:
     """A copy of the tree with one config and one recording removed: both are reported."""
-    for name in ("beyond", "cognition", "runtime", "schemas", "services", "recordings"):
+    for name in ("beyond", "core", "cognition", "runtime", "schemas", "services", "recordings"):
         (tmp_path / name).symlink_to(REPO / name)
     for name in ("pyproject.toml", "README.md", "Dockerfile", ".dockerignore"):
         shutil.copy(REPO / name, tmp_path / name)

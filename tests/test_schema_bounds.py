@@ -10,7 +10,7 @@ import pytest
 from busutil_net import skeleton_frames
 
 import schemas as s
-from runtime.service import REASON_MAX, Service
+from runtime.accounting import REASON_MAX, ErrorAccount
 from schemas.messages import IMAGE_BYTES_MAX, JOINTS_MAX, NAME_MAX, OBJECTS_MAX
 
 HEADER = s.Header(version=1, source="test", seq=0, stamp=1_700_000_000_000_000_000)
@@ -132,17 +132,14 @@ def test_a_huge_malformed_payload_is_logged_on_one_short_line(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
     """A 5,000-joint frame's error lists its joints (about 95 kB): the log line stays bounded."""
-    service = Service.__new__(Service)  # only the malformed bookkeeping, no bus
-    service.last_error = ""
-    service._seen_reasons = set()
-    service.log = logging.getLogger("beyond.test")
+    account = ErrorAccount(logging.getLogger("beyond.test"), "test")  # a service's bookkeeping
     names = {f"joint_with_a_long_name_{i}": joint for i in range(5000)}
     error = s.SchemaError(f"bad frame: unknown joints {sorted(names)}")
     assert len(str(error)) > 100_000
     with caplog.at_level(logging.WARNING, "beyond.test"):
-        service._malformed("k" * 10_000, error)
+        account.malformed("k" * 10_000, error)
     (record,) = caplog.records
     assert len(record.fields["reason"]) <= REASON_MAX
     assert len(record.fields["key"]) <= 200
     assert "characters)" in record.fields["reason"]  # says it was cut, and how long it was
-    assert len(service.last_error) <= REASON_MAX
+    assert len(account.last_error) <= REASON_MAX
