@@ -31,6 +31,7 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -41,6 +42,8 @@ import schemas as s  # noqa: E402
 from cognition.gestures import GestureSegmenter, synthesize_continuous  # noqa: E402
 from runtime.bus import Bus  # noqa: E402
 from runtime.config import BusConfig  # noqa: E402
+from runtime.publisher import Publisher  # noqa: E402
+from runtime.subscription import Subscription  # noqa: E402
 from services.deployment import Deployment  # noqa: E402
 
 GESTURES = int(os.environ.get("BENCH_GESTURES", "100"))
@@ -121,12 +124,8 @@ async def pipeline_latency(config: BusConfig) -> tuple[list[float], float, float
     frames, triggers = stream_frames(seed=7)
     latencies: list[float] = []
     try:
-        bus = await pipeline.open()
-        await pipeline.start()
-        out = bus.subscribe(bus.keys.description, s.Description)
+        bus, out, (pub,) = await _feeding(pipeline, (SKELETON, s.SkeletonFrame))
         predictions = bus.subscribe(bus.keys.affordance, s.AffordancePrediction)
-        pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
-        await pub.wait_matching(timeout=30)
         trig = set(triggers)
         for i, frame in enumerate(frames):
             if i in trig:
@@ -158,6 +157,25 @@ async def pipeline_latency(config: BusConfig) -> tuple[list[float], float, float
     finally:
         await pipeline.stop()
     return latencies, len(frames) / wall, len(frames) / 30.0
+
+
+SKELETON, CAMERA = "skeleton", "camera_compressed"  # streams of schemas.keys.STREAMS
+
+
+async def _feeding(
+    pipeline: Deployment, *inputs: tuple[str, type[s.Message]]
+) -> tuple[Bus, Subscription[s.Description], list[Publisher[Any]]]:
+    """Start `pipeline`; its descriptions, and a publisher on each input stream, matched by the
+    services that take it (what is sent from then on is received)."""
+    bus = await pipeline.open()
+    await pipeline.start()
+    out = bus.subscribe(bus.keys.description, s.Description)
+    publishers: list[Publisher[Any]] = [
+        bus.publisher(bus.keys.stream(stream), cls) for stream, cls in inputs
+    ]
+    for pub in publishers:
+        await pub.wait_matching(timeout=30)
+    return bus, out, publishers
 
 
 async def _consumed(bus: Bus, health_key: str) -> int:
@@ -205,13 +223,9 @@ async def vision_latency(config: BusConfig, repeats: int) -> tuple[list[float], 
     sent_at: list[float] = []
     arrived: dict[int, float] = {}
     try:
-        bus = await pipeline.open()
-        await pipeline.start()
-        out = bus.subscribe(bus.keys.description, s.Description)
-        skeleton = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
-        camera = bus.publisher(bus.keys.camera_compressed, s.CompressedCameraFrame)
-        await skeleton.wait_matching(timeout=30)
-        await camera.wait_matching(timeout=30)
+        _, out, (skeleton, camera) = await _feeding(
+            pipeline, (SKELETON, s.SkeletonFrame), (CAMERA, s.CompressedCameraFrame)
+        )
 
         async def receive() -> None:
             while len(arrived) < len(needs):

@@ -44,6 +44,9 @@ M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
 
 
+_STOP_COUNTS = ("messages_in", "messages_out", "malformed", "dropped", "errors")  # logged at stop
+
+
 class Service:
     """Subclass, set `name` (or pass it), override `setup()`."""
 
@@ -361,20 +364,10 @@ class Service:
         except Exception as exc:
             self.report_error("teardown", exc)
         health = self.health_report()
+        counts = {f: getattr(health, f) for f in _STOP_COUNTS}
         recovered, missed = self.recovery()
-        event(
-            self.log,
-            logging.INFO,
-            "stopped",
-            service=self.name,
-            messages_in=health.messages_in,
-            messages_out=health.messages_out,
-            malformed=health.malformed,
-            dropped=health.dropped,
-            errors=health.errors,
-            recovered=recovered,
-            missed=missed,
-        )
+        stopped = {"service": self.name, **counts, "recovered": recovered, "missed": missed}
+        event(self.log, logging.INFO, "stopped", **stopped)
         if self._owns_bus and self._bus is not None:
             self._bus.close()
             self._bus = None
