@@ -10,9 +10,9 @@ and what the tests and benchmarks that run several services launch, so a pipelin
 Order: a secure side's own router first (its clients wait for it), then this process's session,
 then the services in the order given (the source, `ingest`, last). The watcher's liveliness
 token is declared as the first service is launched, after whatever the caller subscribed between
-`open` and `start`: the source waits for it, so nothing it publishes is missed. The source waits
-itself for every local consumer (its `wait_for`) before it publishes, so the deployment awaits
-liveliness once, for all its processes together, only to know when it is up.
+`open` and `start`: the source waits for it, so nothing it publishes is missed. The source is
+started once the others are alive (why: `start`), and waits itself for every consumer (its
+`wait_for`, remote ones included) before it publishes.
 
 It lives in `services/` beside the launcher and the registry it builds on: it runs services and
 prints nothing (what to show is the caller's: `beyond up`'s terminal views are in `beyond/`).
@@ -139,11 +139,17 @@ class Deployment:
     async def start(self) -> None:
         """Start every service, the source last, and return once each is alive on the bus (its
         health then answers) or has exited (`wait` reports it); TimeoutError if one is
-        neither after ALIVE_TIMEOUT_S."""
+        neither after ALIVE_TIMEOUT_S.
+
+        The source starts only once the others are alive, each awaited once: its session then
+        meets theirs already meshed, and Zenoh routes what it publishes to them directly. Started
+        together, a robot's source sometimes learnt its consumers through the workstation's
+        router first and kept sending them its frames by that detour: a cut link then stalled the
+        robot's own pipeline until Zenoh gave the link up (tests/test_deploy_netns.py)."""
         bus = await self.open()
-        for name in sorted(self.services, key=lambda n: n == SOURCE):
-            await self.launch(name)
-        await asyncio.gather(*(_alive_or_exited(bus, sp, ALIVE_TIMEOUT_S) for sp in self.processes))
+        for group in ([n for n in self.services if n != SOURCE], [SOURCE]):
+            launched = [await self.launch(name) for name in group if name in self.services]
+            await asyncio.gather(*(_alive_or_exited(bus, sp, ALIVE_TIMEOUT_S) for sp in launched))
         if self.on_stuck is not None:
             self.health_watch = HealthWatch(bus, self.processes, self.on_stuck)
             self.health_watch.start()
