@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 from core.errors import InputError, unknown
+from runtime import process
 from runtime.config import BusConfig
 from services.launcher import (
     HealthWatch,
@@ -114,6 +115,7 @@ class Deployment:
         self._stopping = asyncio.Event()
         self._token: Callable[[], None] | None = None
         self._closers: list[Callable[[], Awaitable[object]]] = []
+        self._signals: list[signal.Signals] = []
 
     # -- starting --------------------------------------------------------------------------
 
@@ -123,7 +125,8 @@ class Deployment:
         if self.bus is not None:
             return self.bus
         if self.stop_on_signals:
-            _handle_signals(self._stopping.set)
+            # services run in their own sessions, so Ctrl-C reaches only us: we stop them in order
+            self._signals = process.install_signals(self._stopping.set)
         if self.router_command is not None:
             command, env = self.router_command, self._router_env()
             self.router = await start_service("router", env, command=command, sink=self.log)
@@ -230,8 +233,10 @@ class Deployment:
             if self.bus is not None:
                 self.bus.close()
                 self.bus = None
-            if self.stop_on_signals:
-                _handle_signals(None)
+            loop = asyncio.get_running_loop()
+            for sig in self._signals:
+                loop.remove_signal_handler(sig)
+            self._signals = []
         return self.codes
 
     def unclean(self) -> dict[str, int]:
@@ -258,18 +263,6 @@ def _checked_options(
     for name in names:
         check_options(name, service_class(name), checked[name])
     return checked
-
-
-def _handle_signals(handler: Callable[[], None] | None) -> None:
-    """SIGINT and SIGTERM call `handler` (None: their default again). Services run in their own
-    sessions, so Ctrl-C reaches only us, and we stop them in order."""
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        with contextlib.suppress(NotImplementedError, RuntimeError):
-            if handler is None:
-                loop.remove_signal_handler(sig)
-            else:
-                loop.add_signal_handler(sig, handler)
 
 
 async def _alive_or_exited(bus: Bus, sp: ServiceProcess, timeout: float) -> None:
