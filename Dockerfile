@@ -41,7 +41,7 @@ WORKDIR /opt/beyond-self
 COPY pyproject.toml ./
 RUN if [ -n "$CA_BUNDLE" ]; then export PIP_CERT="$CA_BUNDLE"; fi \
     && python -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" > /tmp/requirements.txt \
-    && python -m pip install --no-cache-dir -r /tmp/requirements.txt "setuptools>=68" wheel \
+    && python -m pip install --no-cache-dir -r /tmp/requirements.txt "setuptools>=77" wheel \
     && rm /tmp/requirements.txt \
     && find "$(python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" \
         -mindepth 2 -type d -name tests -prune -exec rm -rf {} +
@@ -51,7 +51,7 @@ RUN if [ -n "$CA_BUNDLE" ]; then export PIP_CERT="$CA_BUNDLE"; fi \
 COPY . ./
 COPY deploy /etc/beyond
 RUN python -m pip install --no-cache-dir --no-deps --no-build-isolation . \
-    && python -c "import zenoh.ext, beyond.cli, services.registry" \
+    && python -c "import zenoh.ext, beyond_self.cli, beyond_self.services.registry" \
     && rm -rf build *.egg-info
 
 USER beyond

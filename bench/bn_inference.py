@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from cognition.bn import learn_network, load_bag, load_definition, synthetic_dataset
-from cognition.bn.bag import Dataset
-from cognition.bn.structure import k2_search
-from cognition.paths import shared_data_dir
+from beyond_self.cognition.bn import learn_network, load_bag, load_definition, synthetic_dataset
+from beyond_self.cognition.bn.bag import Dataset
+from beyond_self.cognition.bn.structure import k2_search
+from beyond_self.cognition.paths import shared_data_dir
 
 
 def median_time(fn: Callable[[], Any], repeats: int) -> float:
@@ -51,7 +51,7 @@ def main() -> None:
     warnings.simplefilter("ignore", FutureWarning)
     from pgmpy.inference import VariableElimination
 
-    from cognition.bn.pgmpy_bridge import reference_query
+    from beyond_self.cognition.bn.pgmpy_bridge import reference_query
 
     dataset, name = load()
     model = learn_network(dataset)

@@ -73,10 +73,11 @@ import msgspec  # noqa: E402
 import numpy as np  # noqa: E402
 import zenoh  # noqa: E402
 
-import schemas as s  # noqa: E402
-from runtime.bus import Bus  # noqa: E402
-from runtime.config import BusConfig, load_config, zenoh_config  # noqa: E402
-from runtime.delivery import Delivery  # noqa: E402
+import beyond_self.schemas as s  # noqa: E402
+from beyond_self.runtime.bus import Bus  # noqa: E402
+from beyond_self.runtime.config import BusConfig, load_config, zenoh_config  # noqa: E402
+from beyond_self.runtime.delivery import Delivery  # noqa: E402
+from beyond_self.services.launcher import BEYOND  # noqa: E402
 
 KINDS = {
     # kind: (latency messages, pacing Hz, throughput messages)
@@ -350,7 +351,7 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
         return statistics.median(lat) / 1e3
 
     async def to_loop(wakeup_fd: bool) -> float:
-        from runtime.inbox import Inbox
+        from beyond_self.runtime.inbox import Inbox
 
         inbox: Inbox[int] = Inbox(asyncio.get_running_loop(), 16, wakeup_fd=wakeup_fd)
         lat: list[int] = []
@@ -377,7 +378,7 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
 
 
 def write_recording(path: Path, keys: s.Keys) -> None:
-    from runtime.recording_writer import RecordingWriter
+    from beyond_self.runtime.recording_writer import RecordingWriter
 
     start = 1_700_000_000_000_000_000
     with RecordingWriter(path) as writer:
@@ -389,8 +390,8 @@ def write_recording(path: Path, keys: s.Keys) -> None:
 
 
 def replay_once(path: Path, topics: list[str] | None, reference: bool) -> dict[str, float]:
-    from runtime.recording import read_recording
-    from runtime.replay import replay
+    from beyond_self.runtime.recording import read_recording
+    from beyond_self.runtime.replay import replay
 
     items = list(read_recording(path, topics=topics))
     span = (items[-1].publish_time - items[0].publish_time) / 1e9
@@ -466,7 +467,7 @@ def start_router(path: str, port: int, keys_dir: Path) -> subprocess.Popen[str] 
     listen = f"{'tls' if path == 'secure' else 'tcp'}/127.0.0.1:{port}"
     secure = ["--secure", str(keys_dir)] if path == "secure" else []
     return subprocess.Popen(
-        [sys.executable, "-m", "beyond", "router", "--listen", listen, *secure],
+        [*BEYOND, "router", "--listen", listen, *secure],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         text=True,
@@ -474,7 +475,7 @@ def start_router(path: str, port: int, keys_dir: Path) -> subprocess.Popen[str] 
 
 
 def run_path(path: str, kind: str, keys_dir: Path) -> dict[str, float]:
-    from services.launcher import service_env
+    from beyond_self.services.launcher import service_env
 
     n_lat, hz, n_thr = KINDS[kind]
     port = free_port()
@@ -540,8 +541,8 @@ def run_path(path: str, kind: str, keys_dir: Path) -> dict[str, float]:
 
 def secure_path() -> dict[str, float]:
     """Plain, router and secure paths, interleaved REPEATS times, medians and ratios."""
-    from runtime import keystore
-    from services import registry
+    from beyond_self.runtime import keystore
+    from beyond_self.services import registry
 
     figures: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp:

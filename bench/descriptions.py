@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from cognition.descriptions import (
+from beyond_self.cognition.descriptions import (
     SentenceSpace,
     brute_force_nbest,
     brute_force_nbest_plain,
@@ -32,8 +32,8 @@ from cognition.descriptions import (
     nbest_from_file,
     nbest_sampled,
 )
-from cognition.grammar import DEFAULT_GRAMMAR
-from cognition.paths import shared_data_dir
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
+from beyond_self.cognition.paths import shared_data_dir
 
 SEED = 2019
 N = 10

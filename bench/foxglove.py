@@ -50,12 +50,13 @@ import msgspec  # noqa: E402
 from websockets.asyncio.client import connect  # noqa: E402
 from websockets.exceptions import ConnectionClosed  # noqa: E402
 
-import schemas as s  # noqa: E402
+import beyond_self.schemas as s  # noqa: E402
 from bench.bus import free_port, quantile  # noqa: E402
-from runtime.bus import Bus  # noqa: E402
-from runtime.config import BusConfig  # noqa: E402
-from runtime.delivery import Delivery  # noqa: E402
-from runtime.recording import inspect_recording, read_recording  # noqa: E402
+from beyond_self.runtime.bus import Bus  # noqa: E402
+from beyond_self.runtime.config import BusConfig  # noqa: E402
+from beyond_self.runtime.delivery import Delivery  # noqa: E402
+from beyond_self.runtime.recording import inspect_recording, read_recording  # noqa: E402
+from beyond_self.services.launcher import BEYOND  # noqa: E402
 
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
 SPEED = 4.0
@@ -238,7 +239,7 @@ async def run_once(with_bridge: bool) -> dict[str, float]:
         if with_bridge:
             ws_port = free_port()
             bridge = subprocess.Popen(
-                [sys.executable, "-m", "beyond", "foxglove", "--port", str(ws_port)],
+                [*BEYOND, "foxglove", "--port", str(ws_port)],
                 env=env(config),
                 stderr=subprocess.DEVNULL,
             )
@@ -310,7 +311,14 @@ async def pipeline_once(with_bridge: bool) -> dict[str, float]:
     config = BusConfig(robot=f"fp{os.getpid()}{int(with_bridge)}{time.time_ns() % 10**6}")
     config = config.with_(port=free_port())
     ws_port = free_port()
-    cmd = [sys.executable, "-m", "beyond", "up", "--recording", str(DEMO), "--rate", str(SPEED)]
+    cmd = [
+        *BEYOND,
+        "up",
+        "--recording",
+        str(DEMO),
+        "--rate",
+        str(SPEED),
+    ]
     cmd += ["--no-live", "--wait-for", "benchclient", "--timeout", "120"]
     if with_bridge:
         cmd += ["--foxglove", str(ws_port)]

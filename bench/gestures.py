@@ -20,7 +20,7 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
-from cognition.gestures import (
+from beyond_self.cognition.gestures import (
     BatchRecognizer,
     GestureModels,
     StreamingRecognizer,
@@ -33,7 +33,7 @@ from cognition.gestures import (
     synthesize_gesture,
     train_models,
 )
-from cognition.paths import shared_data_dir
+from beyond_self.cognition.paths import shared_data_dir
 
 FPS = 30.0
 

@@ -38,13 +38,13 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-import schemas as s  # noqa: E402
-from cognition.gestures import GestureSegmenter, synthesize_continuous  # noqa: E402
-from runtime.bus import Bus  # noqa: E402
-from runtime.config import BusConfig  # noqa: E402
-from runtime.publisher import Publisher  # noqa: E402
-from runtime.subscription import Subscription  # noqa: E402
-from services.deployment import Deployment  # noqa: E402
+import beyond_self.schemas as s  # noqa: E402
+from beyond_self.cognition.gestures import GestureSegmenter, synthesize_continuous  # noqa: E402
+from beyond_self.runtime.bus import Bus  # noqa: E402
+from beyond_self.runtime.config import BusConfig  # noqa: E402
+from beyond_self.runtime.publisher import Publisher  # noqa: E402
+from beyond_self.runtime.subscription import Subscription  # noqa: E402
+from beyond_self.services.deployment import Deployment  # noqa: E402
 
 GESTURES = int(os.environ.get("BENCH_GESTURES", "100"))
 PORT = 17800 + os.getpid() % 1000
@@ -73,13 +73,13 @@ def raw_hop_us(config: BusConfig, n: int = 2000) -> float:
     """Median one-way latency of raw zenoh-python (ping-pong with a child process)."""
     import zenoh
 
-    from runtime.config import zenoh_config
+    from beyond_self.runtime.config import zenoh_config
 
     child = subprocess.Popen(
         [sys.executable, "-c", textwrap.dedent(f"""
             import sys, time, zenoh
             sys.path.insert(0, {str(REPO)!r})
-            from runtime.config import BusConfig, zenoh_config
+            from beyond_self.runtime.config import BusConfig, zenoh_config
             s = zenoh.open(zenoh_config(BusConfig(robot={config.robot!r}, port={config.port})))
             pub = s.declare_publisher("bench/pong")
             sub = s.declare_subscriber("bench/ping", lambda x: pub.put(x.payload))
@@ -199,11 +199,11 @@ async def vision_latency(config: BusConfig, repeats: int) -> tuple[list[float], 
     effects are measured over the gesture's own frames, known complete only then)."""
     import tempfile
 
-    from beyond.cli import main as beyond
-    from cognition.episodes import Ended, GestureTracker
-    from cognition.gestures import extract_features
-    from cognition.gestures.default_models import default_models
-    from runtime.recording import read_recording
+    from beyond_self.cli import main as beyond
+    from beyond_self.cognition.episodes import Ended, GestureTracker
+    from beyond_self.cognition.gestures import extract_features
+    from beyond_self.cognition.gestures.default_models import default_models
+    from beyond_self.runtime.recording import read_recording
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "scene.mcap"
@@ -265,9 +265,9 @@ async def vision_latency(config: BusConfig, repeats: int) -> tuple[list[float], 
 
 def vision_analysis_ms() -> float:
     """Median time the object segmenter spends analysing one gesture's camera frames."""
-    from cognition.vision.clusters import ClusterModel
-    from cognition.vision.pipeline import analyse_frames
-    from cognition.vision.tabletop import simulate_experiment
+    from beyond_self.cognition.vision.clusters import ClusterModel
+    from beyond_self.cognition.vision.pipeline import analyse_frames
+    from beyond_self.cognition.vision.tabletop import simulate_experiment
 
     clusters = ClusterModel.load()
     rng = np.random.default_rng(0)

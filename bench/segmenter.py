@@ -31,11 +31,11 @@ from collections.abc import Callable  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import ndimage  # noqa: E402
 
-from cognition.vision.background import BackgroundModel  # noqa: E402
-from cognition.vision.color import rgb_to_lab  # noqa: E402
-from cognition.vision.features import measure  # noqa: E402
-from cognition.vision.segmentation import segment  # noqa: E402
-from cognition.vision.tabletop import Camera, simulate_experiment  # noqa: E402
+from beyond_self.cognition.vision.background import BackgroundModel  # noqa: E402
+from beyond_self.cognition.vision.color import rgb_to_lab  # noqa: E402
+from beyond_self.cognition.vision.features import measure  # noqa: E402
+from beyond_self.cognition.vision.segmentation import segment  # noqa: E402
+from beyond_self.cognition.vision.tabletop import Camera, simulate_experiment  # noqa: E402
 
 SECONDS = 2.0  # per measurement
 

@@ -20,9 +20,9 @@ from typing import Literal, cast
 
 import numpy as np
 
-from cognition.bn.inference import Posterior
-from cognition.bn.model import BayesNet
-from core.errors import InputError, unknown
+from beyond_self.cognition.bn.inference import Posterior
+from beyond_self.cognition.bn.model import BayesNet
+from beyond_self.core.errors import InputError, unknown
 
 ACTION = "Action"
 Method = Literal["soft", "formula"]

@@ -17,7 +17,7 @@ import re
 from dataclasses import dataclass, field
 from functools import cached_property
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 _VERBS = {  # stem: (third person, past, -ing)
     "touch": ("touches", "touched", "touching"),

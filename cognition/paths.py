@@ -2,6 +2,10 @@
 
 The article's data is never copied into the repository (licence and size); it is read from
 `../shared/data` beside the checkout, or from the folder named by $BEYOND_DATA.
+
+Bundled resources (the recordings the main job replays) sit beside the layers: in a checkout at
+its root, in an installed wheel inside the `beyond_self` package. `ROOT` is that folder in both
+cases (the links in `beyond_self/` resolve to the checkout), so no code asks which it is.
 """
 
 from __future__ import annotations
@@ -9,9 +13,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parent.parent
+RECORDINGS = ROOT / "recordings"
+DEMO_RECORDING = RECORDINGS / "tap-ball-grasp-box.mcap"
 SOURCES = (
     "giampierosalvi/AffordancesAndSpeech (folder bayesian_net/) and "
     "gsaponaro/tcds-gestures (folders src/matlab/ and app/dumps/) on GitHub"
@@ -22,7 +28,7 @@ def shared_data_dir() -> Path | None:
     """The article's data folder if present: $BEYOND_DATA, else ../shared/data beside the repo."""
     env = os.environ.get("BEYOND_DATA")
     candidates = [Path(env)] if env else []
-    candidates.append(REPO_ROOT.parent / "shared" / "data")
+    candidates.append(ROOT.parent / "shared" / "data")
     for path in candidates:
         if (path / "salvi2012").is_dir() or (path / "saponaro2019").is_dir():
             return path
@@ -35,7 +41,7 @@ def require_shared_data(relative: str = "") -> Path:
     if root is None:
         raise InputError(
             "the article's data folder was not found (looked in $BEYOND_DATA and "
-            f"{REPO_ROOT.parent / 'shared' / 'data'}); get it from {SOURCES}"
+            f"{ROOT.parent / 'shared' / 'data'}); get it from {SOURCES}"
         )
     path = root / relative
     if not path.exists():

@@ -15,15 +15,20 @@ from typing import Any
 
 import numpy as np
 
-from cognition.bn.bag import load_bag
-from cognition.bn.definition import load_definition
-from cognition.bn.model import BayesNet, learn_network
-from cognition.descriptions import ScoredSentence, nbest_exact, nbest_from_file, plot_nbest
-from cognition.fusion import ACTION, fuse, fuse_words
-from cognition.gestures.hmm import GestureModels, load_models
-from cognition.gestures.log_evidence import recognize_log
-from cognition.paths import SOURCES
-from core.errors import InputError
+from beyond_self.cognition.bn.bag import load_bag
+from beyond_self.cognition.bn.definition import load_definition
+from beyond_self.cognition.bn.model import BayesNet, learn_network
+from beyond_self.cognition.descriptions import (
+    ScoredSentence,
+    nbest_exact,
+    nbest_from_file,
+    plot_nbest,
+)
+from beyond_self.cognition.fusion import ACTION, fuse, fuse_words
+from beyond_self.cognition.gestures.hmm import GestureModels, load_models
+from beyond_self.cognition.gestures.log_evidence import recognize_log
+from beyond_self.cognition.paths import SOURCES
+from beyond_self.core.errors import InputError
 
 EXP1_OBSERVED = {"Size": "small", "Shape": "circle", "ObjVel": "slow"}
 EXP2_MIXES = ((1.0, 0.0), (0.75, 0.25), (0.5, 0.5), (0.25, 0.75), (0.0, 1.0))  # touch : tap

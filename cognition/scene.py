@@ -43,9 +43,13 @@ from typing import cast
 
 import numpy as np
 
-from cognition.gestures.synthetic import GestureBounds, SkeletonStream, synthesize_continuous
-from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
-from cognition.vision.tabletop import (
+from beyond_self.cognition.gestures.synthetic import (
+    GestureBounds,
+    SkeletonStream,
+    synthesize_continuous,
+)
+from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+from beyond_self.cognition.vision.tabletop import (
     SKIN_RGB,
     Camera,
     Experiment,
@@ -54,7 +58,7 @@ from cognition.vision.tabletop import (
     render_frame,
     simulate_experiment,
 )
-from core.errors import InputError, unknown
+from beyond_self.core.errors import InputError, unknown
 
 # Every recording starts at this instant (2019-01-01T00:00:00Z), so files are deterministic.
 EPOCH_NS = 1_546_300_800 * 1_000_000_000
@@ -387,7 +391,7 @@ def _blocks(
 def _default_segments(skel: SkeletonStream) -> list[tuple[int, int] | None]:
     """Per gesture, the frames [start, stop) the default gesture segmenter reports for it (the
     found segment overlapping it most), or None."""
-    from cognition.gestures.segmentation import segment_gestures
+    from beyond_self.cognition.gestures.segmentation import segment_gestures
 
     found = segment_gestures(skel.features())
     out: list[tuple[int, int] | None] = []
@@ -489,7 +493,7 @@ def check_scene(
     models and shipped clusters): each gesture's action is the argmax of its final belief, its
     labels are the object at its start and the effects measured over its frames. A found gesture
     is matched to the item whose true frames it overlaps most."""
-    from cognition.episodes import (
+    from beyond_self.cognition.episodes import (
         Belief,
         Ended,
         GestureEffects,
@@ -497,9 +501,9 @@ def check_scene(
         ObjectWatch,
         Started,
     )
-    from cognition.gestures import extract_features
-    from cognition.gestures.default_models import default_models
-    from cognition.vision.clusters import ClusterModel
+    from beyond_self.cognition.gestures import extract_features
+    from beyond_self.cognition.gestures.default_models import default_models
+    from beyond_self.cognition.vision.clusters import ClusterModel
 
     for joint in ("right_hand", "torso"):
         if joint not in skeleton:

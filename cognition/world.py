@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
-from core.errors import unknown
+from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+from beyond_self.core.errors import unknown
 
 # Base object speed (m/s) by (action, shape); size scales it.
 _OBJECT_SPEED = {

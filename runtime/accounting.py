@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import logging
 
-from core.errors import InputError
-from runtime.log import event
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.log import event
 
 REASON_MAX = 500  # characters of a logged reason (and of ServiceHealth.last_error)
 _MAX_REMEMBERED_REASONS = 1000

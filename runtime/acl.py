@@ -36,8 +36,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from core.errors import InputError, unknown
-from schemas.keys import ALIVE, ASK, HEALTH, PREFIX, PROGRESS, STREAMS
+from beyond_self.core.errors import InputError, unknown
+from beyond_self.schemas.keys import ALIVE, ASK, HEALTH, PREFIX, PROGRESS, STREAMS
 
 # queryable name -> key suffix after beyond/<robot>/; "progress": a player answering restarted
 # services with their predecessor's last Progress (runtime/pacing.py)

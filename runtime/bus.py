@@ -16,16 +16,21 @@ from typing import Any, TypeVar, overload
 
 import zenoh
 
-from core.errors import InputError
-from runtime import liveliness, queries
-from runtime.config import BusConfig, describe, load_config, zenoh_config
-from runtime.delivery import RELIABLE, Delivery
-from runtime.inbox import undeclare
-from runtime.publisher import Publisher, ZenohPublisher, declare_zenoh_publisher
-from runtime.queries import ErrorHandler, PlainQueryHandler, QueryHandler
-from runtime.subscription import MalformedHandler, RawSubscription, Received, Subscription
-from schemas.base import Message
-from schemas.keys import Keys
+from beyond_self.core.errors import InputError
+from beyond_self.runtime import liveliness, queries
+from beyond_self.runtime.config import BusConfig, describe, load_config, zenoh_config
+from beyond_self.runtime.delivery import RELIABLE, Delivery
+from beyond_self.runtime.inbox import undeclare
+from beyond_self.runtime.publisher import Publisher, ZenohPublisher, declare_zenoh_publisher
+from beyond_self.runtime.queries import ErrorHandler, PlainQueryHandler, QueryHandler
+from beyond_self.runtime.subscription import (
+    MalformedHandler,
+    RawSubscription,
+    Received,
+    Subscription,
+)
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.keys import Keys
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)

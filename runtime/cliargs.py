@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from runtime.config import ENV_VARS, MODES, BusConfig, load_config
+from beyond_self.runtime.config import ENV_VARS, MODES, BusConfig, load_config
 
 
 def _port(text: str) -> int:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import time
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 CLOCK_MODES = ("wall", "recording")
 

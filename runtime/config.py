@@ -30,8 +30,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from core.errors import InputError
-from schemas.keys import DEFAULT_ROBOT, check_name
+from beyond_self.core.errors import InputError
+from beyond_self.schemas.keys import DEFAULT_ROBOT, check_name
 
 if TYPE_CHECKING:
     import zenoh
@@ -121,7 +121,7 @@ class BusConfig:
         """(listen, connect) endpoints actually used."""
         rendezvous = f"tcp/127.0.0.1:{self.port}"
         if self.secure is not None:
-            from runtime.secure import SECURE_ROUTER_CONNECT, SECURE_ROUTER_LISTEN
+            from beyond_self.runtime.secure import SECURE_ROUTER_CONNECT, SECURE_ROUTER_LISTEN
 
             listen, connect = (
                 ([SECURE_ROUTER_LISTEN], [])
@@ -286,7 +286,7 @@ def zenoh_config(config: BusConfig, access_rules: Mapping[str, Any] | None = Non
     if connect or config.connect is not None:
         sets["connect/endpoints"] = connect
     if config.secure is not None:
-        from runtime.secure import check_endpoints, default_identity, tls_settings
+        from beyond_self.runtime.secure import check_endpoints, default_identity, tls_settings
 
         from_file = config.config_file is not None  # the file's own endpoints count too
         check_endpoints(

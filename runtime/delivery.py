@@ -28,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 Congestion = Literal["block", "drop"]
 

@@ -21,19 +21,19 @@ from typing import Any
 
 import foxglove
 
-from core.errors import InputError
-from runtime.bus import Bus
-from runtime.foxglove_views import VIEWS, VIEWS_OF, View, encode_view, is_view_key
-from runtime.recording_format import JSON, JSONSCHEMA
-from runtime.subscription import RawSample, decode_any
-from schemas.base import Message
-from schemas.codec import (
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.foxglove_views import VIEWS, VIEWS_OF, View, encode_view, is_view_key
+from beyond_self.runtime.recording_format import JSON, JSONSCHEMA
+from beyond_self.runtime.subscription import RawSample, decode_any
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import (
     SchemaError,
     recording_json_schema_bytes,
     to_recording_json,
     type_from_encoding,
 )
-from schemas.keys import STREAMS, type_for_key
+from beyond_self.schemas.keys import STREAMS, type_for_key
 
 log = logging.getLogger("beyond.foxglove")
 DEFAULT_PORT = 8765

@@ -12,9 +12,9 @@ import json
 
 import foxglove.layouts as fl
 
-from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
-from runtime.foxglove_views import VIEWS
-from schemas.keys import Keys
+from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+from beyond_self.runtime.foxglove_views import VIEWS
+from beyond_self.schemas.keys import Keys
 
 PLOTTED_EFFECT = "ObjVel"  # the effect whose prediction the lower plot follows
 

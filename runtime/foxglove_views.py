@@ -25,10 +25,10 @@ from typing import Any, ClassVar
 
 import msgspec
 
-from schemas.base import Message
-from schemas.codec import self_contained_schema
-from schemas.keys import split_key
-from schemas.messages import (
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import self_contained_schema
+from beyond_self.schemas.keys import split_key
+from beyond_self.schemas.messages import (
     ActionPosterior,
     AffordancePrediction,
     Description,

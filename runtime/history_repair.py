@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from runtime.delivery import Delivery
+from beyond_self.runtime.delivery import Delivery
 
 log = logging.getLogger("beyond.recovery")
 

@@ -11,9 +11,9 @@ import io
 
 import numpy as np
 
-from core.errors import InputError
-from schemas.base import Header
-from schemas.messages import RAW_ENCODINGS, CameraFrame, CompressedCameraFrame, Time
+from beyond_self.core.errors import InputError
+from beyond_self.schemas.base import Header
+from beyond_self.schemas.messages import RAW_ENCODINGS, CameraFrame, CompressedCameraFrame, Time
 
 CameraMessage = CameraFrame | CompressedCameraFrame
 _COLOUR = ("rgb8", "bgr8", "rgba8", "bgra8", "mono8")

@@ -19,7 +19,7 @@ from typing import Generic, Protocol, TypeVar
 
 import zenoh
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 T = TypeVar("T")
 _EVENTFD_ONE = (1).to_bytes(8, "little")

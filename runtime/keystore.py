@@ -26,8 +26,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from core.errors import InputError
-from schemas.keys import check_name
+from beyond_self.core.errors import InputError
+from beyond_self.schemas.keys import check_name
 
 CA = "ca"
 TOOLS = "tools"

@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from runtime.inbox import Inbox, direct_callback, undeclare
+from beyond_self.runtime.inbox import Inbox, direct_callback, undeclare
 
 
 def declare_token(session: zenoh.Session, key: str) -> Callable[[], None]:

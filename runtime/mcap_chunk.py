@@ -14,7 +14,7 @@ from mcap.records import Channel, Chunk, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import get_chunk_data_stream
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, body length
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time

@@ -34,9 +34,9 @@ import logging
 from collections.abc import Iterable
 from typing import Any
 
-from runtime.bus import Bus
-from runtime.subscription import consume
-from schemas.messages import Progress, ServiceHealth
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.subscription import consume
+from beyond_self.schemas.messages import Progress, ServiceHealth
 
 log = logging.getLogger("beyond.pacing")
 DEFAULT_WINDOW_S = 0.5

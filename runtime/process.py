@@ -10,8 +10,8 @@ import sys
 from collections.abc import Callable, Coroutine
 from typing import Any, NoReturn
 
-from core.errors import InputError
-from runtime.log import setup_logging
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.log import setup_logging
 
 
 def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:

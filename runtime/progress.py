@@ -15,13 +15,13 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from core.errors import InputError
-from runtime.bus import Bus
-from runtime.delivery import STATUS
-from runtime.log import event
-from runtime.publisher import Publisher
-from schemas.base import Header
-from schemas.messages import Progress
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import STATUS
+from beyond_self.runtime.log import event
+from beyond_self.runtime.publisher import Publisher
+from beyond_self.schemas.base import Header
+from beyond_self.schemas.messages import Progress
 
 
 class ProgressReport:

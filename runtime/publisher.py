@@ -20,12 +20,12 @@ from typing import Generic, TypeVar
 import zenoh
 from zenoh import ext
 
-from core.errors import InputError
-from runtime.delivery import RELIABLE, Delivery
-from runtime.inbox import Inbox, direct_callback, undeclare
-from runtime.recovery import HEARTBEAT_S
-from schemas.base import Message
-from schemas.codec import encode, encode_into, wire_encoding
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.delivery import RELIABLE, Delivery
+from beyond_self.runtime.inbox import Inbox, direct_callback, undeclare
+from beyond_self.runtime.recovery import HEARTBEAT_S
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import encode, encode_into, wire_encoding
 
 M = TypeVar("M", bound=Message)
 ZenohPublisher = zenoh.Publisher | ext.AdvancedPublisher

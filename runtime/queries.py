@@ -18,11 +18,11 @@ from typing import Any, TypeVar
 
 import zenoh
 
-from core.errors import InputError
-from runtime.inbox import Inbox, direct_callback, undeclare
-from runtime.subscription import Received
-from schemas.base import Message
-from schemas.codec import decode, encode, wire_encoding
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.inbox import Inbox, direct_callback, undeclare
+from beyond_self.runtime.subscription import Received
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import decode, encode, wire_encoding
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)

@@ -7,10 +7,10 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from runtime.bus import Bus
-from runtime.log import event
-from runtime.recording_writer import DEFAULT_CHUNK_SIZE, RecordingWriter
-from schemas.codec import SchemaError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.log import event
+from beyond_self.runtime.recording_writer import DEFAULT_CHUNK_SIZE, RecordingWriter
+from beyond_self.schemas.codec import SchemaError
 
 log = logging.getLogger("beyond.record")
 

@@ -17,11 +17,11 @@ from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
 
-from core.errors import InputError
-from runtime.mcap_chunk import chunk_records
-from runtime.recording_format import JSON, META_FORM, META_TYPE, META_VIEW
-from schemas.base import Message
-from schemas.codec import (
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.mcap_chunk import chunk_records
+from beyond_self.runtime.recording_format import JSON, META_FORM, META_TYPE, META_VIEW
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import (
     RECORDING_JSON_FORM,
     REGISTRY,
     encode,

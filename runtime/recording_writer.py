@@ -10,8 +10,8 @@ from typing import IO, Any
 
 from mcap.writer import CompressionType, IndexType, Writer
 
-from core.errors import InputError
-from runtime.recording_format import (
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.recording_format import (
     JSON,
     JSONSCHEMA,
     META_FORM,
@@ -19,8 +19,8 @@ from runtime.recording_format import (
     META_VERSION,
     META_VIEW,
 )
-from schemas.base import Message
-from schemas.codec import (
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import (
     RECORDING_JSON_FORM,
     SchemaError,
     decode,
@@ -28,7 +28,7 @@ from schemas.codec import (
     to_recording_json,
     type_from_encoding,
 )
-from schemas.keys import type_for_key
+from beyond_self.schemas.keys import type_for_key
 
 DEFAULT_CHUNK_SIZE = 256 * 1024
 COMPRESSIONS = {
@@ -177,7 +177,7 @@ class RecordingWriter:
             self._write_views(key, message, log)
 
     def _write_views(self, key: str, message: Message, log_time: int) -> None:
-        from runtime.foxglove_views import VIEWS_OF, encode_view, root_of
+        from beyond_self.runtime.foxglove_views import VIEWS_OF, encode_view, root_of
 
         root = root_of(key)
         if root is None:

@@ -34,9 +34,9 @@ from collections import OrderedDict, deque
 import zenoh
 from zenoh import ext
 
-from runtime.delivery import Delivery
-from runtime.history_repair import HistoryRepair
-from runtime.inbox import Inbox, direct_callback, undeclare
+from beyond_self.runtime.delivery import Delivery
+from beyond_self.runtime.history_repair import HistoryRepair
+from beyond_self.runtime.inbox import Inbox, direct_callback, undeclare
 
 log = logging.getLogger("beyond.recovery")
 

@@ -24,14 +24,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from core.errors import InputError
-from runtime.bus import Bus
-from runtime.pacing import Pacer
-from runtime.recording import RecordedMessage, RecordingInfo, read_recording
-from runtime.replay_control import ReplayControl, check_rate
-from schemas.base import Message
-from schemas.codec import encode_into, wire_encoding
-from schemas.keys import with_robot
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.pacing import Pacer
+from beyond_self.runtime.recording import RecordedMessage, RecordingInfo, read_recording
+from beyond_self.runtime.replay_control import ReplayControl, check_rate
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import encode_into, wire_encoding
+from beyond_self.schemas.keys import with_robot
 
 log = logging.getLogger("beyond.replay")
 YIELD_EVERY = 32  # messages sent without sleeping before the event loop gets a turn
@@ -185,7 +185,7 @@ async def replay(
 
     pacer: Pacer | None = None
     if pace_for:
-        from runtime.recording import inspect_recording
+        from beyond_self.runtime.recording import inspect_recording
 
         pacer = Pacer(bus, pace_for, [rename(c.topic) for c in inspect_recording(path).channels])
         await pacer.start()

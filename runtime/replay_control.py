@@ -16,7 +16,7 @@ import asyncio
 import math
 from collections.abc import Callable, Iterable
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 RATE_MAX = 1e6  # times real time: already "as fast as possible" for any recording; more is a typo
 VALID_RATES = f"a speed factor in (0, {RATE_MAX:g}] (2: twice as fast)"

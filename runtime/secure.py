@@ -19,8 +19,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from core.errors import InputError
-from runtime import keystore
+from beyond_self.core.errors import InputError
+from beyond_self.runtime import keystore
 
 SECURE_ROUTER_LISTEN = "tls/[::]:7447"
 SECURE_ROUTER_CONNECT = "tls/127.0.0.1:7447"

@@ -23,22 +23,22 @@ import time
 from collections.abc import Callable, Coroutine
 from typing import Any, TypeVar, overload
 
-from runtime import process
-from runtime.accounting import ErrorAccount
-from runtime.acl import check_declared
-from runtime.bus import Bus
-from runtime.clock import Clock
-from runtime.config import BusConfig, load_config
-from runtime.delivery import RELIABLE, STATUS, Delivery
-from runtime.log import event
-from runtime.progress import ProgressReport, resume
-from runtime.publisher import Publisher
-from runtime.queries import PlainQueryHandler, QueryHandler
-from runtime.subscription import Handler, Received, Subscription, consume
-from schemas.base import Header, Message
-from schemas.codec import SchemaError
-from schemas.keys import check_name
-from schemas.messages import ServiceHealth
+from beyond_self.runtime import process
+from beyond_self.runtime.accounting import ErrorAccount
+from beyond_self.runtime.acl import check_declared
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.clock import Clock
+from beyond_self.runtime.config import BusConfig, load_config
+from beyond_self.runtime.delivery import RELIABLE, STATUS, Delivery
+from beyond_self.runtime.log import event
+from beyond_self.runtime.progress import ProgressReport, resume
+from beyond_self.runtime.publisher import Publisher
+from beyond_self.runtime.queries import PlainQueryHandler, QueryHandler
+from beyond_self.runtime.subscription import Handler, Received, Subscription, consume
+from beyond_self.schemas.base import Header, Message
+from beyond_self.schemas.codec import SchemaError
+from beyond_self.schemas.keys import check_name
+from beyond_self.schemas.messages import ServiceHealth
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)

@@ -25,12 +25,12 @@ from typing import Generic, TypeVar
 
 import zenoh
 
-from runtime.delivery import RELIABLE, Delivery
-from runtime.inbox import Inbox, undeclare
-from runtime.recovery import RecoveringSource
-from schemas.base import Message
-from schemas.codec import SchemaError, decode, type_from_encoding
-from schemas.keys import type_for_key
+from beyond_self.runtime.delivery import RELIABLE, Delivery
+from beyond_self.runtime.inbox import Inbox, undeclare
+from beyond_self.runtime.recovery import RecoveringSource
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import SchemaError, decode, type_from_encoding
+from beyond_self.schemas.keys import type_for_key
 
 M = TypeVar("M", bound=Message)
 T = TypeVar("T")

@@ -1,11 +1,11 @@
 """The single source of truth for every message on the bus (versioned msgspec Structs) and for the
 key expressions they travel on.
 
-    from schemas import Header, SkeletonFrame, Joint, Keys, encode, decode
+    from beyond_self.schemas import Header, SkeletonFrame, Joint, Keys, encode, decode
 """
 
-from schemas.base import Header, Message
-from schemas.codec import (
+from beyond_self.schemas.base import Header, Message
+from beyond_self.schemas.codec import (
     REGISTRY,
     SchemaError,
     decode,
@@ -19,8 +19,8 @@ from schemas.codec import (
     versions,
     wire_encoding,
 )
-from schemas.keys import STREAMS, Keys, split_key, type_for_key, with_robot
-from schemas.messages import (
+from beyond_self.schemas.keys import STREAMS, Keys, split_key, type_for_key, with_robot
+from beyond_self.schemas.messages import (
     ActionPosterior,
     AffordanceAnswer,
     AffordancePrediction,

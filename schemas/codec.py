@@ -13,9 +13,9 @@ from typing import Any, TypeVar
 
 import msgspec
 
-from core.errors import InputError, unknown
-from schemas.base import Message
-from schemas.messages import ALL_MESSAGES
+from beyond_self.core.errors import InputError, unknown
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.messages import ALL_MESSAGES
 
 M = TypeVar("M", bound=Message)
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from core.errors import InputError
-from schemas import messages as m
-from schemas.base import Message
+from beyond_self.core.errors import InputError
+from beyond_self.schemas import messages as m
+from beyond_self.schemas.base import Message
 
 PREFIX = "beyond"
 DEFAULT_ROBOT = "robot"
@@ -68,7 +68,7 @@ class Keys:
 
     def stream(self, name: str) -> str:
         if name not in STREAMS:
-            from core.errors import unknown
+            from beyond_self.core.errors import unknown
 
             raise unknown("stream", name, list(STREAMS))
         return f"{self.root}/{STREAMS[name][0]}"

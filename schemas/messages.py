@@ -14,7 +14,7 @@ from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
-from schemas.base import NAME_MAX, STAMP_MAX, Header, Message
+from beyond_self.schemas.base import NAME_MAX, STAMP_MAX, Header, Message
 
 # Bytes per pixel of the raw encodings Foxglove understands.
 RAW_ENCODINGS: dict[str, int] = {

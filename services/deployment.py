@@ -27,10 +27,10 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
-from core.errors import InputError, unknown
-from runtime import process
-from runtime.config import BusConfig
-from services.launcher import (
+from beyond_self.core.errors import InputError, unknown
+from beyond_self.runtime import process
+from beyond_self.runtime.config import BusConfig
+from beyond_self.services.launcher import (
     HealthWatch,
     LogSink,
     ServiceProcess,
@@ -38,11 +38,11 @@ from services.launcher import (
     start_service,
     stop_services,
 )
-from services.options import check_options
-from services.registry import service_class
+from beyond_self.services.options import check_options
+from beyond_self.services.registry import service_class
 
 if TYPE_CHECKING:
-    from runtime.bus import Bus
+    from beyond_self.runtime.bus import Bus
 
 SOURCE = "ingest"  # the service that publishes sensor streams, started last
 ALIVE_TIMEOUT_S = 60.0  # a process neither alive nor exited after this long: start() fails
@@ -130,7 +130,9 @@ class Deployment:
         if self.router_command is not None:
             command, env = self.router_command, self._router_env()
             self.router = await start_service("router", env, command=command, sink=self.log)
-        from runtime.bus import Bus  # here: zenoh is slow to import, building a plan needs none
+        from beyond_self.runtime.bus import (
+            Bus,  # here: zenoh is slow to import, building a plan needs none
+        )
 
         try:
             self.bus = Bus.open(self.config)  # a secure client waits here for its router

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from cognition.descriptions import nbest_exact
-from runtime.delivery import EVENTS
-from runtime.service import Service
-from schemas import Description, Evidence, ScoredSentence, WordProbabilities
+from beyond_self.cognition.descriptions import nbest_exact
+from beyond_self.runtime.delivery import EVENTS
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import Description, Evidence, ScoredSentence, WordProbabilities
 
 
 class DescriptionGenerator(Service):

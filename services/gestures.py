@@ -15,13 +15,13 @@ from typing import Any, cast
 
 import numpy as np
 
-from cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
-from cognition.gestures import GestureModels, extract_features, load_models
-from cognition.gestures.default_models import default_models
-from core.errors import InputError
-from runtime.delivery import EVENTS, FRAMES
-from runtime.service import Service
-from schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
+from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
+from beyond_self.cognition.gestures import GestureModels, extract_features, load_models
+from beyond_self.cognition.gestures.default_models import default_models
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.delivery import EVENTS, FRAMES
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
 
 
 class GestureStreamer(Service):

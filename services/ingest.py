@@ -33,19 +33,19 @@ from typing import Any, cast
 
 import numpy as np
 
-from cognition.gestures.logs import read_hand_log
-from core.errors import InputError
-from runtime.delivery import CAMERA, EVENTS
-from runtime.images import message_from_image
-from runtime.log import event
-from runtime.pacing import DEFAULT_WINDOW_S, Pacer
-from runtime.publisher import Publisher
-from runtime.recording import read_recording
-from runtime.replay import Cue, Player, recorded_cues
-from runtime.replay_control import rate_option
-from runtime.service import Service
-from schemas import CameraFrame, CompressedCameraFrame, Joint, SkeletonFrame, StreamEnd
-from schemas.keys import with_robot
+from beyond_self.cognition.gestures.logs import read_hand_log
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.delivery import CAMERA, EVENTS
+from beyond_self.runtime.images import message_from_image
+from beyond_self.runtime.log import event
+from beyond_self.runtime.pacing import DEFAULT_WINDOW_S, Pacer
+from beyond_self.runtime.publisher import Publisher
+from beyond_self.runtime.recording import read_recording
+from beyond_self.runtime.replay import Cue, Player, recorded_cues
+from beyond_self.runtime.replay_control import rate_option
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import CameraFrame, CompressedCameraFrame, Joint, SkeletonFrame, StreamEnd
+from beyond_self.schemas.keys import with_robot
 
 
 class SensorIngest(Service):

@@ -1,7 +1,9 @@
 """Start services as separate processes, stream their logs with their names, stop them cleanly.
 
-Each service runs as `python -m beyond service NAME` with the bus settings in its environment,
-exactly as it would on another machine, so `beyond up` exercises the real deployment path.
+Each service runs as `python -P -m beyond_self service NAME` with the bus settings in its
+environment, exactly as it would on another machine, so `beyond up` exercises the real deployment
+path. `-P` keeps the current folder off the import path: a folder that happens to hold a
+`beyond_self/` (or anything else we import) cannot replace our code in a child process.
 These are the parts `services.deployment.Deployment` runs a set of services with.
 
 A service's output is read in chunks, not lines: any line length and any bytes are fine (a line
@@ -23,10 +25,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from runtime.config import ENV_VARS, BusConfig
+from beyond_self.runtime.config import ENV_VARS, BusConfig
 
 if TYPE_CHECKING:
-    from runtime.bus import Bus
+    from beyond_self.runtime.bus import Bus
 
 LogSink = Callable[[str, str], None]
 LINE_MAX = 4096  # characters of one log line passed on (the rest is counted, not kept)
@@ -60,6 +62,11 @@ def service_env(config: BusConfig, extra: Mapping[str, str] | None = None) -> di
     return env
 
 
+BEYOND = (sys.executable, "-P", "-m", "beyond_self")
+"""The `beyond` command as a child process runs it: this interpreter, the current folder off the
+import path (-P)."""
+
+
 async def start_service(
     name: str,
     env: Mapping[str, str],
@@ -72,7 +79,7 @@ async def start_service(
     """Start service `name` (or, with `command`, `beyond COMMAND...` under that name)."""
     import json
 
-    cmd = [sys.executable, "-m", "beyond", *(command or ["service", name])]
+    cmd = [*BEYOND, *(command or ["service", name])]
     if config_file:
         cmd += ["--config", config_file]
     for key, value in (options or {}).items():
@@ -175,7 +182,7 @@ class HealthWatch:
                 await self._task
 
     async def check(self, sp: ServiceProcess) -> None:
-        from schemas import ServiceHealth
+        from beyond_self.schemas import ServiceHealth
 
         key = self.bus.keys.health(sp.name)
         try:

@@ -18,12 +18,12 @@ from __future__ import annotations
 from collections import deque
 from typing import Any
 
-from cognition.episodes import FrameObjects, GestureEffects, ObjectAtStart, ObjectWatch
-from cognition.vision.clusters import ClusterModel
-from runtime.delivery import CAMERA, EVENTS, FRAMES
-from runtime.images import CameraMessage, image_from_message
-from runtime.service import Service
-from schemas import (
+from beyond_self.cognition.episodes import FrameObjects, GestureEffects, ObjectAtStart, ObjectWatch
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.runtime.delivery import CAMERA, EVENTS, FRAMES
+from beyond_self.runtime.images import CameraMessage, image_from_message
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import (
     CameraFrame,
     CompressedCameraFrame,
     DetectedObject,

@@ -16,7 +16,7 @@ from typing import Any
 
 import msgspec
 
-from core.errors import InputError, unknown
+from beyond_self.core.errors import InputError, unknown
 
 
 def load_options(path: str | Path | None) -> dict[str, dict[str, Any]]:

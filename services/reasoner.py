@@ -16,14 +16,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
-from cognition.bn.evidence import Evidence, build_evidence
-from cognition.episodes import Anticipation, FusionJoin, Outcome
-from cognition.episodes.fusion import Prediction
-from core.errors import InputError
-from runtime.delivery import EVENTS, FRAMES
-from runtime.service import Service
-from schemas import (
+from beyond_self.cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
+from beyond_self.cognition.bn.evidence import Evidence, build_evidence
+from beyond_self.cognition.episodes import Anticipation, FusionJoin, Outcome
+from beyond_self.cognition.episodes.fusion import Prediction
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.delivery import EVENTS, FRAMES
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import (
     ActionPosterior,
     AffordanceAnswer,
     AffordancePrediction,

@@ -5,17 +5,17 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from core.errors import unknown
-from runtime import acl
-from runtime.service import Service
+from beyond_self.core.errors import unknown
+from beyond_self.runtime import acl
+from beyond_self.runtime.service import Service
 
 SERVICES: dict[str, str] = {
-    "ingest": "services.ingest:SensorIngest",
-    "gestures": "services.gestures:GestureStreamer",
-    "objects": "services.objects:ObjectSegmenter",
-    "reasoner": "services.reasoner:AffordanceReasoner",
-    "describer": "services.describer:DescriptionGenerator",
-    "speech": "services.speech:SpeechSynthesizer",
+    "ingest": "beyond_self.services.ingest:SensorIngest",
+    "gestures": "beyond_self.services.gestures:GestureStreamer",
+    "objects": "beyond_self.services.objects:ObjectSegmenter",
+    "reasoner": "beyond_self.services.reasoner:AffordanceReasoner",
+    "describer": "beyond_self.services.describer:DescriptionGenerator",
+    "speech": "beyond_self.services.speech:SpeechSynthesizer",
 }
 PROFILES: dict[str, tuple[str, ...]] = {
     "all": tuple(SERVICES),

@@ -15,10 +15,10 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from runtime.delivery import EVENTS
-from runtime.log import event
-from runtime.service import Service
-from schemas import Description
+from beyond_self.runtime.delivery import EVENTS
+from beyond_self.runtime.log import event
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import Description
 
 
 class SpeechSynthesizer(Service):

@@ -13,8 +13,8 @@ import sys
 import uuid
 from pathlib import Path
 
-from runtime.config import BusConfig
-from schemas import Header, Joint, Keys, SkeletonFrame
+from beyond_self.runtime.config import BusConfig
+from beyond_self.schemas import Header, Joint, Keys, SkeletonFrame
 
 REPO = Path(__file__).resolve().parent.parent
 EXAMPLES = Path(__file__).resolve().parent / "runtime_examples"
@@ -88,8 +88,8 @@ def skeleton_frames(n: int, *, start_ns: int = 1_700_000_000_000_000_000, hz: fl
 def skeleton_recording(path: Path, actions: list[str], seed: int, robot: str = "robot") -> None:
     """A recording of synthetic gestures, skeleton frames only (no camera): the services then
     describe the gestures without measured effects."""
-    from cognition.gestures import synthesize_continuous
-    from runtime.recording_writer import RecordingWriter
+    from beyond_self.cognition.gestures import synthesize_continuous
+    from beyond_self.runtime.recording_writer import RecordingWriter
 
     stream = synthesize_continuous(actions, seed=seed)
     key = Keys(robot).skeleton

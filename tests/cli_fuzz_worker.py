@@ -33,7 +33,7 @@ def _child(argv: list[str], out_fd: int, err_fd: int) -> None:
     sys.stdout = open(1, "w", encoding="utf-8", errors="replace", closefd=False)  # noqa: SIM115
     sys.stderr = open(2, "w", encoding="utf-8", errors="replace", closefd=False)  # noqa: SIM115
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    from beyond.cli import main
+    from beyond_self.cli import main
 
     code = 1
     try:
@@ -92,9 +92,9 @@ def run_case(argv: list[str], timeout: float) -> dict[str, Any]:
 
 
 def main() -> None:
-    import beyond.cli
+    import beyond_self.cli
 
-    beyond.cli.build_parser()  # imports every command module once, before any fork
+    beyond_self.cli.build_parser()  # imports every command module once, before any fork
     print(json.dumps({"ready": True}), flush=True)
     for line in sys.stdin:
         case = json.loads(line)

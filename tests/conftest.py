@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 from netns_util import TwoHosts, unavailable
 
-from cognition.paths import SOURCES, shared_data_dir
+from beyond_self.cognition.paths import SOURCES, shared_data_dir
 
 
 @pytest.fixture(scope="session")
@@ -91,13 +91,17 @@ def show(request: pytest.FixtureRequest) -> Callable[[str], None]:
     return add
 
 
+# mostly waiting on pip or on a paced replay: they run beside the rest, after the container test
+LONG_FILES = ("test_event_time.py", "test_package.py")
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The container test is mostly waiting on podman, leases and a replay in real time: it runs
     beside the rest of the suite, in a worker of its own, followed by the event-time matrix (the
     longest test, which loads the machine on purpose) so that the two workers take about as
     long as each other."""
     for item in items:
-        long = item.get_closest_marker("containers") or item.path.name == "test_event_time.py"
+        long = item.get_closest_marker("containers") or item.path.name in LONG_FILES
         item.add_marker(pytest.mark.xdist_group("long" if long else "suite"))
 
 

@@ -268,9 +268,9 @@ def probe() -> int:
 
     import zenoh
 
-    from runtime.bus import Bus
-    from runtime.delivery import EVENTS
-    from schemas import Description, GestureSegment
+    from beyond_self.runtime.bus import Bus
+    from beyond_self.runtime.delivery import EVENTS
+    from beyond_self.schemas import Description, GestureSegment
 
     zenoh.init_log_from_env_or("error")  # RUST_LOG=zenoh=debug to see the transport's view
 

@@ -10,18 +10,18 @@ from __future__ import annotations
 import asyncio
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from busutil_net import REPO, env_for, private_config
 
-from beyond.cli import main
-from cognition.bn import BayesNet, learn_network, synthetic_dataset
-from cognition.bn.inference import MAX_JOINT_ROWS, MAX_QUERY_WORK
-from core.errors import InputError
-from runtime.bus import Bus
+from beyond_self.cli import main
+from beyond_self.cognition.bn import BayesNet, learn_network, synthetic_dataset
+from beyond_self.cognition.bn.inference import MAX_JOINT_ROWS, MAX_QUERY_WORK
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.services.launcher import BEYOND
 
 ASKS = 50
 
@@ -61,7 +61,7 @@ def test_a_query_over_too_much_work_is_refused_with_the_limit(network: BayesNet)
 def test_bn_query_shares_the_cap(
     network: BayesNet, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from cognition.bn import save_model
+    from beyond_self.cognition.bn import save_model
 
     path = tmp_path / "model.json"
     save_model(network, path)
@@ -75,7 +75,7 @@ def test_ask_succeeds_every_time_against_a_running_reasoner(
 ) -> None:
     config = private_config()
     reasoner = subprocess.Popen(
-        [sys.executable, "-m", "beyond", "service", "reasoner"],
+        [*BEYOND, "service", "reasoner"],
         cwd=REPO,
         env=env_for(config),
         stdout=subprocess.DEVNULL,
@@ -115,7 +115,7 @@ def test_ask_succeeds_every_time_against_a_running_reasoner(
 
 def test_description_caps_are_in_the_library() -> None:
     """`describe --nbest 1000000000000` reached 5 GB before a MemoryError: refused up front."""
-    from cognition.descriptions import NBEST_MAX, SAMPLES_MAX, nbest_exact, sample_keys
+    from beyond_self.cognition.descriptions import NBEST_MAX, SAMPLES_MAX, nbest_exact, sample_keys
 
     with pytest.raises(InputError, match=f"up to {NBEST_MAX}"):
         nbest_exact({}, 10**12)

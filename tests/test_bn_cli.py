@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from beyond.cli import main
+from beyond_self.cli import main
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,15 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from cognition.bn import BayesNet, learn_network, load_bag, load_definition, synthetic_dataset
-from cognition.bn.definition import NetworkDefinition, Variable
-from core.errors import InputError
+from beyond_self.cognition.bn import (
+    BayesNet,
+    learn_network,
+    load_bag,
+    load_definition,
+    synthetic_dataset,
+)
+from beyond_self.cognition.bn.definition import NetworkDefinition, Variable
+from beyond_self.core.errors import InputError
 
 
 def tiny() -> BayesNet:
@@ -144,7 +150,7 @@ def _queries(
 
 
 def _agree(model: BayesNet, network: Any, data: st.DataObject) -> None:
-    from cognition.bn.pgmpy_bridge import reference_query
+    from beyond_self.cognition.bn.pgmpy_bridge import reference_query
 
     query, evidence, soft = data.draw(_queries(model))
     try:
@@ -189,7 +195,7 @@ def _real_network(model: BayesNet) -> Any:
 
 
 def test_word_probabilities_agree_with_pgmpy(real_model: BayesNet) -> None:
-    from cognition.bn.pgmpy_bridge import reference_query
+    from beyond_self.cognition.bn.pgmpy_bridge import reference_query
 
     scene = {"Color": "yellow", "Size": "big", "Shape": "circle", "ObjVel": "fast"}
     soft = {"Action": [0.2, 0.5, 0.3]}
@@ -205,7 +211,7 @@ def test_word_probabilities_agree_with_pgmpy(real_model: BayesNet) -> None:
 
 def test_parent_order_in_the_file_does_not_matter() -> None:
     """CPTs whose parents are listed against node order are laid out correctly (vs pgmpy)."""
-    from cognition.bn.pgmpy_bridge import reference_query
+    from beyond_self.cognition.bn.pgmpy_bridge import reference_query
 
     rng = np.random.default_rng(3)
     definition = NetworkDefinition(

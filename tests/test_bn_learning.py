@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.bn import learn_network, load_bag, load_definition, synthetic_dataset
-from cognition.bn.bag import Dataset
-from cognition.bn.definition import NetworkDefinition, Variable
-from cognition.bn.parameters import bdeu_cpt, ml_cpt, word_cpt
-from cognition.bn.reference import ReferenceNetwork, load_reference
-from cognition.bn.structure import CountingScorer, PgmpyScorer, k2_search
-from core.errors import InputError
+from beyond_self.cognition.bn import learn_network, load_bag, load_definition, synthetic_dataset
+from beyond_self.cognition.bn.bag import Dataset
+from beyond_self.cognition.bn.definition import NetworkDefinition, Variable
+from beyond_self.cognition.bn.parameters import bdeu_cpt, ml_cpt, word_cpt
+from beyond_self.cognition.bn.reference import ReferenceNetwork, load_reference
+from beyond_self.cognition.bn.structure import CountingScorer, PgmpyScorer, k2_search
+from beyond_self.core.errors import InputError
 
 
 @pytest.fixture(scope="module")

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.bn import learn_network, load_model, save_model, synthetic_dataset
-from cognition.bn.model import FORMAT, VERSION
-from cognition.bn.synthetic import DATA_DIR, EXPECTED_OBJVEL, generate, synthetic_paths
-from cognition.grammar import DEFAULT_GRAMMAR
-from cognition.variables import AFFORDANCE_VARIABLES, COLOR_WORDS
-from core.errors import InputError
+from beyond_self.cognition.bn import learn_network, load_model, save_model, synthetic_dataset
+from beyond_self.cognition.bn.model import FORMAT, VERSION
+from beyond_self.cognition.bn.synthetic import DATA_DIR, EXPECTED_OBJVEL, generate, synthetic_paths
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
+from beyond_self.cognition.variables import AFFORDANCE_VARIABLES, COLOR_WORDS
+from beyond_self.core.errors import InputError
 
 
 def test_model_round_trips_exactly(tmp_path: Path) -> None:

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.bn.bag import Dataset, load_bag, parse_bag
-from cognition.bn.definition import load_definition, parse_definition
-from cognition.variables import AFFORDANCE_VARIABLES
-from core.errors import InputError
+from beyond_self.cognition.bn.bag import Dataset, load_bag, parse_bag
+from beyond_self.cognition.bn.definition import load_definition, parse_definition
+from beyond_self.cognition.variables import AFFORDANCE_VARIABLES
+from beyond_self.core.errors import InputError
 
 DEF_TEXT = "Action\tgrasp\ttap\ttouch\nShape\tcircle\tbox\nball\t-\tball\nbox\t-\tbox\n"
 BAG_TEXT = "Action\tShape\tball\tbox\ntap\tcircle\tball\t-\ngrasp\tbox\t-\tbox\ntouch\tbox\t-\t-\n"
@@ -92,7 +92,7 @@ def test_dataset_rejects_out_of_range_codes() -> None:
 
 
 def test_real_files_match_the_reference_network(shared_data: Path) -> None:
-    from cognition.bn.reference import load_reference
+    from beyond_self.cognition.bn.reference import load_reference
 
     d = load_definition(shared_data / "salvi2012/networkDefinition.txt")
     assert len(d.variables) == 57 and len(d.words) == 49

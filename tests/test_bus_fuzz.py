@@ -18,7 +18,6 @@ from __future__ import annotations
 import asyncio
 import random
 import re
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -28,11 +27,12 @@ import msgspec
 import pytest
 from busutil_net import REPO, env_for, private_config
 
-import schemas as s
-from core.errors import InputError
-from runtime.bus import Bus
-from runtime.config import BusConfig
-from services.registry import SERVICES
+import beyond_self.schemas as s
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.config import BusConfig
+from beyond_self.services.launcher import BEYOND
+from beyond_self.services.registry import SERVICES
 
 RECORDING = REPO / "recordings" / "tap-ball-grasp-box.mcap"  # 14.3 s, two gestures
 FUZZ_RATE_HZ = 300.0  # ten times the skeleton's 30 fps
@@ -191,7 +191,13 @@ async def _run_up(fuzz: bool) -> tuple[str, Health, float, int]:
     """One `beyond up` over RECORDING: stdout, health answers, peak service RSS, fuzz count."""
     config = private_config()
     env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
-    cmd = [sys.executable, "-m", "beyond", "up", "--recording", str(RECORDING), "--no-live"]
+    cmd = [
+        *BEYOND,
+        "up",
+        "--recording",
+        str(RECORDING),
+        "--no-live",
+    ]
     proc = await asyncio.create_subprocess_exec(
         *cmd, env=env, cwd=REPO, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL
     )

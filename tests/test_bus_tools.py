@@ -6,31 +6,29 @@ from __future__ import annotations
 
 import asyncio
 import json
-import sys
 from pathlib import Path
 
 import jsonschema
 import pytest
 from busutil_net import REPO, env_for, private_config, skeleton_frames
 
-import schemas as s
-from runtime.bus import Bus
-from runtime.delivery import Delivery
-from runtime.rates import RateWindow
-from runtime.recording import read_recording
-from runtime.replay import replay
-from runtime.replay_control import ReplayControl, remapper
-from runtime.service import Service
-from schemas.codec import recording_json_schema, to_recording_json
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import Delivery
+from beyond_self.runtime.rates import RateWindow
+from beyond_self.runtime.recording import read_recording
+from beyond_self.runtime.replay import replay
+from beyond_self.runtime.replay_control import ReplayControl, remapper
+from beyond_self.runtime.service import Service
+from beyond_self.schemas.codec import recording_json_schema, to_recording_json
+from beyond_self.services.launcher import BEYOND
 
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
 
 
 async def beyond(config, *args: str) -> asyncio.subprocess.Process:
     return await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "beyond",
+        *BEYOND,
         *args,
         env=env_for(config),
         stdout=asyncio.subprocess.PIPE,
@@ -52,7 +50,7 @@ def run_cli(config, *args: str) -> tuple[int, str, str]:
     import subprocess
 
     done = subprocess.run(
-        [sys.executable, "-m", "beyond", *args],
+        [*BEYOND, *args],
         env=env_for(config),
         capture_output=True,
         text=True,

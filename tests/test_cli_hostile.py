@@ -31,10 +31,11 @@ from busutil_net import REPO, env_for, free_port, private_config
 from hypothesis import HealthCheck, Phase, given, seed, settings
 from hypothesis import strategies as st
 
-from beyond.cli import build_parser
-from beyond.commands import argtypes
-from runtime.bus import Bus
-from runtime.recording import inspect_recording
+from beyond_self.cli import build_parser
+from beyond_self.commands import argtypes
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.recording import inspect_recording
+from beyond_self.services.launcher import BEYOND
 
 CASE_TIMEOUT = 60.0  # a hang, on a loaded 2-core machine (cases take well under a second)
 TOTAL_CASES = 2000  # spread over the subcommands; the issue asks for at least 2,000
@@ -115,7 +116,7 @@ def arena(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def model(arena: Path) -> Path:
-    from beyond.cli import main
+    from beyond_self.cli import main
 
     path = arena / "model.json"
     assert main(["bn", "learn", "-o", str(path)]) == 0
@@ -226,7 +227,7 @@ async def test_replay_honours_beyond_robot(arena: Path) -> None:
         sub = bus.subscribe_raw(f"beyond/{config.robot}/**")
         bus.declare_token(bus.keys.alive("hostile-test"))
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "beyond", "replay", SHIPPED, "--afap",
+            *BEYOND, "replay", SHIPPED, "--afap",
             "--wait-for", bus.keys.alive("hostile-test"),
             cwd=arena, env=env_for(config), stderr=asyncio.subprocess.PIPE,
         )  # fmt: skip

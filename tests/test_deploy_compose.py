@@ -23,10 +23,10 @@ from typing import Any
 import pytest
 import yaml
 
-from beyond.cli import COMMANDS, build_parser
-from runtime.config import ENV_VARS
-from services.options import check_options, load_options
-from services.registry import PROFILES, service_class
+from beyond_self.cli import COMMANDS, build_parser
+from beyond_self.runtime.config import ENV_VARS
+from beyond_self.services.options import check_options, load_options
+from beyond_self.services.registry import PROFILES, service_class
 
 REPO = Path(__file__).resolve().parent.parent
 COMPOSE = REPO / "docker-compose.yml"
@@ -489,9 +489,12 @@ def test_the_checker_reports_each_kind_of_problem(change: Any, expected: str | N
         assert any(expected in p for p in problems), problems
 
 
+LAYERS = ("beyond_self", "core", "cognition", "runtime", "schemas", "services")
+
+
 def test_the_checker_reads_the_files_on_disk(tmp_path: Path) -> None:
     """A copy of the tree with one config and one recording removed: both are reported."""
-    for name in ("beyond", "core", "cognition", "runtime", "schemas", "services", "recordings"):
+    for name in (*LAYERS, "recordings"):
         (tmp_path / name).symlink_to(REPO / name)
     for name in ("pyproject.toml", "README.md", "Dockerfile", ".dockerignore"):
         shutil.copy(REPO / name, tmp_path / name)
@@ -513,7 +516,7 @@ def test_the_checker_reads_the_files_on_disk(tmp_path: Path) -> None:
 
 def test_the_checker_reads_the_dockerfile(tmp_path: Path) -> None:
     """A health check the CLI refuses, and a context file .dockerignore lets in that is gone."""
-    for name in ("beyond", "cognition", "runtime", "schemas", "services", "recordings", "deploy"):
+    for name in (*LAYERS, "recordings", "deploy"):
         (tmp_path / name).symlink_to(REPO / name)
     for name in ("pyproject.toml", "README.md", ".dockerignore"):
         shutil.copy(REPO / name, tmp_path / name)

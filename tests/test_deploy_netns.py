@@ -32,6 +32,8 @@ import pytest
 from busutil_net import skeleton_recording
 from netns_util import REPO, Proc, TwoHosts
 
+from beyond_self.services.launcher import BEYOND
+
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(175)]
 
 ACTIONS = ["tap", "grasp", "touch", "tap", "grasp", "touch"]
@@ -142,7 +144,7 @@ class Sides:
         py, hosts = sys.executable, self.hosts
         if router:
             hosts.start(
-                hosts.ws, "router", [py, "-m", "beyond", "router", *self.router_args],
+                hosts.ws, "router", [*BEYOND, "router", *self.router_args],
                 self.env, self.lines.feed,
             )  # fmt: skip
         hosts.start(
@@ -152,7 +154,7 @@ class Sides:
         )  # fmt: skip
         return hosts.start(
             hosts.ws, "ws-up",
-            [py, "-m", "beyond", "up", "--profile", "workstation", "--connect",
+            [*BEYOND, "up", "--profile", "workstation", "--connect",
              "tcp/127.0.0.1:7447", "--until-stream-end", "--no-live", "--timeout", "120"],
             self.ws_env, self.lines.feed,
         )  # fmt: skip
@@ -165,10 +167,10 @@ class Sides:
         )  # fmt: skip
 
     def start_robot(self) -> Proc:
-        py, hosts = sys.executable, self.hosts
+        hosts = self.hosts
         return hosts.start(
             hosts.robot, "robot-up",
-            [py, "-m", "beyond", "up", "--profile", "robot", "--recording", str(self.recording),
+            [*BEYOND, "up", "--profile", "robot", "--recording", str(self.recording),
              "--rate", RATE, "--connect", self.router, "--no-live", "--timeout", "120"],
             self.robot_env, self.lines.feed,
         )  # fmt: skip
@@ -299,7 +301,7 @@ def test_the_robot_may_start_first(hosts: TwoHosts, tmp_path: Path) -> None:
     gestures have ended, still describes all six: what it missed comes from the caches."""
     sides = Sides(hosts, tmp_path, "deploy")
     hosts.start(
-        hosts.ws, "router", [sys.executable, "-m", "beyond", "router", *sides.router_args],
+        hosts.ws, "router", [*BEYOND, "router", *sides.router_args],
         sides.env, sides.lines.feed,
     )  # fmt: skip
     sides.start_robot_probe()

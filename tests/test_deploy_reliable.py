@@ -12,13 +12,13 @@ import msgspec
 import pytest
 from busutil_net import private_config, skeleton_frames
 
-import schemas as s
-from beyond.commands.up import local_group, monitor_name, wait_list
-from core.errors import InputError
-from runtime.bus import Bus
-from runtime.config import BusConfig, load_config, zenoh_config
-from runtime.delivery import FRAMES, Delivery
-from services.launcher import service_env
+import beyond_self.schemas as s
+from beyond_self.commands.up import local_group, monitor_name, wait_list
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.config import BusConfig, load_config, zenoh_config
+from beyond_self.runtime.delivery import FRAMES, Delivery
+from beyond_self.services.launcher import service_env
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from beyond.cli import main
-from cognition.bn import learn_network, load_bag, load_definition, save_model
-from cognition.descriptions import score_sentence
+from beyond_self.cli import main
+from beyond_self.cognition.bn import learn_network, load_bag, load_definition, save_model
+from beyond_self.cognition.descriptions import score_sentence
 
 
 @pytest.fixture(scope="module")

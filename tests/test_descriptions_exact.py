@@ -18,7 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cognition.descriptions import (
+from beyond_self.cognition.descriptions import (
     ScoredSentence,
     SentenceSpace,
     brute_force_nbest,
@@ -28,8 +28,8 @@ from cognition.descriptions import (
     nbest_sampled,
     top_keys,
 )
-from cognition.grammar import DEFAULT_GRAMMAR, Grammar, parse_grammar
-from core.errors import InputError
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR, Grammar, parse_grammar
+from beyond_self.core.errors import InputError
 
 SMALL = parse_grammar(
     "\n".join(

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.stats import chisquare
 
-from cognition.descriptions import (
+from beyond_self.cognition.descriptions import (
     SentenceSpace,
     hsgen_phrase_probabilities,
     nbest_from_sentences,
@@ -19,8 +19,8 @@ from cognition.descriptions import (
     sample_keys,
     sample_sentences,
 )
-from cognition.grammar import DEFAULT_GRAMMAR, Phrase, parse_grammar
-from core.errors import InputError
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR, Phrase, parse_grammar
+from beyond_self.core.errors import InputError
 
 # By hand, from the walk over the word network (uniform among the words that can come next):
 # after the agent, each of 6 verbs offers 5 next words {V-s, has, just, V-ed, is}; after "has",

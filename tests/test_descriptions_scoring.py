@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.descriptions import (
+from beyond_self.cognition.descriptions import (
     ScoredSentence,
     nbest_exact,
     nbest_from_file,
@@ -17,8 +17,8 @@ from cognition.descriptions import (
     plot_nbest,
     score_sentence,
 )
-from cognition.grammar import DEFAULT_GRAMMAR
-from core.errors import InputError
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
+from beyond_self.core.errors import InputError
 
 
 def _probs(seed: int) -> dict[str, float]:

@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from beyond.cli import main as cli
-from cognition.bn import learn_network, synthetic_dataset
-from cognition.bn.model import BayesNet
-from cognition.development.demonstrations import (
+from beyond_self.cli import main as cli
+from beyond_self.cognition.bn import learn_network, synthetic_dataset
+from beyond_self.cognition.bn.model import BayesNet
+from beyond_self.cognition.development.demonstrations import (
     Demonstration,
     ObservationConfig,
     RecordedEffects,
     synthesize_demonstrations,
 )
-from cognition.development.learning import (
+from beyond_self.cognition.development.learning import (
     LearningConfig,
     LearningResults,
     fit_kappa,
@@ -30,13 +30,13 @@ from cognition.development.learning import (
     tempered_posterior,
     word_evidence,
 )
-from cognition.development.report import write_outputs
-from cognition.fusion import fuse
-from cognition.gestures.hmm import TrainingConfig
-from cognition.grammar import DEFAULT_GRAMMAR
-from cognition.variables import ACTIONS, EFFECTS
-from cognition.world import simulate_effects
-from core.errors import InputError
+from beyond_self.cognition.development.report import write_outputs
+from beyond_self.cognition.fusion import fuse
+from beyond_self.cognition.gestures.hmm import TrainingConfig
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
+from beyond_self.cognition.variables import ACTIONS, EFFECTS
+from beyond_self.cognition.world import simulate_effects
+from beyond_self.core.errors import InputError
 
 SMALL = LearningConfig(
     n_per_action=8,

@@ -12,9 +12,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from beyond.commands.analyse import _inputs
-from cognition.bn import learn_network, synthetic_dataset
-from cognition.episodes import (
+from beyond_self.cognition.bn import learn_network, synthetic_dataset
+from beyond_self.cognition.episodes import (
     Anticipation,
     Belief,
     Cancelled,
@@ -29,10 +28,11 @@ from cognition.episodes import (
     Outcome,
     Started,
 )
-from cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
-from cognition.gestures import extract_features
-from cognition.gestures.default_models import default_models
-from cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
+from beyond_self.cognition.gestures import extract_features
+from beyond_self.cognition.gestures.default_models import default_models
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.commands.analyse import _inputs
 
 RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "touch-box.mcap"
 

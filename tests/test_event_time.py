@@ -24,15 +24,15 @@ from pathlib import Path
 import pytest
 from busutil_net import private_config
 
-import schemas as s
-from beyond.commands.analyse import _inputs
-from beyond.monitor import PipelineMonitor
-from cognition.bn import learn_network, synthetic_dataset
-from cognition.episodes.offline import analyse_stream
-from cognition.gestures.default_models import default_models
-from cognition.vision.clusters import ClusterModel
-from runtime.delivery import FRAMES
-from services.deployment import Deployment
+import beyond_self.schemas as s
+from beyond_self.cognition.bn import learn_network, synthetic_dataset
+from beyond_self.cognition.episodes.offline import analyse_stream
+from beyond_self.cognition.gestures.default_models import default_models
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.commands.analyse import _inputs
+from beyond_self.monitor import PipelineMonitor
+from beyond_self.runtime.delivery import FRAMES
+from beyond_self.services.deployment import Deployment
 
 RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"
 SHIPPED = sorted(p.name for p in RECORDINGS.glob("*.mcap"))

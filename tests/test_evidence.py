@@ -10,20 +10,26 @@ from typing import Any
 
 import pytest
 
-from beyond.cli import build_parser, main
-from beyond.commands import ask
-from cognition.bn import BayesNet, learn_network, load_model, save_model, synthetic_dataset
-from cognition.bn.evidence import (
+from beyond_self.cli import build_parser, main
+from beyond_self.cognition.bn import (
+    BayesNet,
+    learn_network,
+    load_model,
+    save_model,
+    synthetic_dataset,
+)
+from beyond_self.cognition.bn.evidence import (
     Evidence,
     build_evidence,
     parse_evidence,
     parse_gesture,
     parse_soft,
 )
-from core.errors import InputError
-from schemas import AffordanceAnswer, AffordanceQuery
-from schemas.codec import decode, encode
-from services.reasoner import AffordanceReasoner
+from beyond_self.commands import ask
+from beyond_self.core.errors import InputError
+from beyond_self.schemas import AffordanceAnswer, AffordanceQuery
+from beyond_self.schemas.codec import decode, encode
+from beyond_self.services.reasoner import AffordanceReasoner
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,6 @@ import os
 import socket
 import struct
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +20,8 @@ import jsonschema
 from busutil_net import REPO, env_for, free_port, private_config
 from websockets.asyncio.client import connect
 
-from runtime.bus import Bus
+from beyond_self.runtime.bus import Bus
+from beyond_self.services.launcher import BEYOND
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 RECORDING = REPO / "recordings" / "touch-box.mcap"
@@ -69,9 +69,7 @@ async def test_websocket_client_gets_valid_foxglove_messages_during_a_replay(
         f"{root}/foxglove/posterior": None,  # ours: checked against its advertised schema
     }
     proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "beyond",
+        *BEYOND,
         "up",
         "--recording",
         str(RECORDING),
@@ -147,7 +145,7 @@ def test_port_in_use_is_one_line_and_exit_2() -> None:
         taken.listen()
         port = taken.getsockname()[1]
         done = subprocess.run(
-            [sys.executable, "-m", "beyond", "foxglove", "--port", str(port)],
+            [*BEYOND, "foxglove", "--port", str(port)],
             env=env_for(config),
             capture_output=True,
             text=True,

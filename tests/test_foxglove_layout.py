@@ -8,9 +8,9 @@ import re
 
 from busutil_net import REPO
 
-from runtime.foxglove_layout import layout_json
-from runtime.foxglove_views import VIEWS
-from schemas.keys import STREAMS, Keys
+from beyond_self.runtime.foxglove_layout import layout_json
+from beyond_self.runtime.foxglove_views import VIEWS
+from beyond_self.schemas.keys import STREAMS, Keys
 
 SHIPPED = REPO / "deploy" / "foxglove" / "beyond-demo.layout.json"
 

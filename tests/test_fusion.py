@@ -10,9 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cognition.bn import BayesNet, learn_network, load_bag, load_definition, synthetic_dataset
-from cognition.fusion import fuse, fuse_words
-from core.errors import InputError
+from beyond_self.cognition.bn import (
+    BayesNet,
+    learn_network,
+    load_bag,
+    load_definition,
+    synthetic_dataset,
+)
+from beyond_self.cognition.fusion import fuse, fuse_words
+from beyond_self.core.errors import InputError
 
 AFFORDANCE = ("Color", "Shape", "Size", "ObjVel", "ObjHandVel", "HandVel", "Contact")
 

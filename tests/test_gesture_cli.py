@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from beyond.cli import main
-from cognition.gestures.hmm import load_models
+from beyond_self.cli import main
+from beyond_self.cognition.gestures.hmm import load_models
 
 
 def test_stream_json_on_the_article_tap(
@@ -69,11 +69,11 @@ def test_train_then_evaluate_synthetic(tmp_path: Path, capsys: pytest.CaptureFix
 
 
 def _write_mcap(path: Path, actions: list[str], seed: int, metadata: dict[str, str]) -> None:
-    from cognition.gestures.synthetic import synthesize_continuous
-    from runtime.recording_writer import RecordingWriter
-    from schemas.base import Header
-    from schemas.keys import Keys
-    from schemas.messages import Joint, SkeletonFrame
+    from beyond_self.cognition.gestures.synthetic import synthesize_continuous
+    from beyond_self.runtime.recording_writer import RecordingWriter
+    from beyond_self.schemas.base import Header
+    from beyond_self.schemas.keys import Keys
+    from beyond_self.schemas.messages import Joint, SkeletonFrame
 
     stream = synthesize_continuous(actions, seed)
     key = Keys().skeleton

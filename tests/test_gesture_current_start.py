@@ -1,6 +1,6 @@
 """The segmenter announces a gesture's start while it unfolds (the streamer relies on it)."""
 
-from cognition.gestures import GestureSegmenter, synthesize_continuous
+from beyond_self.cognition.gestures import GestureSegmenter, synthesize_continuous
 
 
 def test_current_start_is_known_while_the_gesture_unfolds() -> None:

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.gestures.features import extract_features, features_from_joints
-from cognition.gestures.logs import parse_frames, read_hand_log
-from core.errors import InputError
+from beyond_self.cognition.gestures.features import extract_features, features_from_joints
+from beyond_self.cognition.gestures.logs import parse_frames, read_hand_log
+from beyond_self.core.errors import InputError
 
 
 def _write(tmp_path: Path, text: str) -> Path:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from cognition.gestures import (
+from beyond_self.cognition.gestures import (
     GestureHMM,
     GestureModels,
     TrainingConfig,
@@ -18,7 +18,7 @@ from cognition.gestures import (
     save_models,
     train_hmm,
 )
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 
 def random_hmm(rng: np.random.Generator, q: int = 4, m: int = 2, d: int = 3) -> GestureHMM:

@@ -7,10 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.gestures.datasets import load_gestures, synthetic_gestures
-from cognition.gestures.evaluation import EvaluationReport, cross_validate, evaluate, plot_report
-from cognition.gestures.hmm import GestureModels, TrainingConfig, train_models
-from cognition.gestures.synthetic import synthesize_dataset
+from beyond_self.cognition.gestures.datasets import load_gestures, synthetic_gestures
+from beyond_self.cognition.gestures.evaluation import (
+    EvaluationReport,
+    cross_validate,
+    evaluate,
+    plot_report,
+)
+from beyond_self.cognition.gestures.hmm import GestureModels, TrainingConfig, train_models
+from beyond_self.cognition.gestures.synthetic import synthesize_dataset
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +56,7 @@ def test_plots_are_written(held_out_report: EvaluationReport, tmp_path: Path) ->
 
 
 def test_cross_validation_never_tests_on_training_data(monkeypatch: pytest.MonkeyPatch) -> None:
-    import cognition.gestures.evaluation as ev
+    import beyond_self.cognition.gestures.evaluation as ev
 
     gestures = synthetic_gestures(3, seed=5)
     seen: list[list[np.ndarray]] = []

@@ -7,16 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.gestures.datasets import load_gestures
-from cognition.gestures.features import extract_features
-from cognition.gestures.logs import read_hand_log
-from cognition.gestures.segmentation import (
+from beyond_self.cognition.gestures.datasets import load_gestures
+from beyond_self.cognition.gestures.features import extract_features
+from beyond_self.cognition.gestures.logs import read_hand_log
+from beyond_self.cognition.gestures.segmentation import (
     GestureSegmenter,
     SegmenterConfig,
     segment_gestures,
 )
-from cognition.gestures.synthetic import synthesize_continuous
-from core.errors import InputError
+from beyond_self.cognition.gestures.synthetic import synthesize_continuous
+from beyond_self.core.errors import InputError
 
 
 def _iou(a: tuple[int, int], b: tuple[int, int]) -> float:

@@ -11,16 +11,16 @@ from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 from test_gesture_models import random_hmm
 
-from cognition.gestures.features import extract_features
-from cognition.gestures.hmm import GestureHMM, GestureModels
-from cognition.gestures.logs import read_hand_log
-from cognition.gestures.matlab import load_matlab_models
-from cognition.gestures.streaming import (
+from beyond_self.cognition.gestures.features import extract_features
+from beyond_self.cognition.gestures.hmm import GestureHMM, GestureModels
+from beyond_self.cognition.gestures.logs import read_hand_log
+from beyond_self.cognition.gestures.matlab import load_matlab_models
+from beyond_self.cognition.gestures.streaming import (
     BatchRecognizer,
     StreamingRecognizer,
     recognize_sequence,
 )
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 
 def hmmlearn_prefix_scores(

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cognition.gestures.synthetic import (
+from beyond_self.cognition.gestures.synthetic import (
     JOINTS,
     synthesize_continuous,
     synthesize_dataset,
     synthesize_gesture,
 )
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 
 def test_same_seed_same_bytes_other_seed_other_data() -> None:

@@ -2,8 +2,8 @@ from pathlib import Path
 
 import pytest
 
-from cognition.grammar import DEFAULT_GRAMMAR, parse_grammar
-from core.errors import InputError
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR, parse_grammar
+from beyond_self.core.errors import InputError
 
 
 def test_grammar_size_matches_hand_count() -> None:
@@ -29,7 +29,7 @@ def test_every_sampled_sentence_of_the_article_is_in_the_grammar(shared_data: Pa
 
 
 def _derives(words: tuple[str, ...], slots: list[str], g: object) -> bool:
-    from cognition.grammar import Grammar
+    from beyond_self.cognition.grammar import Grammar
 
     assert isinstance(g, Grammar)
     if not slots:

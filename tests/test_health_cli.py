@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from beyond.cli import main
-from beyond.commands.health import local_roles
+from beyond_self.cli import main
+from beyond_self.commands.health import local_roles
+from beyond_self.services.launcher import BEYOND
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -41,7 +41,7 @@ def test_local_roles_come_from_the_beyond_processes(tmp_path: Path) -> None:
             "--config",
             "x",
         ],
-        ["python", "-m", "beyond", "service", "describer"],
+        [*BEYOND, "service", "describer"],
         ["/usr/bin/python3", "/usr/local/bin/beyond", "router", "--zenoh-config", "r.json5"],
         ["beyond", "health"],
         ["sleep", "service", "objects"],
@@ -53,7 +53,7 @@ def test_local_roles_come_from_the_beyond_processes(tmp_path: Path) -> None:
 def test_no_service_and_none_running_is_an_input_error(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("beyond.commands.health.local_roles", lambda: ([], False))
+    monkeypatch.setattr("beyond_self.commands.health.local_roles", lambda: ([], False))
     assert main(["health"]) == 2
     err = capsys.readouterr().err
     assert "no SERVICE given" in err and err.count("\n") == 1
@@ -66,7 +66,7 @@ def test_a_running_service_answers_and_a_missing_one_does_not(tmp_path: Path) ->
         "BEYOND_ZENOH_PORT": str(20000 + os.getpid() % 20000),
         "PYTHONPATH": str(REPO),
     }
-    beyond = [sys.executable, "-m", "beyond"]
+    beyond = [*BEYOND]
     service = subprocess.Popen([*beyond, "service", "objects"], env=env, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 60

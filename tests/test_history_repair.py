@@ -21,9 +21,9 @@ import time
 import zenoh
 from busutil_net import private_config, skeleton_frames
 
-import schemas as s
-from runtime.bus import Bus
-from runtime.delivery import FRAMES
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import FRAMES
 
 BEFORE = 100  # published before the subscriber exists: only the cache holds them
 LIVE = 60  # published while it starts, every 10 ms

@@ -15,8 +15,8 @@ from pathlib import Path
 
 from busutil_net import env_for, private_config
 
-from runtime.bus import Bus
-from services.launcher import (
+from beyond_self.runtime.bus import Bus
+from beyond_self.services.launcher import (
     LINE_MAX,
     HealthWatch,
     read_lines,

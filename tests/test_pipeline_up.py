@@ -6,16 +6,16 @@ import asyncio
 import re
 import signal
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from busutil_net import env_for, private_config, skeleton_recording
 
-import schemas as s
-from cognition.grammar import DEFAULT_GRAMMAR
-from runtime.config import BusConfig
-from services.deployment import Deployment
+import beyond_self.schemas as s
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
+from beyond_self.runtime.config import BusConfig
+from beyond_self.services.deployment import Deployment
+from beyond_self.services.launcher import BEYOND
 
 VERBS = {
     "tap": r"\b(taps|tapped|tapping|pushes|pushed|pushing|pokes|poked|poking)\b",
@@ -28,7 +28,7 @@ def run_up(
     recording: Path, tmp: Path, config: BusConfig, rate: str
 ) -> subprocess.CompletedProcess[str]:
     env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
-    cmd = [sys.executable, "-m", "beyond", "up", "--recording", str(recording), "--rate", rate,
+    cmd = [*BEYOND, "up", "--recording", str(recording), "--rate", rate,
            "--no-live", "--timeout", "90"]  # fmt: skip
     return subprocess.run(cmd, env=env, cwd=tmp, capture_output=True, text=True, timeout=150)
 
@@ -88,7 +88,7 @@ async def test_a_killed_service_restarts_and_is_picked_up() -> None:
 def test_demo_watches_the_bundled_recording_and_describes_it(tmp_path: Path) -> None:
     """`make demo`'s job, on a private bus: the tapped ball and the grasped box, in words."""
     env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}
-    cmd = [sys.executable, "-m", "beyond", "demo", "--no-live"]
+    cmd = [*BEYOND, "demo", "--no-live"]
     done = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150)
     assert done.returncode == 0, done.stdout + done.stderr[-3000:]
     described = dict(re.findall(r'^gesture (\d+): "(.*)"$', done.stdout, re.M))

@@ -16,10 +16,11 @@ from typing import Any
 import pytest
 from busutil_net import REPO, env_for, private_config
 
-import schemas as s
-from runtime.bus import Bus
-from runtime.recording import inspect_recording, read_recording
-from runtime.replay import replay
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.replay import replay
+from beyond_self.services.launcher import BEYOND
 
 SHIPPED = sorted((REPO / "recordings").glob("*.mcap"))
 CHECKER = REPO / "tests" / "js" / "mcap_check.js"
@@ -115,7 +116,7 @@ async def test_beyond_record_file_is_trusted(node_modules: Path, tmp_path: Path)
     with Bus.open(config) as bus:
         proc = subprocess.Popen(
             [
-                *(sys.executable, "-m", "beyond", "record", "--foxglove"),
+                *(*BEYOND, "record", "--foxglove"),
                 *("-o", str(out), "--count", str(expected)),
             ],
             env=env_for(config),
@@ -159,7 +160,14 @@ def test_export_adds_foxglove_views_to_a_shipped_recording(
     source = REPO / "recordings" / "touch-box.mcap"
     out = tmp_path / "touch-views.mcap"
     done = subprocess.run(
-        [sys.executable, "-m", "beyond", "foxglove", "--export", str(source), "-o", str(out)],
+        [
+            *BEYOND,
+            "foxglove",
+            "--export",
+            str(source),
+            "-o",
+            str(out),
+        ],
         capture_output=True,
         text=True,
         timeout=60,
@@ -175,7 +183,14 @@ def test_export_adds_foxglove_views_to_a_shipped_recording(
     assert report["unchecked"] == 0
     assert_trusted(report, out)
     again = subprocess.run(
-        [sys.executable, "-m", "beyond", "foxglove", "--export", str(out), "-o", str(out)],
+        [
+            *BEYOND,
+            "foxglove",
+            "--export",
+            str(out),
+            "-o",
+            str(out),
+        ],
         capture_output=True,
         text=True,
         timeout=60,

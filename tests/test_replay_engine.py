@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 from busutil_net import skeleton_frames
 
-import schemas as s
-from core.errors import InputError
-from runtime.recording import read_recording
-from runtime.recording_writer import RecordingWriter
-from runtime.replay import Cue, Player, recorded_cues
-from runtime.replay_control import ReplayControl, check_rate, rate_option
+import beyond_self.schemas as s
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.recording import read_recording
+from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.runtime.replay import Cue, Player, recorded_cues
+from beyond_self.runtime.replay_control import ReplayControl, check_rate, rate_option
 
 KEYS = s.Keys("r1")
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 from busutil_net import private_config
 
-import schemas as s
-from runtime.config import BusConfig
-from runtime.delivery import FRAMES
-from runtime.replay import replay
-from services.deployment import Deployment
+import beyond_self.schemas as s
+from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.delivery import FRAMES
+from beyond_self.runtime.replay import replay
+from beyond_self.services.deployment import Deployment
 
 RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "touch-box.mcap"
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from beyond.cli import main
+from beyond_self.cli import main
 
 
 @pytest.fixture(scope="module")

@@ -12,10 +12,10 @@ import msgspec
 import pytest
 from busutil_net import EXAMPLES, env_for, private_config, skeleton_frames
 
-import schemas as s
-from runtime.bus import Bus
-from runtime.inbox import Inbox
-from runtime.service import Service
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.inbox import Inbox
+from beyond_self.runtime.service import Service
 
 
 async def test_inbox_hands_items_from_threads_in_order_and_counts_drops() -> None:

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.errors import InputError
-from runtime.config import DEFAULT_PORT, ENV_VARS, BusConfig, load_config, zenoh_config
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.config import DEFAULT_PORT, ENV_VARS, BusConfig, load_config, zenoh_config
 
 
 def get(zc: object, key: str) -> object:

@@ -20,9 +20,9 @@ from types import ModuleType
 import msgspec
 from busutil_net import env_for, private_config
 
-from runtime.bus import Bus
-from runtime.delivery import EVENTS
-from schemas import Description, GestureSegment, Header
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import EVENTS
+from beyond_self.schemas import Description, GestureSegment, Header
 
 README = Path(__file__).resolve().parents[1] / "runtime" / "README.md"
 

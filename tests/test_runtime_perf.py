@@ -12,13 +12,13 @@ from pathlib import Path
 import pytest
 from busutil_net import private_config, skeleton_frames
 
-import schemas as s
-from runtime.bus import Bus
-from runtime.delivery import Delivery
-from runtime.inbox import Inbox
-from runtime.recording_writer import RecordingWriter
-from runtime.replay import replay
-from schemas.codec import encode, encode_into, wire_encoding
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import Delivery
+from beyond_self.runtime.inbox import Inbox
+from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.runtime.replay import replay
+from beyond_self.schemas.codec import encode, encode_into, wire_encoding
 
 
 def camera_frame(seq: int, width: int = 32, height: int = 24) -> s.CameraFrame:
@@ -206,7 +206,7 @@ async def test_replay_sends_each_recorded_message_as_its_wire_bytes(tmp_path: Pa
 def test_chunk_parser_reads_what_mcap_reads(tmp_path: Path, compression: str) -> None:
     from mcap.reader import make_reader
 
-    from runtime.recording import read_recording
+    from beyond_self.runtime.recording import read_recording
 
     keys = s.Keys("robot")
     path = tmp_path / f"{compression}.mcap"
@@ -228,8 +228,8 @@ def test_chunk_parser_reads_what_mcap_reads(tmp_path: Path, compression: str) ->
 
 
 def test_a_corrupt_chunk_is_reported_as_damage(tmp_path: Path) -> None:
-    from core.errors import InputError
-    from runtime.recording import read_recording
+    from beyond_self.core.errors import InputError
+    from beyond_self.runtime.recording import read_recording
 
     keys = s.Keys("robot")
     path = tmp_path / "corrupt.mcap"

@@ -11,11 +11,12 @@ from pathlib import Path
 
 from busutil_net import EXAMPLES, env_for, private_config, skeleton_frames
 
-import schemas as s
-from runtime.bus import Bus
-from runtime.recording_writer import RecordingWriter
-from runtime.replay import replay
-from runtime.subscription import RawSubscription
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.runtime.replay import replay
+from beyond_self.runtime.subscription import RawSubscription
+from beyond_self.services.launcher import BEYOND
 
 N = 150
 THRESHOLD = 1.6  # the segmenter's, on doubled coordinates
@@ -80,9 +81,7 @@ async def test_two_services_replay_twice_identical(tmp_path: Path) -> None:
                 probe.close()
                 if use_cli:
                     cli = await asyncio.create_subprocess_exec(
-                        sys.executable,
-                        "-m",
-                        "beyond",
+                        *BEYOND,
                         "replay",
                         str(recording),
                         "--afap",

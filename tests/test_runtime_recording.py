@@ -8,7 +8,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -16,11 +15,12 @@ import pytest
 from busutil_net import env_for, private_config, skeleton_frames
 from mcap.reader import make_reader
 
-import schemas as s
-from runtime.bus import Bus
-from runtime.recording import inspect_recording, read_recording
-from runtime.recording_writer import RecordingWriter
-from runtime.replay import replay
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.runtime.replay import replay
+from beyond_self.services.launcher import BEYOND
 
 ROBOT_KEYS = s.Keys("r1")
 
@@ -135,7 +135,7 @@ def test_truncated_file_reports_what_is_readable(tmp_path: Path) -> None:
         line = info.damage()
         assert f"of {cut}" in line and f"readable: {expected} messages" in line
         result = subprocess.run(
-            [sys.executable, "-m", "beyond", "inspect", str(cut_path)],
+            [*BEYOND, "inspect", str(cut_path)],
             capture_output=True,
             text=True,
             timeout=60,
@@ -163,9 +163,7 @@ async def test_killed_recorder_leaves_readable_file(tmp_path: Path) -> None:
     with Bus.open(config) as bus:
         proc = subprocess.Popen(
             [
-                sys.executable,
-                "-m",
-                "beyond",
+                *BEYOND,
                 "record",
                 bus.keys.everything,
                 "-o",

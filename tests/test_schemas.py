@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import schemas as s
-from core.errors import InputError
-from schemas.messages import IMAGE_BYTES_MAX
+import beyond_self.schemas as s
+from beyond_self.core.errors import InputError
+from beyond_self.schemas.messages import IMAGE_BYTES_MAX
 
 H = s.Header(version=1, source="test", seq=7, stamp=1_700_000_000_123_456_789, correlation="x/1")
 

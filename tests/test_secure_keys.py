@@ -12,20 +12,20 @@ import os
 import shutil
 import stat
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from core.errors import InputError
-from runtime import acl, keystore
-from runtime.bus import Bus
-from runtime.config import BusConfig, load_config, zenoh_config
-from runtime.service import Service
-from schemas import Description, WordProbabilities
-from services import registry
-from services.registry import SERVICES, service_class
+from beyond_self.core.errors import InputError
+from beyond_self.runtime import acl, keystore
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.config import BusConfig, load_config, zenoh_config
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import Description, WordProbabilities
+from beyond_self.services import registry
+from beyond_self.services.launcher import BEYOND
+from beyond_self.services.registry import SERVICES, service_class
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -40,7 +40,7 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def beyond(*args: str) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("BEYOND_")}
     return subprocess.run(
-        [sys.executable, "-m", "beyond", *args],
+        [*BEYOND, *args],
         capture_output=True,
         text=True,
         timeout=60,

@@ -21,8 +21,9 @@ import pytest
 from busutil_net import skeleton_recording
 from netns_util import REPO, TwoHosts
 
-from runtime import keystore
-from services import registry
+from beyond_self.runtime import keystore
+from beyond_self.services import registry
+from beyond_self.services.launcher import BEYOND
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(170)]
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"
@@ -61,7 +62,7 @@ def wait_exit(proc: Any, timeout: float) -> int:
 
 def test_secure_up_describes_the_demo_recording(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
     ours, _ = stores
-    argv = [str(REPO / ".venv/bin/python"), "-m", "beyond", "up", "--secure", str(ours),
+    argv = [*BEYOND, "up", "--secure", str(ours),
             "--recording", str(DEMO), "--no-live", "--timeout", "100"]  # fmt: skip
     up = hosts.start(hosts.ws, "up", argv, clean_env())
     code = wait_exit(up, 150)
@@ -81,7 +82,10 @@ def test_router_rules_hold(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
     ours, theirs = stores
     python = str(REPO / ".venv/bin/python")
     router = hosts.start(
-        hosts.ws, "router", [python, "-m", "beyond", "router", "--secure", str(ours)], clean_env()
+        hosts.ws,
+        "router",
+        [*BEYOND, "router", "--secure", str(ours)],
+        clean_env(),
     )
     deadline = time.monotonic() + 60
     while not any("zenoh router" in line for _, line in router.lines):
@@ -134,7 +138,15 @@ def test_secure_split_survives_a_cut_link(
     recording = tmp_path / "six.mcap"
     skeleton_recording(recording, SIX, seed=3, robot="robot")
     python = str(REPO / ".venv/bin/python")
-    up = [python, "-m", "beyond", "up", "--secure", str(ours), "--no-live", "--timeout", "120"]
+    up = [
+        *BEYOND,
+        "up",
+        "--secure",
+        str(ours),
+        "--no-live",
+        "--timeout",
+        "120",
+    ]
     ws = hosts.start(hosts.ws, "ws", [*up, "--profile", "workstation", "--until-stream-end"],
                      clean_env())  # fmt: skip
     wait_for("the workstation", lambda: "pipeline up:" in ws.text(), 90, [ws])
@@ -192,10 +204,9 @@ def test_tools_read_and_ask_a_secure_pipeline(hosts: TwoHosts, stores: tuple[Pat
     """`echo`, `topics`, `ask` and `record` with the tools' certificate against a running secure
     pipeline (no source: it runs until stopped)."""
     ours, _ = stores
-    python = str(REPO / ".venv/bin/python")
     up = hosts.start(
         hosts.ws, "up",
-        [python, "-m", "beyond", "up", "--secure", str(ours), "--skip", "ingest", "--no-live"],
+        [*BEYOND, "up", "--secure", str(ours), "--skip", "ingest", "--no-live"],
         clean_env(),
     )  # fmt: skip
     deadline = time.monotonic() + 90
@@ -211,7 +222,7 @@ def test_tools_read_and_ask_a_secure_pipeline(hosts: TwoHosts, stores: tuple[Pat
         "record": ["record", "-o", mcap, "--count", "3", "beyond/robot/health/*"],
     }
     procs = {
-        name: hosts.start(hosts.ws, name, [python, "-m", "beyond", *argv, *secure], clean_env())
+        name: hosts.start(hosts.ws, name, [*BEYOND, *argv, *secure], clean_env())
         for name, argv in commands.items()
     }
     out = {}

@@ -10,10 +10,10 @@ import msgspec
 import pytest
 from busutil_net import private_config
 
-import schemas as s
-from cognition.gestures import synthesize_continuous
-from runtime.bus import Bus
-from services.registry import SERVICES, service_class
+import beyond_self.schemas as s
+from beyond_self.cognition.gestures import synthesize_continuous
+from beyond_self.runtime.bus import Bus
+from beyond_self.services.registry import SERVICES, service_class
 
 GARBAGE = [b"", b"\x00\x01\x02", msgspec.msgpack.encode({"type": "Nope", "header": 3})]
 
@@ -69,7 +69,7 @@ async def test_describer_still_describes_after_garbage(bus: Bus) -> None:
     pub = bus.publisher(bus.keys.words, s.WordProbabilities)
     await pub.wait_matching(timeout=10)
     pub.put_bytes(b"garbage")
-    from cognition.grammar import DEFAULT_GRAMMAR
+    from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
 
     words = {w: 0.5 for w in DEFAULT_GRAMMAR.vocabulary}
     words.update({"taps": 0.99, "he": 0.99, "the": 0.99, "ball": 0.99, "rolls": 0.99, "and": 0.99})
@@ -126,7 +126,7 @@ async def test_reasoner_answers_ad_hoc_queries_and_rejects_bad_ones(bus: Bus) ->
     direct = model.query("ObjVel", {"Shape": "circle", "Action": "tap"}).marginal("ObjVel")
     assert dist == pytest.approx(direct, abs=1e-12)
     bad = s.AffordanceQuery(header=_header(1, 0), query=["Nope"])
-    from core.errors import InputError
+    from beyond_self.core.errors import InputError
 
     with pytest.raises(InputError, match="valid: Action"):
         await bus.query(bus.keys.ask, s.AffordanceAnswer, payload=bad, timeout=5)

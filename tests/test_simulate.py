@@ -10,11 +10,10 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from beyond.cli import main
-from beyond.commands.simulate import check_recording, checks_pass
-from cognition.gestures.segmentation import segment_gestures
-from cognition.gestures.synthetic import synthesize_continuous
-from cognition.scene import (
+from beyond_self.cli import main
+from beyond_self.cognition.gestures.segmentation import segment_gestures
+from beyond_self.cognition.gestures.synthetic import synthesize_continuous
+from beyond_self.cognition.scene import (
     EPOCH_NS,
     PRESETS,
     Scene,
@@ -23,13 +22,14 @@ from cognition.scene import (
     parse_scene,
     simulate_scene,
 )
-from cognition.vision.tabletop import kinect_to_table
-from core.errors import InputError
-from runtime.images import image_from_message, message_from_image
-from runtime.recording import inspect_recording, read_recording
-from runtime.recording_writer import RecordingWriter
-from schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame
-from schemas.keys import Keys
+from beyond_self.cognition.vision.tabletop import kinect_to_table
+from beyond_self.commands.simulate import check_recording, checks_pass
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.images import image_from_message, message_from_image
+from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame
+from beyond_self.schemas.keys import Keys
 
 
 @pytest.fixture(scope="module")
@@ -179,7 +179,7 @@ def test_overlapping_windows_get_an_empty_table_between_objects() -> None:
     """If the segmenter ends one gesture after the next one's window opens, the old object goes
     first, the table stays empty longer than the tracker keeps a lost object, and the new one is
     on the table before that window opens."""
-    from cognition.scene import _blocks
+    from beyond_self.cognition.scene import _blocks
 
     sk = synthesize_continuous(["tap", "touch"], seed=3)
     (a, b) = sk.gestures
@@ -356,7 +356,7 @@ def test_every_gesture_is_found_recognised_and_its_object_read(seed: int) -> Non
     """Random scenes of three items: one segment per item, the action recognised, the object's
     colour, shape and size and the true ObjVel measured on the gesture's camera window (JPEG
     frames, as shipped)."""
-    from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+    from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
 
     rng = np.random.default_rng(seed)
     items = [

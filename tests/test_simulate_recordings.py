@@ -8,11 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from beyond.cli import main
-from beyond.commands.simulate import check_recording, checks_pass
-from cognition.paths import REPO_ROOT
+from beyond_self.cli import main
+from beyond_self.cognition.paths import RECORDINGS
+from beyond_self.commands.simulate import check_recording, checks_pass
 
-RECORDINGS = REPO_ROOT / "recordings"
 README = RECORDINGS / "README.md"
 DEMO = "tap-ball-grasp-box.mcap"
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from services.speech import SpeechSynthesizer
+from beyond_self.services.speech import SpeechSynthesizer
 
 
 def test_synthesizes_a_real_wav_with_espeak(tmp_path: Path) -> None:

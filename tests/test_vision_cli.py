@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from beyond.cli import main
-from cognition.vision.images import read_image, write_image
-from cognition.vision.tabletop import Camera, make_table, simulate_experiment
+from beyond_self.cli import main
+from beyond_self.cognition.vision.images import read_image, write_image
+from beyond_self.cognition.vision.tabletop import Camera, make_table, simulate_experiment
 
 REAL = "saponaro2019/lemon_and_cuboid"
 
@@ -81,8 +81,8 @@ def test_bad_input_is_one_line_and_status_2(
 def test_mcap_recording_of_camera_frames(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import schemas as s
-    from runtime.recording_writer import RecordingWriter
+    import beyond_self.schemas as s
+    from beyond_self.runtime.recording_writer import RecordingWriter
 
     exp = simulate_experiment("tap", "yellow", "circle", "big", np.random.default_rng(9))
     path = tmp_path / "rec.mcap"

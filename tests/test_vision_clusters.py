@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.variables import AFFORDANCE_VARIABLES
-from cognition.vision.clusters import (
+from beyond_self.cognition.variables import AFFORDANCE_VARIABLES
+from beyond_self.cognition.vision.clusters import (
     DEFAULT_PATH,
     ClusterModel,
     learn_discretiser,
     name_by_majority,
 )
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 
 def _speeds(seed: int) -> tuple[np.ndarray, list[str]]:

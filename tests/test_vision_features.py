@@ -5,9 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cognition.vision.features import crofton_perimeter, hull_and_rectangle, measure_blob
-from cognition.vision.segmentation import Blob
-from cognition.vision.tabletop import Camera
+from beyond_self.cognition.vision.features import (
+    crofton_perimeter,
+    hull_and_rectangle,
+    measure_blob,
+)
+from beyond_self.cognition.vision.segmentation import Blob
+from beyond_self.cognition.vision.tabletop import Camera
 
 YY, XX = np.mgrid[0:120, 0:120].astype(float)
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.vision.color import lab_to_rgb, rgb_to_lab
-from cognition.vision.images import as_frame, decode_pnm, read_image, write_image
-from core.errors import InputError
+from beyond_self.cognition.vision.color import lab_to_rgb, rgb_to_lab
+from beyond_self.cognition.vision.images import as_frame, decode_pnm, read_image, write_image
+from beyond_self.core.errors import InputError
 
 
 def _frame() -> np.ndarray:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from cognition.vision.clusters import ClusterModel
-from cognition.vision.pipeline import RecordingAnalyser, analyse_frames
-from cognition.vision.tabletop import simulate_experiment
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.pipeline import RecordingAnalyser, analyse_frames
+from beyond_self.cognition.vision.tabletop import simulate_experiment
 
 
 def test_prefix_of_an_incremental_analysis_equals_the_batch_analysis() -> None:

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.vision.clusters import ClusterModel
-from cognition.vision.evaluation import evaluate_experiments, evaluate_stills
-from cognition.vision.pipeline import analyse_experiment
-from cognition.vision.tabletop import exploration, simulate_experiment
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.evaluation import evaluate_experiments, evaluate_stills
+from beyond_self.cognition.vision.pipeline import analyse_experiment
+from beyond_self.cognition.vision.tabletop import exploration, simulate_experiment
 
 SEED = 20_260_001  # not the exploration seed (0) of the shipped clusters
 

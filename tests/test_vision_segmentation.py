@@ -7,20 +7,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cognition.vision.background import BackgroundModel
-from cognition.vision.clusters import ClusterModel
-from cognition.vision.features import measure
-from cognition.vision.images import read_image
-from cognition.vision.pipeline import describe_frame
-from cognition.vision.segmentation import segment
-from cognition.vision.tabletop import (
+from beyond_self.cognition.vision.background import BackgroundModel
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.features import measure
+from beyond_self.cognition.vision.images import read_image
+from beyond_self.cognition.vision.pipeline import describe_frame
+from beyond_self.cognition.vision.segmentation import segment
+from beyond_self.cognition.vision.tabletop import (
     Camera,
     _draw_shadow,
     make_table,
     random_object,
     render_frame,
 )
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 LEMON_AND_CUBOID = "saponaro2019/lemon_and_cuboid"
 # reference blob descriptors, obj/data.log: first two numbers of each bottle

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cognition.vision.pipeline import analyse_experiment
-from cognition.vision.tabletop import Camera, kinect_to_table, simulate_experiment
-from cognition.world import simulate_effects
-from core.errors import InputError
+from beyond_self.cognition.vision.pipeline import analyse_experiment
+from beyond_self.cognition.vision.tabletop import Camera, kinect_to_table, simulate_experiment
+from beyond_self.cognition.world import simulate_effects
+from beyond_self.core.errors import InputError
 
 
 def test_camera_projection() -> None:

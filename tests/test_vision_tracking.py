@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cognition.vision.effects import contact_run, measure_effects
-from cognition.vision.tracking import Tracker, peak_speed, velocities
+from beyond_self.cognition.vision.effects import contact_run, measure_effects
+from beyond_self.cognition.vision.tracking import Tracker, peak_speed, velocities
 
 
 def test_two_objects_keep_their_identity_while_moving() -> None:

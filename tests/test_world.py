@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from cognition.world import simulate_effects
-from core.errors import InputError
+from beyond_self.cognition.world import simulate_effects
+from beyond_self.core.errors import InputError
 
 
 def _labels(action: str, shape: str, n: int = 200) -> list[dict[str, str]]:

@@ -17,10 +17,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from cognition.bn.bag import Dataset, load_bag, parse_bag
-from cognition.bn.definition import NetworkDefinition, Variable, load_definition, parse_definition
-from cognition.bn.inference import Posterior
-from cognition.bn.model import BayesNet, learn_network, load_model, save_model
+from beyond_self.cognition.bn.bag import Dataset, load_bag, parse_bag
+from beyond_self.cognition.bn.definition import (
+    NetworkDefinition,
+    Variable,
+    load_definition,
+    parse_definition,
+)
+from beyond_self.cognition.bn.inference import Posterior
+from beyond_self.cognition.bn.model import BayesNet, learn_network, load_model, save_model
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -45,13 +50,15 @@ __all__ = [
 
 def synthetic_dataset() -> Dataset:
     """The bundled synthetic training set (see cognition.bn.synthetic)."""
-    from cognition.bn import synthetic  # not at import time: `python -m` runs that module
+    from beyond_self.cognition.bn import (
+        synthetic,  # not at import time: `python -m` runs that module
+    )
 
     return synthetic.synthetic_dataset()
 
 
 def synthetic_paths() -> tuple[Path, Path]:
     """The bundled synthetic (definition, bag table) files."""
-    from cognition.bn import synthetic
+    from beyond_self.cognition.bn import synthetic
 
     return synthetic.synthetic_paths()

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cognition.bn.definition import NetworkDefinition
-from core.errors import InputError, read_text
+from beyond_self.cognition.bn.definition import NetworkDefinition
+from beyond_self.core.errors import InputError, read_text
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from core.errors import InputError, read_text, unknown
+from beyond_self.core.errors import InputError, read_text, unknown
 
 ABSENT = "-"
 

@@ -22,9 +22,9 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from cognition.bn.model import BayesNet
-from cognition.fusion import ACTION, action_vector
-from core.errors import InputError, unknown
+from beyond_self.cognition.bn.model import BayesNet
+from beyond_self.cognition.fusion import ACTION, action_vector
+from beyond_self.core.errors import InputError, unknown
 
 SUM_TOLERANCE = 1e-6
 EVIDENCE_FORM = "VAR=VALUE"

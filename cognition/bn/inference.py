@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from cognition.bn.definition import Variable
-from core.errors import InputError, unknown
+from beyond_self.cognition.bn.definition import Variable
+from beyond_self.core.errors import InputError, unknown
 
 MAX_CORE_STATES = 5_000_000
 # Work per query is capped, with the limit in the message (the reasoner and `beyond bn query`

@@ -18,11 +18,11 @@ from typing import Any, Literal
 
 import numpy as np
 
-from cognition.bn.bag import Dataset
-from cognition.bn.definition import NetworkDefinition, Variable
-from cognition.bn.inference import CompiledNetwork, Posterior
-from cognition.bn.parameters import UNSEEN_RULES, bdeu_cpt, word_cpt
-from cognition.bn.structure import (
+from beyond_self.cognition.bn.bag import Dataset
+from beyond_self.cognition.bn.definition import NetworkDefinition, Variable
+from beyond_self.cognition.bn.inference import CompiledNetwork, Posterior
+from beyond_self.cognition.bn.parameters import UNSEEN_RULES, bdeu_cpt, word_cpt
+from beyond_self.cognition.bn.structure import (
     DEFAULT_MAX_PARENTS,
     DEFAULT_ROOTS,
     Scorer,
@@ -30,7 +30,7 @@ from cognition.bn.structure import (
     k2_search,
     log_likelihood,
 )
-from core.errors import InputError, unknown
+from beyond_self.core.errors import InputError, unknown
 
 FORMAT = "beyond-self/bn-model"
 VERSION = 1
@@ -145,7 +145,7 @@ class BayesNet:
 
     def to_pgmpy(self) -> Any:
         """The same network as a pgmpy DiscreteBayesianNetwork (imports pgmpy)."""
-        from cognition.bn.pgmpy_bridge import to_pgmpy
+        from beyond_self.cognition.bn.pgmpy_bridge import to_pgmpy
 
         return to_pgmpy(self)
 

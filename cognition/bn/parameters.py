@@ -21,7 +21,7 @@ from typing import Literal, cast
 
 import numpy as np
 
-from core.errors import InputError, unknown
+from beyond_self.core.errors import InputError, unknown
 
 UnseenRule = Literal["absent", "uniform", "dirichlet"]
 UNSEEN_RULES: tuple[str, ...] = ("absent", "uniform", "dirichlet")

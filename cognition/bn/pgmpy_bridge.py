@@ -25,8 +25,8 @@ with warnings.catch_warnings():  # pgmpy 1.1 warns, at import, about its own dep
     from pgmpy.inference import VariableElimination
     from pgmpy.models import DiscreteBayesianNetwork
 
-from cognition.bn.inference import Posterior, check_likelihood
-from cognition.bn.model import BayesNet
+from beyond_self.cognition.bn.inference import Posterior, check_likelihood
+from beyond_self.cognition.bn.model import BayesNet
 
 
 def to_pgmpy(model: BayesNet) -> DiscreteBayesianNetwork:

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from cognition.paths import require_shared_data
-from core.errors import InputError
+from beyond_self.cognition.paths import require_shared_data
+from beyond_self.core.errors import InputError
 
 REFERENCE_FILE = "saponaro2019/BN_lab.mat"
 

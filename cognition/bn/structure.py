@@ -28,8 +28,8 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from cognition.bn.bag import Dataset
-from core.errors import InputError, unknown
+from beyond_self.cognition.bn.bag import Dataset
+from beyond_self.core.errors import InputError, unknown
 
 DEFAULT_ROOTS: tuple[str, ...] = ("Action", "Color", "Shape", "Size")
 DEFAULT_MAX_PARENTS = 10

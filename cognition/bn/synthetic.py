@@ -46,11 +46,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cognition.bn.bag import Dataset, load_bag
-from cognition.bn.definition import ABSENT, NetworkDefinition, Variable, load_definition
-from cognition.grammar import DEFAULT_GRAMMAR, Grammar, Phrase
-from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES, COLOR_WORDS
-from cognition.world import simulate_effects
+from beyond_self.cognition.bn.bag import Dataset, load_bag
+from beyond_self.cognition.bn.definition import ABSENT, NetworkDefinition, Variable, load_definition
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR, Grammar, Phrase
+from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES, COLOR_WORDS
+from beyond_self.cognition.world import simulate_effects
 
 DEFAULT_SEED = 2012
 N_EXPERIMENTS = 254

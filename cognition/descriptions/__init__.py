@@ -26,14 +26,14 @@ sentence the same score to the last bit, and sentences with the same words tie e
 
 from __future__ import annotations
 
-from cognition.descriptions.plot import plot_nbest
-from cognition.descriptions.sampling import (
+from beyond_self.cognition.descriptions.plot import plot_nbest
+from beyond_self.cognition.descriptions.sampling import (
     SAMPLES_MAX,
     hsgen_phrase_probabilities,
     sample_keys,
     sample_sentences,
 )
-from cognition.descriptions.search import (
+from beyond_self.cognition.descriptions.search import (
     NBEST_MAX,
     Ranking,
     brute_force_nbest,
@@ -45,7 +45,7 @@ from cognition.descriptions.search import (
     nbest_sampled,
     top_keys,
 )
-from cognition.descriptions.space import ScoredSentence, SentenceSpace, score_sentence
+from beyond_self.cognition.descriptions.space import ScoredSentence, SentenceSpace, score_sentence
 
 __all__ = [
     "NBEST_MAX",

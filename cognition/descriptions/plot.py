@@ -6,8 +6,8 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-from cognition.descriptions.space import ScoredSentence
-from core.errors import InputError
+from beyond_self.cognition.descriptions.space import ScoredSentence
+from beyond_self.core.errors import InputError
 
 
 def plot_nbest(items: Sequence[ScoredSentence], path: str | Path, title: str) -> Path:

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cognition.descriptions.space import FloatArray, IntArray, SentenceSpace
-from cognition.grammar import _TOKEN, DEFAULT_GRAMMAR, Grammar, Phrase
-from core.errors import InputError
+from beyond_self.cognition.descriptions.space import FloatArray, IntArray, SentenceSpace
+from beyond_self.cognition.grammar import _TOKEN, DEFAULT_GRAMMAR, Grammar, Phrase
+from beyond_self.core.errors import InputError
 
 
 @dataclass

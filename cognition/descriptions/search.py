@@ -31,15 +31,15 @@ from typing import TypedDict, Unpack
 
 import numpy as np
 
-from cognition.descriptions.space import (
+from beyond_self.cognition.descriptions.space import (
     FloatArray,
     IntArray,
     ScoredSentence,
     SentenceSpace,
     final_scores,
 )
-from cognition.grammar import DEFAULT_GRAMMAR, Grammar
-from core.errors import InputError, read_text
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR, Grammar
+from beyond_self.core.errors import InputError, read_text
 
 Require = re.Pattern[str] | str | None
 
@@ -339,7 +339,7 @@ def nbest_sampled(
 
     Ties keep the order in which the sentences were first drawn.
     """
-    from cognition.descriptions.sampling import sample_keys
+    from beyond_self.cognition.descriptions.sampling import sample_keys
 
     space = SentenceSpace.of(grammar)
     keys = sample_keys(samples, seed, grammar=grammar)

@@ -32,8 +32,8 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from cognition.grammar import DEFAULT_GRAMMAR, Grammar, Phrase
-from core.errors import InputError
+from beyond_self.cognition.grammar import DEFAULT_GRAMMAR, Grammar, Phrase
+from beyond_self.core.errors import InputError
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

@@ -1,7 +1,7 @@
 """Developmental learning: from the robot's own experience to recognising a human's actions.
 
-    from cognition.development.learning import LearningConfig, run_learning
-    from cognition.development.report import write_outputs
+    from beyond_self.cognition.development.learning import LearningConfig, run_learning
+    from beyond_self.cognition.development.report import write_outputs
     results = run_learning(LearningConfig(), robot_data="synthetic", human_data="synthetic")
     write_outputs(results, "out/")        # learning.md, results.json, PNGs
 

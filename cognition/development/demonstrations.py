@@ -48,13 +48,13 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from cognition.bn.bag import Dataset
-from cognition.bn.synthetic import Narrator
-from cognition.gestures.evaluation import LabelledGesture
-from cognition.gestures.synthetic import SynthesisConfig, synthesize_gesture
-from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES, EFFECTS, OBJECT_FEATURES
-from cognition.world import Effects, simulate_effects
-from core.errors import InputError, unknown
+from beyond_self.cognition.bn.bag import Dataset
+from beyond_self.cognition.bn.synthetic import Narrator
+from beyond_self.cognition.gestures.evaluation import LabelledGesture
+from beyond_self.cognition.gestures.synthetic import SynthesisConfig, synthesize_gesture
+from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES, EFFECTS, OBJECT_FEATURES
+from beyond_self.cognition.world import Effects, simulate_effects
+from beyond_self.core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
 

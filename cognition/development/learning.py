@@ -51,9 +51,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cognition.bn.bag import Dataset
-from cognition.bn.model import BayesNet, learn_network
-from cognition.development.demonstrations import (
+from beyond_self.cognition.bn.bag import Dataset
+from beyond_self.cognition.bn.model import BayesNet, learn_network
+from beyond_self.cognition.development.demonstrations import (
     Demonstration,
     EffectModel,
     ObservationConfig,
@@ -62,10 +62,10 @@ from cognition.development.demonstrations import (
     split_demonstrations,
     synthesize_demonstrations,
 )
-from cognition.fusion import ACTION, action_vector
-from cognition.gestures.hmm import GestureModels, TrainingConfig, train_models
-from cognition.gestures.streaming import CompiledModels, recognize_sequence
-from core.errors import InputError
+from beyond_self.cognition.fusion import ACTION, action_vector
+from beyond_self.cognition.gestures.hmm import GestureModels, TrainingConfig, train_models
+from beyond_self.cognition.gestures.streaming import CompiledModels, recognize_sequence
+from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
 SYNTHETIC = "synthetic"
@@ -140,7 +140,7 @@ def load_robot_data(spec: str | Path) -> Dataset:
     A folder must hold networkDefinition.txt and sent-1-5_lab_aff_bag.txt (or exactly one
     *_bag.txt); a bag file needs networkDefinition.txt beside it.
     """
-    from cognition.bn import load_bag, load_definition, synthetic_dataset
+    from beyond_self.cognition.bn import load_bag, load_definition, synthetic_dataset
 
     if str(spec) == SYNTHETIC:
         return synthetic_dataset()
@@ -597,7 +597,7 @@ def _human_demonstrations(
         )
         tick("held-out demonstrations made", len(test))
         return watched, test
-    from cognition.gestures.datasets import load_gestures
+    from beyond_self.cognition.gestures.datasets import load_gestures
 
     tick(f"reading recorded gestures from {human_data}", 0)
     gestures = load_gestures(Path(human_data))

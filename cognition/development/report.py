@@ -16,7 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from cognition.development.learning import SOURCE_NAMES, SOURCES, Condition, LearningResults
+from beyond_self.cognition.development.learning import (
+    SOURCE_NAMES,
+    SOURCES,
+    Condition,
+    LearningResults,
+)
 
 RESULTS_FILE = "results.json"
 REPORT_FILE = "learning.md"

@@ -9,10 +9,15 @@ stream) or from a deadline in stream time. `analyse_recording` runs them offline
 recording, which is the specification a run on the bus must equal.
 """
 
-from cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
-from cognition.episodes.objects import FrameObjects, GestureEffects, ObjectAtStart, ObjectWatch
-from cognition.episodes.report import GestureReport
-from cognition.episodes.tracker import Belief, Cancelled, Ended, GestureTracker, Started
+from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
+from beyond_self.cognition.episodes.objects import (
+    FrameObjects,
+    GestureEffects,
+    ObjectAtStart,
+    ObjectWatch,
+)
+from beyond_self.cognition.episodes.report import GestureReport
+from beyond_self.cognition.episodes.tracker import Belief, Cancelled, Ended, GestureTracker, Started
 
 __all__ = [
     "Anticipation",

@@ -21,10 +21,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
-from cognition.bn.model import BayesNet
-from cognition.fusion import ACTION, fuse, fuse_words
-from cognition.variables import EFFECTS
-from core.errors import InputError
+from beyond_self.cognition.bn.model import BayesNet
+from beyond_self.cognition.fusion import ACTION, fuse, fuse_words
+from beyond_self.cognition.variables import EFFECTS
+from beyond_self.core.errors import InputError
 
 R = TypeVar("R")
 

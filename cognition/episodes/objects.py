@@ -32,14 +32,14 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from cognition.vision.clusters import ClusterModel
-from cognition.vision.pipeline import (
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.pipeline import (
     DetectedObject,
     RecordingAnalyser,
     RecordingAnalysis,
     describe_frame,
 )
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 R = TypeVar("R")
 EFFECT_VARIABLES = ("ObjVel", "HandVel", "ObjHandVel", "Contact")

@@ -14,14 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from cognition.bn.model import BayesNet
-from cognition.descriptions import nbest_exact
-from cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
-from cognition.episodes.objects import GestureEffects, ObjectAtStart, ObjectWatch
-from cognition.episodes.report import GestureReport
-from cognition.episodes.tracker import Belief, Cancelled, Ended, GestureTracker, Started
-from cognition.gestures import GestureModels, extract_features
-from cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.bn.model import BayesNet
+from beyond_self.cognition.descriptions import nbest_exact
+from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
+from beyond_self.cognition.episodes.objects import GestureEffects, ObjectAtStart, ObjectWatch
+from beyond_self.cognition.episodes.report import GestureReport
+from beyond_self.cognition.episodes.tracker import Belief, Cancelled, Ended, GestureTracker, Started
+from beyond_self.cognition.gestures import GestureModels, extract_features
+from beyond_self.cognition.vision.clusters import ClusterModel
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from cognition.gestures import (
+from beyond_self.cognition.gestures import (
     FrameResult,
     GestureModels,
     GestureSegmenter,
@@ -27,7 +27,7 @@ from cognition.gestures import (
     StreamingRecognizer,
     recognize_sequence,
 )
-from cognition.gestures.segmentation import SegmenterConfig
+from beyond_self.cognition.gestures.segmentation import SegmenterConfig
 
 R = TypeVar("R")
 
@@ -109,7 +109,7 @@ class GestureTracker(Generic[R]):
     def push(self, stamp: int, number: int, x: np.ndarray, ref: R) -> list[Event[R]]:
         """The events at this frame (x: the hand in feature space, see extract_features)."""
         if self.last_stamp is not None and stamp <= self.last_stamp:
-            from core.errors import InputError
+            from beyond_self.core.errors import InputError
 
             raise InputError(
                 f"skeleton frame {number} stamped {stamp} is not after the previous frame "

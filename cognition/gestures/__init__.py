@@ -2,7 +2,7 @@
 
 The API other modules use (fusion, services, reproduction, the simulator):
 
-    from cognition.gestures import load_models, StreamingRecognizer, extract_features
+    from beyond_self.cognition.gestures import load_models, StreamingRecognizer, extract_features
     models = load_models("models.json")          # or the article's .mat file
     rec = StreamingRecognizer(models)            # priors=None: equal priors
     for hand, torso in frames:                   # metres, camera frame (x right, y up, z away)
@@ -17,7 +17,7 @@ gestures; `synthesize_gesture`/`synthesize_continuous` make seeded skeleton stre
 Heavy dependencies (hmmlearn, scipy.io) are imported only by the functions that need them.
 """
 
-from cognition.gestures.evaluation import (
+from beyond_self.cognition.gestures.evaluation import (
     EvaluationReport,
     LabelledGesture,
     cross_validate,
@@ -25,13 +25,13 @@ from cognition.gestures.evaluation import (
     plot_report,
     plot_stream,
 )
-from cognition.gestures.features import (
+from beyond_self.cognition.gestures.features import (
     LOG_SCALE,
     body_scale,
     extract_features,
     features_from_joints,
 )
-from cognition.gestures.hmm import (
+from beyond_self.cognition.gestures.hmm import (
     GestureHMM,
     GestureModels,
     TrainingConfig,
@@ -40,15 +40,15 @@ from cognition.gestures.hmm import (
     train_hmm,
     train_models,
 )
-from cognition.gestures.logs import HandLog, read_hand_log
-from cognition.gestures.matlab import load_matlab_models
-from cognition.gestures.segmentation import (
+from beyond_self.cognition.gestures.logs import HandLog, read_hand_log
+from beyond_self.cognition.gestures.matlab import load_matlab_models
+from beyond_self.cognition.gestures.segmentation import (
     GestureSegmenter,
     Segment,
     SegmenterConfig,
     segment_gestures,
 )
-from cognition.gestures.streaming import (
+from beyond_self.cognition.gestures.streaming import (
     BatchRecognizer,
     BatchResult,
     FrameResult,
@@ -56,7 +56,7 @@ from cognition.gestures.streaming import (
     StreamingRecognizer,
     recognize_sequence,
 )
-from cognition.gestures.synthetic import (
+from beyond_self.cognition.gestures.synthetic import (
     GestureBounds,
     SkeletonStream,
     SynthesisConfig,

@@ -20,13 +20,17 @@ from pathlib import Path
 
 from numpy.typing import ArrayLike
 
-from cognition.gestures.evaluation import LabelledGesture
-from cognition.gestures.features import LOG_SCALE, extract_features, features_from_joints
-from cognition.gestures.logs import read_hand_log
-from cognition.gestures.segmentation import SegmenterConfig, segment_gestures
-from cognition.gestures.synthetic import SynthesisConfig, synthesize_dataset
-from cognition.variables import ACTIONS
-from core.errors import InputError
+from beyond_self.cognition.gestures.evaluation import LabelledGesture
+from beyond_self.cognition.gestures.features import (
+    LOG_SCALE,
+    extract_features,
+    features_from_joints,
+)
+from beyond_self.cognition.gestures.logs import read_hand_log
+from beyond_self.cognition.gestures.segmentation import SegmenterConfig, segment_gestures
+from beyond_self.cognition.gestures.synthetic import SynthesisConfig, synthesize_dataset
+from beyond_self.cognition.variables import ACTIONS
+from beyond_self.core.errors import InputError
 
 SYNTHETIC = "synthetic"
 _NAME = re.compile(r"^(grasp|tap|touch|push)\d")

@@ -14,7 +14,7 @@ from __future__ import annotations
 from functools import cache
 from pathlib import Path
 
-from cognition.gestures.hmm import GestureModels, load_models
+from beyond_self.cognition.gestures.hmm import GestureModels, load_models
 
 DEFAULT_MODELS_PATH = Path(__file__).with_name("data") / "synthetic_models.json"
 

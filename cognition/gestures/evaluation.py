@@ -16,10 +16,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cognition.gestures.hmm import GestureModels, TrainingConfig, train_hmm, train_models
-from cognition.gestures.streaming import CompiledModels, SequenceResult, recognize_sequence
-from cognition.variables import ACTIONS
-from core.errors import InputError
+from beyond_self.cognition.gestures.hmm import (
+    GestureModels,
+    TrainingConfig,
+    train_hmm,
+    train_models,
+)
+from beyond_self.cognition.gestures.streaming import (
+    CompiledModels,
+    SequenceResult,
+    recognize_sequence,
+)
+from beyond_self.cognition.variables import ACTIONS
+from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
 FRACTIONS: tuple[float, ...] = tuple(round(0.1 * i, 1) for i in range(1, 11))

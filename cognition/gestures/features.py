@@ -23,7 +23,7 @@ from typing import cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
 

@@ -30,8 +30,8 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cognition.variables import ACTIONS
-from core.errors import InputError, unknown
+from beyond_self.cognition.variables import ACTIONS
+from beyond_self.core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
 
@@ -280,7 +280,7 @@ def load_models(path: str | Path, *, include_garbage: bool = False) -> GestureMo
     if not p.is_file():
         raise InputError(f"model file {p} does not exist; valid: a .json model file or a .mat file")
     if p.suffix.lower() == ".mat":
-        from cognition.gestures.matlab import load_matlab_models
+        from beyond_self.cognition.gestures.matlab import load_matlab_models
 
         return load_matlab_models(p, include_garbage=include_garbage)
     if p.suffix.lower() != ".json":

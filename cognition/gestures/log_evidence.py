@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cognition.gestures.features import LOG_SCALE, extract_features
-from cognition.gestures.hmm import GestureModels
-from cognition.gestures.logs import parse_frames, read_hand_log
-from cognition.gestures.streaming import SequenceResult, recognize_sequence
+from beyond_self.cognition.gestures.features import LOG_SCALE, extract_features
+from beyond_self.cognition.gestures.hmm import GestureModels
+from beyond_self.cognition.gestures.logs import parse_frames, read_hand_log
+from beyond_self.cognition.gestures.streaming import SequenceResult, recognize_sequence
 
 
 def recognize_log(

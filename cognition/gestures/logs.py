@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cognition.gestures.hmm import FEATURE_SPACE, GestureHMM, GestureModels
-from core.errors import InputError
+from beyond_self.cognition.gestures.hmm import FEATURE_SPACE, GestureHMM, GestureModels
+from beyond_self.core.errors import InputError
 
 # action -> model number in the MATLAB file, in the canonical action order
 REFERENCE_NUMBERS: dict[str, int] = {"grasp": 3, "tap": 1, "touch": 4}

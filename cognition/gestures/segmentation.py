@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
 

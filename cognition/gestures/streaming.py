@@ -28,8 +28,8 @@ from typing import cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from cognition.gestures.hmm import FloatArray, GestureModels, log_prior
-from core.errors import InputError
+from beyond_self.cognition.gestures.hmm import FloatArray, GestureModels, log_prior
+from beyond_self.core.errors import InputError
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 

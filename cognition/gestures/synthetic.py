@@ -31,9 +31,9 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from cognition.gestures.features import features_from_joints
-from cognition.variables import ACTIONS
-from core.errors import InputError, unknown
+from beyond_self.cognition.gestures.features import features_from_joints
+from beyond_self.cognition.variables import ACTIONS
+from beyond_self.core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
 

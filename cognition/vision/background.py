@@ -26,8 +26,8 @@ from typing import cast
 import numpy as np
 from scipy import ndimage
 
-from cognition.vision.images import as_frame
-from core.errors import InputError
+from beyond_self.cognition.vision.images import as_frame
+from beyond_self.core.errors import InputError
 
 
 @lru_cache(maxsize=16)

@@ -35,8 +35,8 @@ import numpy as np
 from scipy.cluster.vq import kmeans2
 from scipy.optimize import linear_sum_assignment
 
-from cognition.variables import AFFORDANCE_VARIABLES
-from core.errors import InputError, unknown
+from beyond_self.cognition.variables import AFFORDANCE_VARIABLES
+from beyond_self.core.errors import InputError, unknown
 
 FORMAT = "beyond-self/vision-clusters"
 VERSION = 1
@@ -263,7 +263,7 @@ class ClusterModel:
         disc.names = [mapping.get(n, n) for n in disc.names]
 
     def to_json(self) -> dict[str, Any]:
-        from cognition.vision.features import FEATURE_DEFINITIONS
+        from beyond_self.cognition.vision.features import FEATURE_DEFINITIONS
 
         used = sorted({f for d in self.variables.values() for f in d.features})
         return {

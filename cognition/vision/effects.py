@@ -23,8 +23,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from cognition.vision.clusters import ClusterModel
-from cognition.vision.tracking import peak_speed, velocities
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.tracking import peak_speed, velocities
 
 EFFECT_FEATURES = {
     "ObjVel": "object_speed",

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cognition.variables import AFFORDANCE_VARIABLES, EFFECTS, OBJECT_FEATURES
-from cognition.vision.clusters import ClusterModel
-from cognition.vision.pipeline import analyse_experiment, describe_frame
-from cognition.vision.tabletop import Camera, Experiment, random_object, render_still
+from beyond_self.cognition.variables import AFFORDANCE_VARIABLES, EFFECTS, OBJECT_FEATURES
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.pipeline import analyse_experiment, describe_frame
+from beyond_self.cognition.vision.tabletop import Camera, Experiment, random_object, render_still
 
 VARIABLES = (*OBJECT_FEATURES, *EFFECTS)
 

@@ -27,9 +27,9 @@ from typing import cast
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from cognition.vision.color import rgb_to_lab
-from cognition.vision.segmentation import Blob, Segmentation
-from cognition.vision.tabletop import Camera
+from beyond_self.cognition.vision.color import rgb_to_lab
+from beyond_self.cognition.vision.segmentation import Blob, Segmentation
+from beyond_self.cognition.vision.tabletop import Camera
 
 SHAPE_FEATURES = ("circularity", "rectangularity", "convexity", "solidity", "eccentricity")
 FEATURE_DEFINITIONS: dict[str, str] = {

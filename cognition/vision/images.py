@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 SUFFIXES = (".ppm", ".pgm", ".pnm", ".png")
 

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cognition.vision.pipeline import DetectedObject
-from cognition.vision.segmentation import Segmentation
+from beyond_self.cognition.vision.pipeline import DetectedObject
+from beyond_self.cognition.vision.segmentation import Segmentation
 
 _COLORS = ("#00e5ff", "#ff4081", "#ffea00", "#76ff03", "#ff9100", "#d500f9")
 
@@ -94,6 +94,6 @@ def save_overlay(
     title: str | None = None,
 ) -> Path:
     """Write the overlay as PNG (or PPM, by suffix)."""
-    from cognition.vision.images import write_image
+    from beyond_self.cognition.vision.images import write_image
 
     return write_image(path, render_overlay(frame, segmentation, objects, title=title))

@@ -15,16 +15,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cognition.variables import OBJECT_FEATURES
-from cognition.vision.background import BackgroundModel
-from cognition.vision.clusters import VARIABLE_FEATURES, ClusterModel, learn_discretiser
-from cognition.vision.effects import EffectMeasures, measure_effects
-from cognition.vision.features import ObjectFeatures, measure_blob
-from cognition.vision.images import as_frame
-from cognition.vision.segmentation import Segmentation, SegmentParams, segment
-from cognition.vision.tabletop import Camera, Experiment
-from cognition.vision.tracking import Tracker
-from core.errors import InputError
+from beyond_self.cognition.variables import OBJECT_FEATURES
+from beyond_self.cognition.vision.background import BackgroundModel
+from beyond_self.cognition.vision.clusters import VARIABLE_FEATURES, ClusterModel, learn_discretiser
+from beyond_self.cognition.vision.effects import EffectMeasures, measure_effects
+from beyond_self.cognition.vision.features import ObjectFeatures, measure_blob
+from beyond_self.cognition.vision.images import as_frame
+from beyond_self.cognition.vision.segmentation import Segmentation, SegmentParams, segment
+from beyond_self.cognition.vision.tabletop import Camera, Experiment
+from beyond_self.cognition.vision.tracking import Tracker
+from beyond_self.core.errors import InputError
 
 ASSUMED_HAND_HEIGHT_M = 0.05  # a hand seen only as a blob is taken to hover this high
 

@@ -24,9 +24,9 @@ from typing import cast
 import numpy as np
 from scipy import ndimage
 
-from cognition.vision.background import BackgroundModel
-from cognition.vision.images import as_frame
-from core.errors import InputError
+from beyond_self.cognition.vision.background import BackgroundModel
+from beyond_self.cognition.vision.images import as_frame
+from beyond_self.core.errors import InputError
 
 _OPEN = np.ones((3, 3), dtype=bool)
 _EIGHT = np.ones((3, 3), dtype=bool)

@@ -47,9 +47,9 @@ from typing import cast
 import numpy as np
 from scipy import ndimage
 
-from cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
-from cognition.world import Effects, simulate_effects
-from core.errors import InputError, unknown
+from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
+from beyond_self.cognition.world import Effects, simulate_effects
+from beyond_self.core.errors import InputError, unknown
 
 # Base colours (sRGB) of the four colour clusters; both greens are greenish but far apart in CIELAB
 # (green1 ≈ L*64 a*-40 b*+57, yellowish; green2 ≈ L*52 a*-42 b*+18, bluish).

@@ -15,7 +15,7 @@ from typing import cast
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from core.errors import InputError
+from beyond_self.core.errors import InputError
 
 
 @dataclass

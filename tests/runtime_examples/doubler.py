@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from runtime.service import Service
-from schemas import Joint, SkeletonFrame
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import Joint, SkeletonFrame
 
 DOUBLED = "example/doubled"
 

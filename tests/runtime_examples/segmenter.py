@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import sys
 
-from runtime.service import Service
-from schemas import GestureSegment, SkeletonFrame
+from beyond_self.runtime.service import Service
+from beyond_self.schemas import GestureSegment, SkeletonFrame
 
 THRESHOLD = 1.6  # metres, in the doubled coordinates
 

@@ -1,1 +1,0 @@
-"""The `beyond` command-line front end: one dispatcher, one module per command group."""

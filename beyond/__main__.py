@@ -1,3 +1,0 @@
-from beyond.cli import main
-
-raise SystemExit(main())

@@ -1,1 +1,0 @@
-"""One module per `beyond` command (see `beyond.cli.COMMANDS`)."""

@@ -1,0 +1,3 @@
+from beyond_self.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""One module per `beyond` command (see `beyond_self.cli.COMMANDS`)."""

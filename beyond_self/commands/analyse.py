@@ -1,0 +1,108 @@
+"""`beyond analyse RECORDING`: the whole pipeline over a recording, offline, in one process.
+
+    beyond analyse RECORDING [--config FILE] [--json]
+
+No bus, no services: the skeleton and camera streams are read in recording order and go through
+the same library classes the services run (cognition.episodes), with the same options (the
+per-service options of `--config`, as for `beyond up`). It prints the lines `beyond up` prints
+for the same recording; a run on the bus, at any rate and under any load, must equal it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from beyond_self.cognition.bn import learn_network, load_model, synthetic_dataset
+from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
+from beyond_self.cognition.gestures import load_models
+from beyond_self.cognition.gestures.default_models import default_models
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.images import image_from_message
+from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
+from beyond_self.schemas.keys import split_key
+from beyond_self.services.options import check_options, load_options
+from beyond_self.services.registry import service_class
+
+HELP = "run the pipeline's logic over a recording offline and print what `beyond up` prints"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", type=Path, help="MCAP recording (skeleton and camera)")
+    parser.add_argument("--config", help="YAML/JSON file with per-service options (as for up)")
+    parser.add_argument("--json", action="store_true", help="one JSON object per gesture")
+
+
+def _inputs(path: Path, hand: str, torso: str) -> Iterator[SkeletonInput | CameraInput]:
+    for item in read_recording(path):
+        split = split_key(item.key)
+        if split is None or item.cls is None:
+            continue
+        if item.cls is SkeletonFrame:
+            msg = item.message()
+            assert isinstance(msg, SkeletonFrame)
+            joint = msg.joints.get(hand)
+            if joint is None:
+                raise InputError(
+                    f"skeleton frame {msg.frame} has no joint {hand!r}; joints: "
+                    f"{', '.join(list(msg.joints)[:8]) or 'none'}"
+                )
+            body = msg.joints.get(torso)
+            yield SkeletonInput(
+                msg.header.stamp, msg.frame, joint.position, body.position if body else None
+            )
+        elif item.cls in (CameraFrame, CompressedCameraFrame):
+            cam = item.message()
+            assert isinstance(cam, CameraFrame | CompressedCameraFrame)
+            yield CameraInput(cam.header.stamp, cam.header.seq, image_from_message(cam))
+
+
+def _options(config: str | None) -> dict[str, dict[str, Any]]:
+    file_options = load_options(config)
+    names = ("gestures", "objects", "reasoner", "describer")
+    return {n: check_options(n, service_class(n), dict(file_options.get(n, {}))) for n in names}
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.recording.is_file():
+        raise InputError(f"recording {args.recording} does not exist")
+    info = inspect_recording(args.recording)
+    if info.error:
+        raise InputError(f"recording {args.recording}: {info.damage()}")
+    o = _options(args.config)
+    g, ob, r, d = o["gestures"], o["objects"], o["reasoner"], o["describer"]
+    models = load_models(Path(g["models"])) if g.get("models") else default_models()
+    network = load_model(Path(r["model"])) if r.get("model") else learn_network(synthetic_dataset())
+    emit = None if args.json else (lambda line: print(line, flush=True))
+    result = analyse_stream(
+        _inputs(args.recording, g.get("hand_joint", "right_hand"), g.get("torso_joint", "torso")),
+        gesture_models=models,
+        clusters=ClusterModel.load(ob.get("clusters")),
+        network=network,
+        nbest=int(d.get("nbest", 5)),
+        legacy_offset=bool(d.get("legacy_offset", False)),
+        lead_s=float(ob.get("lead_s", 0.3)),
+        fps=ob.get("fps"),
+        camera_deadline_s=float(ob.get("deadline_s", 5.0)),
+        objects_deadline_s=float(r.get("deadline_s", 30.0)),
+        on_line=emit,
+    )
+    if args.json:
+        for out in result.outcomes:
+            print(
+                json.dumps(
+                    {
+                        "segment_id": out.segment_id,
+                        "frame": out.frame,
+                        "action_belief": out.prediction.action_belief,
+                        "evidence": out.prediction.evidence,
+                        "sentences": result.sentences.get(out.segment_id, []),
+                    }
+                )
+            )
+    return 0

@@ -1,0 +1,103 @@
+"""`beyond foxglove [--port 8765]`: watch the bus live in Foxglove (open a Foxglove WebSocket
+connection to ws://localhost:8765; see README, "Watch the demo in Foxglove").
+
+`beyond foxglove --export IN.mcap -o OUT.mcap` adds the same views to a recording made without
+them (`beyond record --foxglove` writes them as it records)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+from pathlib import Path
+
+from beyond_self.commands import argtypes
+from beyond_self.commands.terminal import run_until_stopped
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.foxglove_bridge import DEFAULT_PORT, FoxgloveBridge
+from beyond_self.runtime.log import setup_logging
+from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.recording_writer import RecordingWriter
+
+HELP = "serve the bus to Foxglove over its WebSocket protocol"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--port",
+        dest="ws_port",
+        type=argtypes.number(int, lo=0, hi=65535, what="TCP port, 0: any free one"),
+        default=DEFAULT_PORT,
+        help=f"WebSocket port (default {DEFAULT_PORT})",
+    )
+    parser.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    parser.add_argument(
+        "--export", metavar="IN.mcap", help="write IN.mcap plus its Foxglove views to -o FILE"
+    )
+    parser.add_argument("-o", "--output", metavar="OUT.mcap", help="file written by --export")
+    parser.add_argument(
+        "--layout",
+        metavar="FILE",
+        help="write the Foxglove layout for --robot to FILE (import it in Foxglove) and exit",
+    )
+    add_bus_arguments(parser, port_flag="--bus-port")
+
+
+def export(source: str, target: str) -> int:
+    """Copy `source` into `target` with the Foxglove views; returns the messages copied."""
+    if Path(target).resolve() == Path(source).resolve():
+        raise InputError(f"--export would overwrite its input {source}; give another -o")
+    info = inspect_recording(source)
+    if info.error:
+        raise InputError(info.damage())
+    copied = 0
+    with RecordingWriter(target, metadata=info.metadata.get("beyond"), foxglove_views=True) as w:
+        for item in read_recording(source):
+            if item.cls is None:
+                w.write_raw(item.key, item.data, item.encoding, item.log_time)
+            else:
+                w.write(item.key, item.message(), log_time=item.log_time)
+            copied += 1
+    return copied
+
+
+def run(args: argparse.Namespace) -> int:
+    setup_logging(fmt="text")
+    if args.layout:
+        from beyond_self.runtime.foxglove_layout import layout_json
+
+        robot = args.robot or config_from_args(args).robot
+        Path(args.layout).write_text(layout_json(robot), encoding="utf-8")
+        print(f"wrote the Foxglove layout for robot {robot!r} to {args.layout}")
+        return 0
+    if args.export or args.output:
+        if not (args.export and args.output):
+            raise InputError("--export IN.mcap needs -o OUT.mcap (and -o needs --export)")
+        copied = export(args.export, args.output)
+        print(f"wrote {copied} messages and their Foxglove views to {args.output}")
+        return 0
+    config = config_from_args(args)
+
+    async def go(stop: asyncio.Event) -> str:
+        with Bus.open(config) as bus:
+            bridge = FoxgloveBridge(bus, host=args.host, port=args.ws_port)
+            try:
+                ready = asyncio.Event()
+                task = asyncio.create_task(bridge.run(stop, ready))
+                await ready.wait()
+                print(
+                    f"serving {bus.keys.everything} to Foxglove on ws://{args.host}:{bridge.port}",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                stats = await task
+            finally:
+                bridge.close()
+        return (
+            f"bridge stopped: {stats.received} samples, {stats.forwarded} messages forwarded, "
+            f"{stats.malformed} malformed"
+        )
+
+    return run_until_stopped(go)

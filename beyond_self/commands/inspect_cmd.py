@@ -1,0 +1,45 @@
+"""`beyond inspect FILE.mcap`: what a recording holds (works without the bus)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict
+
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.recording import inspect_recording
+
+HELP = "list the channels, schemas, message counts and duration of an MCAP recording"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="MCAP recording")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def run(args: argparse.Namespace) -> int:
+    info = inspect_recording(args.file)
+    if args.json:
+        print(json.dumps({**asdict(info), "duration_s": info.duration_s}))
+    else:
+        print(f"file:      {info.path} ({info.size} bytes)")
+        print(f"library:   {info.library}")
+        print(f"messages:  {info.messages} in {info.chunks} chunks")
+        print(f"duration:  {info.duration_s:.3f} s")
+        for name, values in info.metadata.items():
+            print(f"metadata:  {name}: {values}")
+        print("channels:")
+        width = max((len(c.topic) for c in info.channels), default=10)
+        for c in info.channels:
+            rate = ""
+            if c.count > 1 and c.first_stamp is not None and c.last_stamp is not None:
+                span = (c.last_stamp - c.first_stamp) / 1e9
+                rate = f"{(c.count - 1) / span:8.1f} Hz" if span > 0 else ""
+            schema = f"{c.schema_name} ({c.schema_encoding})" if c.schema_name else "(no schema)"
+            print(
+                f"  {c.topic:<{width}}  {c.count:7d} msgs {rate:>11}  {c.message_encoding:6} "
+                f"{schema}"
+            )
+    if info.error:
+        raise InputError(info.damage())
+    return 0

@@ -1,0 +1,49 @@
+"""`beyond reproduce`: re-run the article's experiments on its real data and write a report.
+
+    beyond reproduce [--data DIR] --out DIR
+
+DIR defaults to ../shared/data (or $BEYOND_DATA). Writes report.md, one PNG per figure and
+results.json; takes a few seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from rich.console import Console
+
+from beyond_self.cognition.paths import SOURCES, shared_data_dir
+from beyond_self.commands import argtypes
+from beyond_self.core.errors import InputError
+
+HELP = "re-run the article's experiments 1-6 on its real data; write report.md, PNGs, JSON"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--data", type=Path, help="the article's data folder (default: ../shared/data)"
+    )
+    parser.add_argument("--out", type=argtypes.output_dir, required=True, help="output folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    from beyond_self.cognition.reproduction import run_all, write_report
+
+    data = args.data or shared_data_dir()
+    if data is None:
+        raise InputError(
+            "no data folder: give --data DIR or put the article's data in ../shared/data; "
+            f"it comes from {SOURCES}"
+        )
+    if not data.is_dir():
+        raise InputError(f"data folder {data} does not exist; it comes from {SOURCES}")
+    console = Console(stderr=True)
+    start = time.perf_counter()
+    with console.status("starting") as status:
+        results = run_all(data, progress=lambda text: status.update(text))
+    report = write_report(results, args.out)
+    console.print(f"wrote {report}, results.json and plots in {time.perf_counter() - start:.1f} s")
+    print(report)
+    return 0

@@ -1,0 +1,54 @@
+"""`beyond service NAME`: run one service in this process until SIGINT/SIGTERM.
+
+    beyond service NAME [--config FILE] [--set OPTION=VALUE ...] [bus options]
+
+Options come from the config file's `services.NAME` section, then `--set` (values are JSON when
+they parse as JSON, else strings). The bus joins as the environment and bus options say.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.process import exit_process
+from beyond_self.services.options import check_options, load_options
+from beyond_self.services.registry import SERVICES, service_class
+
+HELP = "run one service (ingest, gestures, objects, reasoner, describer, speech)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("name", choices=list(SERVICES), metavar="NAME", help=", ".join(SERVICES))
+    parser.add_argument("--config", metavar="FILE", help="YAML/JSON file with a services section")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="OPTION=VALUE", help="override an option"
+    )
+    add_bus_arguments(parser)
+
+
+def parse_sets(items: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise InputError(f"--set expects OPTION=VALUE; got {item!r}")
+        try:
+            out[name.replace("-", "_")] = json.loads(text)
+        except json.JSONDecodeError:
+            out[name.replace("-", "_")] = text
+    return out
+
+
+def service_options(name: str, config: str | None, sets: list[str]) -> dict[str, Any]:
+    options = {**load_options(config).get(name, {}), **parse_sets(sets)}
+    return check_options(name, service_class(name), options)
+
+
+def run(args: argparse.Namespace) -> int:
+    options = service_options(args.name, args.config, args.set)
+    cls = service_class(args.name)
+    exit_process(cls.main(config=config_from_args(args), **options))

@@ -1,0 +1,306 @@
+"""`beyond up`: the whole pipeline, every service in its own process, on one machine.
+
+    beyond up [--recording FILE | --log DIR | --live-source module:function] [--config FILE]
+              [--profile all|robot|workstation] [--rate R] [--no-live] [--timeout S]
+              [--wait-for NAME,...] [--until-stream-end] [bus options]
+
+Starts the services of the profile on the configured bus (default: Zenoh peers on loopback), the
+source last (it waits for their liveliness before it publishes), as a `services.deployment.
+Deployment`: this module is the command line and the terminal around it. Service logs go to
+stderr with the service name; pipeline events (recognised action, anticipated effect,
+description) to stdout, and a live view when stdout is a terminal. With a recording or log it
+exits once every gesture has its final description (status 0) or after --timeout (status 1);
+Ctrl-C stops everything cleanly.
+
+Two machines (see README, Deployment): `--profile robot` (ingest, gestures, objects) and
+`--profile workstation` (reasoner, describer, speech) start one side each, against a router
+given with `--connect tcp/HOST:7447`. In peer mode the processes `up` starts stay one local peer
+group (their traffic stays on the machine) and that group is linked to the router. The
+workstation side joins as clients of its router unless a mode or config file says otherwise:
+zenoh 1.10 routers assume the peers connected to them reach each other directly, which peers on
+two machines' loopbacks cannot, so peers on both sides of one router would never meet. Either side
+may start first: the source waits only for this machine's services (plus `--wait-for`), and the
+cross-link streams are recovered from publisher caches when the other side joins late or a link
+fails. The workstation side runs until stopped, or with `--until-stream-end` until the robot's
+source has ended and every gesture it showed is described.
+
+`--secure DIR` (README, "Securing a deployment"): every certificate the side needs is checked
+first, then the side starts its own router (TLS, the generated access rules; linked with the
+side's certificate to the endpoints given with `--connect`, if any) and its processes join it
+as clients, each with its own certificate.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.live import Live
+
+from beyond_self.cognition.paths import DEMO_RECORDING
+from beyond_self.commands import argtypes
+from beyond_self.core.errors import InputError
+from beyond_self.live_view import render
+from beyond_self.monitor import PipelineMonitor
+from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.process import exit_process
+from beyond_self.schemas.keys import check_name
+from beyond_self.services.deployment import Deployment, Ending
+from beyond_self.services.options import load_options
+from beyond_self.services.registry import PROFILES
+
+HELP = "start the pipeline's services as separate processes and watch them"
+SECURE_LOCAL_ROUTER = "tls/127.0.0.1:7447"  # a side's own router, when it links to another
+DEFAULT_TIMEOUT = 120.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument("--recording", type=Path, help="MCAP recording to replay into the pipeline")
+    source.add_argument("--log", type=Path, help="YARP hand log (the article's data.log)")
+    source.add_argument("--live-source", metavar="MODULE:FUNCTION", help="live source plug-in")
+    parser.add_argument("--config", help="YAML/JSON file with per-service options")
+    parser.add_argument("--profile", choices=list(PROFILES), default="all")
+    parser.add_argument(
+        "--skip",
+        action="append",
+        default=[],
+        metavar="SERVICE",
+        help="do not start this service (e.g. speech, when your own synthesizer replaces it)",
+    )
+    parser.add_argument(
+        "--rate",
+        type=argtypes.number(float, lo=0, hi=1e6),
+        default=1.0,
+        help="replay speed (0: as fast as possible)",
+    )
+    parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
+    parser.add_argument(
+        "--foxglove",
+        nargs="?",
+        type=argtypes.port,
+        const=8765,
+        metavar="PORT",
+        help="also serve the bus to Foxglove on ws://localhost:PORT (default 8765)",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=argtypes.seconds(),
+        default=None,
+        help=f"give up after S seconds (default {DEFAULT_TIMEOUT:.0f} with a source or "
+        "--until-stream-end, else run until stopped)",
+    )
+    parser.add_argument(
+        "--wait-for",
+        action="append",
+        default=[],
+        metavar="NAME[,NAME...]",
+        help="services elsewhere (e.g. the workstation's reasoner) the source waits for too",
+    )
+    parser.add_argument(
+        "--until-stream-end",
+        action="store_true",
+        help="exit once the (remote) source has ended and every gesture is described",
+    )
+    add_bus_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    config = config_from_args(args)
+    if args.profile == "workstation" and _mode_unset(args, config):
+        config = config.with_(mode="client")
+    if config.secure is not None and config.identity is None:  # the monitor is the side's
+        config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
+    status = asyncio.run(up(args, local_group(config)))
+    # every service is stopped and the session closed: leave before the interpreter's teardown,
+    # which aborted `up` now and then (SIGABRT) after a run that had succeeded
+    exit_process(status)
+
+
+def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str]:
+    """On a secure bus every side runs its own router: check every certificate this side needs
+    (one line naming the file, before anything starts) and return the router's command. Given
+    endpoints elsewhere (the workstation's router), this side's router links to them with the
+    side's certificate, and this side's processes stay on their own router, so a robot's
+    pipeline keeps running when the network between the machines fails."""
+    from beyond_self.runtime import keystore
+
+    assert config.secure is not None
+    remote = list(config.connect or ()) + list(config.routers)
+    identity = ("robot" if profile == "robot" else "workstation") if remote else "router"
+    for name in [*names, str(config.identity), identity]:
+        keystore.check(config.secure, name)
+    command = ["router", "--secure", str(config.secure), "--identity", identity]
+    if remote:
+        command += ["--listen", SECURE_LOCAL_ROUTER] + [a for e in remote for a in ("--connect", e)]
+    return command
+
+
+def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:
+    return (
+        getattr(args, "mode", None) is None
+        and not os.environ.get("BEYOND_ZENOH_MODE")
+        and config.config_file is None
+    )
+
+
+def local_group(config: BusConfig) -> BusConfig:
+    """In peer mode, endpoints given to connect to are routers linked to this machine's group,
+    not a replacement of it: the services `up` starts keep meeting on loopback."""
+    if config.mode == "peer" and config.connect is not None:
+        return config.with_(connect=None, routers=config.routers + config.connect)
+    return config
+
+
+def monitor_name(profile: str) -> str:
+    """Liveliness name of `up`'s own monitor: one per side, so two sides never mistake each
+    other's monitor for their own."""
+    return "monitor" if profile == "all" else f"monitor-{profile}"
+
+
+def wait_list(values: list[str]) -> list[str]:
+    names = [n.strip() for v in values for n in v.split(",") if n.strip()]
+    for name in names:
+        check_name("service", name)
+    return names
+
+
+class EventLines:
+    """Where pipeline events go: above the live view while it runs, else plain stdout lines."""
+
+    def __init__(self) -> None:
+        self.live: Live | None = None
+
+    def emit(self, line: str) -> None:
+        if self.live is not None:
+            self.live.console.print(line, markup=False, highlight=False)
+        else:
+            print(line, flush=True)
+
+
+def log_line(name: str, line: str) -> None:
+    print(f"[{name}] {line}", file=sys.stderr, flush=True)
+
+
+def service_options(args: argparse.Namespace, names: list[str]) -> tuple[dict[str, Any], bool]:
+    """Each service's options (the config file's, then the command line's), and whether the
+    source replays something finite (its services then follow the recording's clock). Without
+    a source anywhere, the demo recording is the source."""
+    file_options = load_options(args.config)
+    options: dict[str, dict[str, Any]] = {n: dict(file_options.get(n, {})) for n in names}
+    source = _source(args)
+    replayed = "log" in source or "recording" in source
+    if "ingest" in names:
+        if not source and not any(k in options["ingest"] for k in ("recording", "log", "plugin")):
+            source = {"recording": str(DEMO_RECORDING)}
+            replayed = True
+        options["ingest"].update(source)
+        options["ingest"].setdefault("rate", args.rate)
+    if "reasoner" in names and "objects" not in names and args.profile == "all":
+        # no object segmenter in this deployment: the reasoner must not wait for one
+        options["reasoner"].setdefault("objects", False)
+    return options, replayed
+
+
+def deployment(
+    args: argparse.Namespace, config: BusConfig, lines: EventLines
+) -> tuple[Deployment, bool]:
+    """The side's Deployment, and whether it replays a finite source."""
+    names = [n for n in PROFILES[args.profile] if n not in args.skip]
+    options, replayed = service_options(args, names)
+    router = None
+    if config.secure is not None:
+        router = secure_router(config, names, args.profile)
+        config = config.with_(connect=None, routers=())  # this side's router links elsewhere
+    side = Deployment(
+        config,
+        names,
+        options=options,
+        wait_for=wait_list(args.wait_for),
+        watcher=monitor_name(args.profile),
+        clock="recording" if replayed else "wall",
+        router=router,
+        log=log_line,
+        on_stuck=lambda n, why: lines.emit(f"service {n} is stuck ({why}); stopping it"),
+        stop_on_signals=True,
+    )
+    return side, replayed
+
+
+async def up(args: argparse.Namespace, config: BusConfig) -> int:
+    lines = EventLines()
+    side, replayed = deployment(args, config, lines)
+    finite = replayed or args.until_stream_end
+    timeout = args.timeout
+    if timeout is None and ("ingest" in side.services or finite):
+        timeout = DEFAULT_TIMEOUT
+    bus = await side.open()
+    pipeline = PipelineMonitor(bus, lines.emit)
+    try:
+        if args.foxglove:  # imported only when asked for: the SDK is not free to load
+            from beyond_self.runtime.foxglove_bridge import start_in_background
+
+            side.attach(await start_in_background(bus, args.foxglove))
+            lines.emit(f"Foxglove: open a WebSocket connection to ws://localhost:{args.foxglove}")
+        pipeline.start()
+        await side.start()
+        if not side.exited():
+            lines.emit(f"pipeline up: {', '.join(side.services)} on robot {side.config.robot!r}")
+        ending = await watch(side, pipeline, lines, timeout, finite, live=not args.no_live)
+    finally:
+        pipeline.stop()
+        codes = await side.stop()
+    lines.emit(pipeline.summary())
+    err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
+    print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)
+    if failed := side.unclean():
+        lines.emit(f"services that did not stop cleanly: {failed}")
+        return 1
+    return 0 if ending.ok else 1
+
+
+async def watch(
+    side: Deployment,
+    pipeline: PipelineMonitor,
+    lines: EventLines,
+    timeout: float | None,
+    finite: bool,
+    *,
+    live: bool,
+) -> Ending:
+    """Wait for the side to end, with the live view drawn meanwhile on a terminal; say why it
+    ended unless it was asked to or done."""
+    console = Console()
+    if live and console.is_terminal:
+        view = lambda: render(pipeline, side.services)  # noqa: E731
+        lines.live = Live(get_renderable=view, console=console, refresh_per_second=8)
+        lines.live.start()
+    try:
+        ending = await side.wait(timeout, done=pipeline.done if finite else None)
+    finally:
+        if lines.live is not None:
+            lines.live.stop()  # drawn once more, as it ends
+            lines.live = None
+    if ending.reason == "exited":
+        lines.emit(f"service(s) exited early: {', '.join(ending.exited)}")
+    elif ending.reason == "timeout":
+        lines.emit(f"timed out after {timeout:.0f} s")
+    return ending
+
+
+def _source(args: argparse.Namespace) -> dict[str, str]:
+    if args.recording is not None:
+        if not args.recording.is_file():
+            raise InputError(f"recording {args.recording} does not exist")
+        return {"recording": str(args.recording)}
+    if args.log is not None:
+        return {"log": str(args.log)}
+    if args.live_source is not None:
+        return {"plugin": args.live_source}
+    return {}

@@ -1,0 +1,160 @@
+"""Watching the pipeline: what `beyond up` prints and shows while the services run.
+
+`PipelineMonitor` subscribes to the outputs of every service and feeds them to
+`cognition.episodes.GestureReport`, which makes the lines `beyond analyse` prints offline. It
+also keeps the state a live terminal view draws (per-service health, current action posterior,
+effect prediction, last description), and knows when a replayed source has been fully
+described.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from typing import Any
+
+from beyond_self.cognition.episodes import GestureReport
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import FRAMES, RELIABLE
+from beyond_self.runtime.subscription import Received, consume
+from beyond_self.schemas import (
+    ActionPosterior,
+    AffordancePrediction,
+    Description,
+    GestureSegment,
+    Message,
+    Progress,
+    ServiceHealth,
+    StreamEnd,
+)
+
+log = logging.getLogger("beyond.monitor")
+
+
+class PipelineMonitor:
+    """Collects each gesture's events and prints them as one block, in frame order, once the
+    gesture has its final description: services run concurrently and their messages interleave
+    differently from run to run, but the printed lines do not."""
+
+    def __init__(self, bus: Bus, emit: Callable[[str], None]) -> None:
+        self.bus = bus
+        self.emit = emit
+        self.report = GestureReport()
+        self.health_reports: dict[str, ServiceHealth] = {}
+        self.progress: dict[str, dict[str, int]] = {}
+        self.posterior: ActionPosterior | None = None
+        self.prediction: AffordancePrediction | None = None
+        self.description: Description | None = None
+        self.stream_end: StreamEnd | None = None
+        self.changed = asyncio.Event()
+        self.last_message = time.monotonic()
+        self._tasks: list[asyncio.Task[None]] = []
+
+    def start(self) -> None:
+        keys = self.bus.keys
+        loop = asyncio.get_running_loop()
+        subscriptions: list[tuple[str, type[Message], Callable[[Any], None]]] = [
+            (keys.gesture_segment, GestureSegment, self.on_segment),
+            (keys.gesture_posterior, ActionPosterior, self.on_posterior),
+            (keys.affordance, AffordancePrediction, self.on_prediction),
+            (keys.description, Description, self.on_description),
+            (keys.stream_end, StreamEnd, self.on_end),
+            (keys.health(), ServiceHealth, self.on_health),
+            (keys.progress(), Progress, self.on_progress),
+        ]
+        for key, cls, handler in subscriptions:
+            # derived streams may cross a link (robot <-> workstation): recover what it loses
+            delivery = RELIABLE if cls in (ServiceHealth, Progress) else FRAMES
+            sub = self.bus.subscribe(key, cls, delivery)
+            self._tasks.append(
+                loop.create_task(consume(sub, handler, self._failed, after=self._seen))
+            )
+
+    def _seen(self, received: Received[Any]) -> None:
+        if not isinstance(received.message, ServiceHealth | Progress):
+            self.last_message = time.monotonic()
+        self.changed.set()
+
+    def _failed(self, key: str, exc: Exception) -> None:
+        log.warning("could not show a message on %s: %s", key, exc)
+
+    def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+
+    def _flush(self) -> None:
+        for line in self.report.release():
+            self.emit(line)
+
+    # -- handlers ------------------------------------------------------------------------
+
+    def on_segment(self, msg: GestureSegment) -> None:
+        if msg.event == "start":
+            self.report.started(msg.segment_id, msg.frame)
+        elif msg.event == "cancel":
+            self.report.cancelled(msg.segment_id)
+        else:
+            self.report.ended(msg.segment_id, msg.frame)
+        self._flush()
+
+    def on_posterior(self, msg: ActionPosterior) -> None:
+        self.posterior = msg
+        if not msg.final:
+            self.report.belief(msg.segment_id, msg.frame, msg.actions, msg.posterior)
+
+    def on_prediction(self, msg: AffordancePrediction) -> None:
+        self.prediction = msg
+        if msg.final:
+            self.report.recognised(msg.segment_id, msg.action_belief, msg.evidence)
+            self._flush()
+        else:
+            self.report.anticipation(msg.segment_id, msg.frame, msg.effects)
+
+    def on_description(self, msg: Description) -> None:
+        self.description = msg
+        if msg.final and msg.sentences:
+            self.report.described(msg.segment_id, msg.sentences[0].text)
+            self._flush()
+
+    def on_progress(self, msg: Progress) -> None:
+        mine = self.progress.setdefault(msg.service, {})
+        for key, stamp in msg.handled.items():
+            mine[key] = max(mine.get(key, -1), stamp)
+
+    def on_end(self, msg: StreamEnd) -> None:
+        self.stream_end = msg
+
+    def on_health(self, msg: ServiceHealth) -> None:
+        self.health_reports[msg.service] = msg
+
+    # -- completion ----------------------------------------------------------------------
+
+    def done(self, quiet_s: float = 1.0) -> bool:
+        """The source is exhausted, every service reporting progress has handled its last
+        message, every gesture it showed has its final description, and nothing has moved for
+        `quiet_s` (a gesture ended by the source's end is announced after it)."""
+        end = self.stream_end
+        if end is None:
+            return False
+        keys = self.bus.keys
+        last = {keys.stream(name): stamp for name, stamp in end.last_stamps.items()}
+        for handled in self.progress.values():
+            for key, stamp in handled.items():
+                if key in last and stamp < last[key]:
+                    return False
+        if not self.report.all_ended_printed:
+            return False
+        return time.monotonic() - self.last_message >= quiet_s
+
+    def summary(self) -> str:
+        end = self.stream_end
+        source = (
+            f"source finished after {end.messages} messages ({end.dropped} dropped); "
+            if end
+            else ""
+        )
+        gestures = [g for g in self.report.gestures.values() if g.started is not None]
+        described = sum(1 for g in gestures if g.description)
+        return f"{source}{described} of {len(gestures)} gesture(s) described"
