@@ -65,24 +65,27 @@ FIG7B: Rows = (
     ("the robot grasps the square but the sphere is inert", -0.57417),
 )
 
-# Fig. 4: P_comb(ObjVel = slow, medium, fast | Shape, G), rows keyed as experiment 2 keys them.
+# Fig. 4: P_comb(ObjVel = slow, medium, fast | Shape, G) for each P_HMM of experiment 2, in the
+# order experiment 2 keys them (`FIG4_EVIDENCE`: the network alone, then touch to tap).
+FIG4_EVIDENCE = (
+    "none",
+    "[0, 0, 1]",
+    "[0, 0.25, 0.75]",
+    "[0, 0.5, 0.5]",
+    "[0, 0.75, 0.25]",
+    "[0, 1, 0]",
+)
+_FIG4_BARS = (  # one row per FIG4_EVIDENCE: (sphere, box), each (slow, medium, fast)
+    ((0.2773, 0.51998, 0.20271), (0.50601, 0.48943, 0.00457)),
+    ((0.9681, 0.01596, 0.01594), (0.96798, 0.01602, 0.01601)),
+    ((0.60125, 0.16717, 0.23158), (0.74295, 0.24853, 0.00851)),
+    ((0.40329, 0.24876, 0.34795), (0.62097, 0.37458, 0.00445)),
+    ((0.27941, 0.29982, 0.42077), (0.54443, 0.45367, 0.0019)),
+    ((0.19458, 0.33479, 0.47063), (0.49193, 0.50791, 0.00016)),
+)
 FIG4: dict[str, dict[str, tuple[float, float, float]]] = {
-    "circle": {
-        "none": (0.2773, 0.51998, 0.20271),
-        "[0, 0, 1]": (0.9681, 0.01596, 0.01594),
-        "[0, 0.25, 0.75]": (0.60125, 0.16717, 0.23158),
-        "[0, 0.5, 0.5]": (0.40329, 0.24876, 0.34795),
-        "[0, 0.75, 0.25]": (0.27941, 0.29982, 0.42077),
-        "[0, 1, 0]": (0.19458, 0.33479, 0.47063),
-    },
-    "box": {
-        "none": (0.50601, 0.48943, 0.00457),
-        "[0, 0, 1]": (0.96798, 0.01602, 0.01601),
-        "[0, 0.25, 0.75]": (0.74295, 0.24853, 0.00851),
-        "[0, 0.5, 0.5]": (0.62097, 0.37458, 0.00445),
-        "[0, 0.75, 0.25]": (0.54443, 0.45367, 0.0019),
-        "[0, 1, 0]": (0.49193, 0.50791, 0.00016),
-    },
+    shape: {key: bars[i] for key, bars in zip(FIG4_EVIDENCE, _FIG4_BARS, strict=True)}
+    for i, shape in enumerate(("circle", "box"))
 }
 # Fig. 6: ΔP(w) = P(w | X_obs, Action=tap) - P(w | X_obs), every word with |ΔP| > 0.02.
 FIG6_THRESHOLD = 0.02
