@@ -26,7 +26,8 @@ def _json(capsys: pytest.CaptureFixture[str], argv: list[str]) -> object:
 def test_show_json(model_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = _json(capsys, ["bn", "show", str(model_path), "--json"])
     assert isinstance(out, dict)
-    assert set(out) == {"nodes", "arcs", "node_log_likelihood"}
+    assert set(out) == {"nodes", "arcs", "node_log_likelihood", "zero_columns", "removed_mass"}
+    assert out["zero_columns"] == {} and out["removed_mass"] == 0.0
     assert out["nodes"][0] == {"name": "Action", "values": ["grasp", "tap", "touch"]}
     assert len(out["nodes"]) == 57
     assert ["Action", "HandVel"] in out["arcs"]
@@ -184,6 +185,28 @@ def test_learn_the_real_network(
     lls = shown["node_log_likelihood"]
     total = sum(v for k, v in lls.items() if k not in ("Action", "Color", "Shape", "Size"))
     assert total == pytest.approx(-14723.61822813, abs=1e-6)
+
+
+def test_learn_with_zero_columns_and_query(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--unseen zero: the toolbox's columns; the query renormalises over what they leave."""
+    out = tmp_path / "zero.json"
+    bag = shared_data / "salvi2012/sent-1-5_lab_aff_bag.txt"
+    assert main(["bn", "learn", str(bag), "--unseen", "zero", "-o", str(out)]) == 0
+    shown = _json(capsys, ["bn", "show", str(out), "--json"])
+    assert isinstance(shown, dict)
+    assert shown["zero_columns"] == {"and": 3, "but": 3, "falls": 3, "falling": 3}
+    assert 0 < shown["removed_mass"] < 0.05
+    scene = ["Color=yellow", "Size=big", "Shape=circle", "ObjVel=fast"]
+    action = _json(
+        capsys, ["bn", "query", str(out), "--query", "Action", "--evidence", *scene, "--json"]
+    )
+    assert isinstance(action, dict)
+    assert action["Action"]["tap"] == pytest.approx(0.6963, abs=5e-5)
+    argv = ["bn", "query", str(out), "--query", "Action", "--evidence", "ObjVel=fast"]
+    assert main([*argv, "HandVel=slow", "Contact=long"]) == 2
+    assert "unseen=zero" in capsys.readouterr().err
 
 
 def test_demo_runs_offline(

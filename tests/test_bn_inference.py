@@ -185,6 +185,24 @@ def test_compiled_agrees_with_pgmpy_on_the_real_network(
     _agree(real_model, _real_network(real_model), data)
 
 
+@pytest.fixture(scope="module")
+def real_zero_model(shared_data: Path) -> BayesNet:
+    d = load_definition(shared_data / "salvi2012/networkDefinition.txt")
+    bag = load_bag(shared_data / "salvi2012/sent-1-5_lab_aff_bag.txt", d)
+    return learn_network(bag, unseen="zero")
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_compiled_agrees_with_pgmpy_with_zero_columns(
+    real_zero_model: BayesNet, data: st.DataObject
+) -> None:
+    """The toolbox's all-zero columns: pgmpy holds them in a Markov network (pgmpy_bridge)."""
+    network = _real_network(real_zero_model)
+    assert type(network).__name__ == "DiscreteMarkovNetwork"
+    _agree(real_zero_model, network, data)
+
+
 _NETWORKS: dict[int, Any] = {}
 
 

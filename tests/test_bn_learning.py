@@ -132,8 +132,9 @@ def test_cpts_by_hand() -> None:
     assert np.allclose(ml_cpt(counts, "absent"), [[0.75, 0.25], [1.0, 0.0]])
     assert np.allclose(ml_cpt(counts, "uniform"), [[0.75, 0.25], [0.5, 0.5]])
     assert np.allclose(word_cpt(counts, "dirichlet", 2.0), [[3.5 / 5, 1.5 / 5], [0.5, 0.5]])
-    with pytest.raises(InputError, match="unseen"):
-        word_cpt(counts, "zero")
+    assert np.array_equal(word_cpt(counts, "zero"), [[0.75, 0.25], [0.0, 0.0]])
+    with pytest.raises(InputError, match=r"unseen.*valid: absent, zero, uniform, dirichlet"):
+        word_cpt(counts, "none")
 
 
 def test_synthetic_learning_recovers_the_generating_arcs() -> None:

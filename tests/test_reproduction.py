@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from beyond_self.cli import main
+from beyond_self.cognition.published import FIG7A, FIG7B, TABLE_II
 
 
 @pytest.fixture(scope="module")
@@ -81,6 +82,35 @@ def test_exp5_and_but_and_exp6_green(results: tuple[Path, dict]) -> None:
     assert all(" and " in s for s, _ in r["exp5_and"][:3])
     assert all(" but " in s for s, _ in r["exp5_but"][:3])
     assert len(r["exp6"]) == 4 and all(" green " in s for s in r["exp6"].values())
+
+
+def test_report_says_which_unseen_rule_each_published_figure_needs(
+    results: tuple[Path, dict],
+) -> None:
+    """Table II exists only with the toolbox's zero columns; Fig. 7a/7b re-run beside it."""
+    out, r = results
+    figures = r["published"]
+    assert figures["Table II"]["needs"] == ["zero"]
+    assert figures["Table II"]["checks"]["absent"]["same"] is False  # other sentences
+    for name in ("Fig. 7a (list)", "Fig. 4", "Fig. 6", "Fig. 7a/7b (bars)"):
+        assert figures[name]["needs"] == ["zero"], name
+    # the "and" list keeps its sentences under both rules; its scores move by 7.5e-5
+    assert figures["Fig. 7a (list)"]["checks"]["absent"]["same"] is True
+    assert 5e-5 < figures["Fig. 7a (list)"]["checks"]["absent"]["max_abs_diff"] < 1e-4
+    assert figures["Fig. 7b (list)"]["needs"] == ["absent", "zero"]
+    assert figures["Fig. 8"]["needs"] == ["absent", "zero"]
+    assert figures["Fig. 3"]["rules_differ_by"] < 1e-12
+    assert figures["Fig. 5"]["rules_differ_by"] > 0.01
+    # the lists themselves, against the article's sentences, independently of the checks
+    lists = r["published_lists"]["zero"]
+    for name, published in (("Table II", TABLE_II), ("Fig. 7a", FIG7A), ("Fig. 7b", FIG7B)):
+        assert [s for s, _ in lists[name]] == [s for s, _ in published]
+        assert all(
+            abs(a - b) < 1.5e-5 for (_, a), (_, b) in zip(lists[name], published, strict=True)
+        )
+    report = (out / "report.md").read_text()
+    assert "## 7. The published figures under each rule" in report
+    assert "| Table II | no (other items;" in report and "(table2_nbest.png)" in report
 
 
 def test_missing_data_says_where_to_get_it(

@@ -1,6 +1,6 @@
 """`beyond bn`: learn, show and query the Affordance–Words Bayesian network.
 
-    beyond bn learn [BAG] [--network DEF] -o MODEL
+    beyond bn learn [BAG] [--network DEF] -o MODEL [--unseen absent|zero|uniform|dirichlet]
     beyond bn show MODEL [--json]
     beyond bn query MODEL --query VAR [VAR ...] [--evidence VAR=VALUE ...]
                     [--soft VAR=value:p,value:p ...] [--gesture ACTION=p,... |
@@ -61,8 +61,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--unseen",
         choices=UNSEEN_RULES,
         default="absent",
-        help="word CPT for parent configurations never seen in training (default: absent, "
-        "the reference's behaviour)",
+        help="word CPT for parent configurations never seen in training: absent (default: "
+        "P(absent) = 1, the configuration stays possible), zero (the reference toolbox's "
+        "all-zero column: the configuration leaves the joint; the article's Table II), uniform, "
+        "dirichlet",
     )
     learn.add_argument("--max-parents", type=argtypes.count(0, 64), default=DEFAULT_MAX_PARENTS)
     learn.add_argument(
@@ -152,6 +154,12 @@ def _show(args: argparse.Namespace) -> int:
         f"training log-likelihood without {', '.join(roots)}: "
         f"{model.training_log_likelihood(roots):.8f}"
     )
+    if model.zero_columns:
+        console.print(
+            "all-zero word columns (parent configurations ruled out of the joint): "
+            + ", ".join(f"{w} {n}" for w, n in model.zero_columns.items())
+            + f"; prior mass ruled out {model.compiled.removed_mass:.6f}"
+        )
     return 0
 
 
@@ -160,6 +168,8 @@ def show_json(model: BayesNet) -> dict[str, Any]:
         "nodes": [{"name": n, "values": list(model.values[n])} for n in model.variables],
         "arcs": [list(a) for a in model.arcs],
         "node_log_likelihood": dict(model.node_log_likelihood),
+        "zero_columns": model.zero_columns,
+        "removed_mass": model.compiled.removed_mass,
     }
 
 

@@ -9,6 +9,10 @@ word's P(present | evidence) is one dot product, all words at once one matrix–
 This agrees with pgmpy's VariableElimination (see `pgmpy_bridge`) to rounding error and is
 hundreds of times faster, which matters because fusion re-queries it for every gesture frame.
 
+Word CPT rows may be all zero (unseen="zero", parameters.py): such a row removes its parent
+configuration from the joint, as the factor product does in the reference toolbox, and every
+query renormalises over the configurations that remain.
+
 Evidence: hard (`{"Shape": "box"}`) or soft (`{"Action": [0.2, 0.7, 0.1]}`: a likelihood vector
 over the variable's values in definition order, scaled arbitrarily; it multiplies the prior, as
 pgmpy's virtual evidence does). A variable cannot be both observed and queried, nor carry both
@@ -138,6 +142,18 @@ class CompiledNetwork:
         joint = np.ones(self.shape)
         for name in self.core_names:
             joint = joint * self._broadcast(name, parents[name], cpts[name])
+        # A word row of all zeros (unseen="zero", the reference toolbox's unseen column) sums to
+        # 0 over the word's values, not 1: summing the word out multiplies the joint by 0 there,
+        # so that parent configuration leaves the joint and every query renormalises over what
+        # remains. One indicator over the core states carries it for every word. An observed,
+        # soft or queried word multiplies by its own row as well, which is 0 exactly where the
+        # indicator is, so counting it twice changes nothing.
+        support = np.ones(self.shape, dtype=bool)
+        for name in self.leaf_names:
+            support &= self._broadcast(name, parents[name], cpts[name], leaf=True).sum(-1) > 0
+        self.removed_mass = float(joint[~support].sum())  # prior mass ruled out, 0 if none
+        if not support.all():
+            joint = joint * support
         self.joint = joint.reshape(-1)
         # Leaf tables over the flat core states: (size, card) each.
         self.leaf_tables: dict[str, np.ndarray] = {}
@@ -186,7 +202,8 @@ class CompiledNetwork:
     ) -> tuple[np.ndarray, tuple[int, ...], tuple[int | slice, ...]]:
         """The core joint restricted to the hard evidence (a view: observed axes sliced away),
         times every other evidence factor; the core axes it keeps; the index that sliced it.
-        Its sum is P(evidence) up to the soft vectors' scales."""
+        Its sum is P(evidence) up to the soft vectors' scales. A queried word's soft evidence
+        is left out: it weighs that word's values, which the caller multiplies in."""
         for name in evidence:
             if name not in self.variables:
                 raise unknown("evidence variable", name, tuple(self.variables))
@@ -217,20 +234,25 @@ class CompiledNetwork:
                 shape = [1] * len(free)
                 shape[free.index(self.axis[name])] = vec.size
                 phi = phi * vec.reshape(shape)
-            else:
+            elif name not in query:
                 phi = phi * (self.leaf_nd[name][idx] @ vec)
         for name, code in leaf_hard:
             phi = phi * self.leaf_nd[name][(*idx, code)]
         return phi, free, idx
 
-    @staticmethod
     def _check_total(
-        total: float, evidence: Mapping[str, str], soft: Mapping[str, Sequence[float]]
+        self, total: float, evidence: Mapping[str, str], soft: Mapping[str, Sequence[float]]
     ) -> None:
         if not total > 0:
             shown = [f"{k}={v}" for k, v in evidence.items()] + [f"soft {k}" for k in soft]
+            why = (
+                " (its all-zero word columns, unseen=zero, rule out parent configurations "
+                "never seen in training)"
+                if self.removed_mass > 0
+                else ""
+            )
             raise InputError(
-                f"the evidence has zero probability under the model ({', '.join(shown)}); "
+                f"the evidence has zero probability under the model{why} ({', '.join(shown)}); "
                 "drop or change some of it"
             )
 
@@ -280,7 +302,10 @@ class CompiledNetwork:
             operands: list[Any] = [phi, list(free)]
             for k, name in enumerate(leaf_q):
                 labels[name] = self._ndim + k
-                operands += [self.leaf_nd[name][idx], [*free, self._ndim + k]]
+                leaf = self.leaf_nd[name][idx]
+                if name in soft:  # its likelihood weighs each of its values
+                    leaf = leaf * check_likelihood(self.variables[name], soft[name])
+                operands += [leaf, [*free, self._ndim + k]]
             operands.append([labels[n] for n in query])
             table = np.einsum(*operands, optimize=len(leaf_q) > 1)
         total = float(table.sum())

@@ -62,8 +62,13 @@ class BayesNet:
             if cpt.shape != shape:
                 raise InputError(f"CPT of {name!r} has shape {cpt.shape}; expected {shape}")
             sums = cpt.reshape(-1, shape[-1]).sum(axis=1)
-            if np.any(cpt < 0) or not np.allclose(sums, 1.0, atol=1e-6):
-                raise InputError(f"CPT of {name!r} is not a probability table (rows sum to 1)")
+            proper = np.isclose(sums, 1.0, atol=1e-6)
+            rule = "rows sum to 1"
+            if self.definition[name].is_word:  # the toolbox's unseen column (unseen="zero")
+                proper |= sums == 0.0
+                rule += ", or are all zero for a parent configuration ruled out"
+            if np.any(cpt < 0) or not np.all(proper):
+                raise InputError(f"CPT of {name!r} is not a probability table ({rule})")
             self.cpts[name] = cpt
         self._check_acyclic()
 
@@ -97,6 +102,18 @@ class BayesNet:
     def words(self) -> tuple[str, ...]:
         """The vocabulary: each word node's present value, in node order."""
         return tuple(v.word for v in self.definition.words)
+
+    @property
+    def zero_columns(self) -> dict[str, int]:
+        """Word nodes with all-zero CPT rows (unseen="zero"), and how many each: those parent
+        configurations are out of the joint, and every query renormalises over the rest."""
+        out = {}
+        for var in self.definition.words:
+            rows = self.cpts[var.name].reshape(-1, var.card)
+            zeros = int(np.count_nonzero(rows.sum(axis=1) == 0.0))
+            if zeros:
+                out[var.name] = zeros
+        return out
 
     @property
     def arcs(self) -> list[tuple[str, str]]:

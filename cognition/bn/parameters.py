@@ -5,11 +5,14 @@ pseudo-count ess/(q·r) in every cell, q parent configurations, r values. A conf
 in training thus gets the uniform distribution.
 
 Word nodes: maximum likelihood. For a parent configuration never seen in training the counts are
-all zero and maximum likelihood is undefined. The rule is an explicit choice (`unseen`):
+all zero and maximum likelihood is undefined. The rule is an explicit choice (`unseen`), and each
+is a different model (README.md beside this file compares them on the article's tables):
 
-- "absent" (default, the reference's behaviour): P(absent) = 1. BNT leaves such a column all zero,
-  so that configuration adds nothing to P(word present); P(absent) = 1 reproduces exactly that for
-  P(present) while keeping a proper distribution (which pgmpy requires).
+- "absent" (default): P(absent) = 1. The configuration stays in the joint and the word is never
+  said there. A proper Bayesian network (what pgmpy requires); the article's "and"/"but" lists.
+- "zero": the column stays all zero, as the reference toolbox (BNT) leaves it. Summing the word
+  out then gives 0, not 1, so the configuration leaves the *joint*: every query renormalises over
+  the configurations every word has seen. This is the model behind the article's Table II.
 - "uniform": 1/r for every value.
 - "dirichlet": give word nodes a BDeu prior of equivalent sample size `word_ess` as well, which
   changes every word column slightly, not only the unseen ones.
@@ -23,8 +26,9 @@ import numpy as np
 
 from beyond_self.core.errors import InputError, unknown
 
-UnseenRule = Literal["absent", "uniform", "dirichlet"]
-UNSEEN_RULES: tuple[str, ...] = ("absent", "uniform", "dirichlet")
+UnseenRule = Literal["absent", "zero", "uniform", "dirichlet"]
+UNSEEN_RULES: tuple[str, ...] = ("absent", "zero", "uniform", "dirichlet")
+ML_RULES = ("absent", "zero", "uniform")  # the rules that keep maximum likelihood on seen columns
 
 
 def bdeu_cpt(counts: np.ndarray, ess: float) -> np.ndarray:
@@ -37,7 +41,7 @@ def bdeu_cpt(counts: np.ndarray, ess: float) -> np.ndarray:
 
 
 def ml_cpt(counts: np.ndarray, unseen: str, absent_index: int = 0) -> np.ndarray:
-    """Maximum-likelihood CPT; rows with no counts follow `unseen` ("absent" or "uniform")."""
+    """Maximum-likelihood CPT; rows with no counts follow `unseen` ("absent", "zero", "uniform")."""
     q, r = counts.shape
     totals = counts.sum(axis=1, keepdims=True)
     cpt = np.divide(counts, totals, out=np.zeros((q, r)), where=totals > 0)
@@ -46,8 +50,8 @@ def ml_cpt(counts: np.ndarray, unseen: str, absent_index: int = 0) -> np.ndarray
         cpt[empty, absent_index] = 1.0
     elif unseen == "uniform":
         cpt[empty, :] = 1.0 / r
-    else:
-        raise unknown("rule for unseen parent configurations", unseen, ["absent", "uniform"])
+    elif unseen != "zero":
+        raise unknown("rule for unseen parent configurations", unseen, ML_RULES)
     return cast(np.ndarray, cpt)
 
 

@@ -1,18 +1,30 @@
-"""The network as a pgmpy DiscreteBayesianNetwork, and pgmpy's exact inference as the reference.
+"""The network as a pgmpy model, and pgmpy's exact inference as the reference.
 
 pgmpy is the container other tools understand and the yardstick for our compiled inference:
 `reference_query` must agree with `BayesNet.query` to rounding error (tested, benchmarked).
 
-Soft evidence goes in as pgmpy's virtual evidence (pgmpy 1.x `VariableElimination.query(...,
-virtual_evidence=[TabularCPD])`): pgmpy adds a binary child `__VAR` with
-P(__VAR = 0 | VAR) = the given vector, observed at 0, so the vector acts as a likelihood. Because
-it is used as a probability column, we scale it to a maximum of 1 first (a likelihood's scale does
-not matter). pgmpy rebuilds the inference object around the augmented model in place, so every
-soft query here gets a fresh VariableElimination.
+A network whose word columns are all proper distributions ("absent", "uniform", "dirichlet") is a
+pgmpy DiscreteBayesianNetwork. One with all-zero word columns (unseen="zero", the reference
+toolbox's semantics) is not: pgmpy's TabularCPD requires every column to sum to 1, and writing
+P(absent) = 1 there would be the "absent" model, which keeps those configurations in the joint.
+So that network becomes a pgmpy DiscreteMarkovNetwork whose factors are the CPTs exactly as they
+are (zero columns included) over each node's family: pgmpy's VariableElimination then computes
+the plain factor product, in which a zero column removes its parent configuration, and the
+result is normalised over what remains: the toolbox's junction tree, and our semantics.
+
+Soft evidence on a Bayesian network goes in as pgmpy's virtual evidence (pgmpy 1.x
+`VariableElimination.query(..., virtual_evidence=[TabularCPD])`): pgmpy adds a binary child
+`__VAR` with P(__VAR = 0 | VAR) = the given vector, observed at 0, so the vector acts as a
+likelihood. Because it is used as a probability column, we scale it to a maximum of 1 first (a
+likelihood's scale does not matter). pgmpy rebuilds the inference object around the augmented
+model in place, so every soft query here gets a fresh VariableElimination. pgmpy has no virtual
+evidence for Markov networks: there soft evidence is one more factor over the variable, the
+likelihood vector itself, on a copy of the network.
 """
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -21,16 +33,19 @@ import numpy as np
 
 with warnings.catch_warnings():  # pgmpy 1.1 warns, at import, about its own deprecated module
     warnings.simplefilter("ignore", FutureWarning)
-    from pgmpy.factors.discrete import TabularCPD
+    from pgmpy.factors.discrete import DiscreteFactor, TabularCPD
     from pgmpy.inference import VariableElimination
-    from pgmpy.models import DiscreteBayesianNetwork
+    from pgmpy.models import DiscreteBayesianNetwork, DiscreteMarkovNetwork
 
 from beyond_self.cognition.bn.inference import Posterior, check_likelihood
 from beyond_self.cognition.bn.model import BayesNet
 
 
-def to_pgmpy(model: BayesNet) -> DiscreteBayesianNetwork:
-    """Same nodes, arcs, state names and CPTs (pgmpy columns = parent configurations)."""
+def to_pgmpy(model: BayesNet) -> DiscreteBayesianNetwork | DiscreteMarkovNetwork:
+    """Same nodes, arcs, state names and CPTs (pgmpy columns = parent configurations); a Markov
+    network of the same tables when some word columns are all zero (module docstring)."""
+    if model.zero_columns:
+        return to_pgmpy_factors(model)
     network = DiscreteBayesianNetwork()
     network.add_nodes_from(model.variables)
     network.add_edges_from(model.arcs)
@@ -51,6 +66,27 @@ def to_pgmpy(model: BayesNet) -> DiscreteBayesianNetwork:
             )
         )
     network.add_cpds(*cpds)
+    return network
+
+
+def to_pgmpy_factors(model: BayesNet) -> DiscreteMarkovNetwork:
+    """One factor per node, its CPT as it is over (parents..., node); each family a clique."""
+    network = DiscreteMarkovNetwork()
+    network.add_nodes_from(model.variables)
+    values = model.values
+    factors = []
+    for name in model.variables:
+        family = [*model.parents[name], name]
+        network.add_edges_from(itertools.combinations(family, 2))
+        factors.append(
+            DiscreteFactor(
+                family,
+                [len(values[n]) for n in family],
+                model.cpts[name],
+                state_names={n: list(values[n]) for n in family},
+            )
+        )
+    network.add_factors(*factors)
     return network
 
 
@@ -85,12 +121,16 @@ def reference_query(
     """
     evidence = dict(evidence or {})
     soft = dict(soft or {})
+    markov = isinstance(network, DiscreteMarkovNetwork)
+    if soft and markov:
+        network = network.copy()
+        network.add_factors(*likelihood_factors(model, soft))
     if soft or inference is None:
         inference = VariableElimination(network)
     factor = inference.query(
         variables=list(query),
         evidence=evidence or None,
-        virtual_evidence=virtual_evidence(model, soft) or None,
+        virtual_evidence=(virtual_evidence(model, soft) if not markov else None) or None,
         show_progress=False,
     )
     values = model.values
@@ -98,4 +138,24 @@ def reference_query(
     for index in np.ndindex(*table.shape):
         assignment = {q: values[q][i] for q, i in zip(query, index, strict=True)}
         table[index] = factor.get_value(**assignment)
+    if markov:  # pgmpy returns a Markov network's factor product unnormalised
+        table = table / table.sum()
     return Posterior(tuple(query), tuple(values[q] for q in query), table)
+
+
+def likelihood_factors(
+    model: BayesNet, soft: Mapping[str, Sequence[float]]
+) -> list[DiscreteFactor]:
+    """Soft evidence as factors for a Markov network: each likelihood vector over its variable."""
+    out = []
+    for name, likelihood in soft.items():
+        var = model.definition[name]
+        out.append(
+            DiscreteFactor(
+                [name],
+                [var.card],
+                check_likelihood(var, likelihood),
+                state_names={name: list(var.values)},
+            )
+        )
+    return out
