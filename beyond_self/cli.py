@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
@@ -110,6 +111,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as exc:
         print(f"beyond {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `beyond inspect FILE | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
+        return 141  # as a shell reports a command ended by SIGPIPE
     except OSError as exc:
         # a file the user named (or the folder it is in) cannot be read or written: bad input
         # from the user's side, not a bug; the path checks in argtypes catch most of them earlier
