@@ -239,7 +239,7 @@ async def run_once(with_bridge: bool) -> dict[str, float]:
         if with_bridge:
             ws_port = free_port()
             bridge = subprocess.Popen(
-                [*BEYOND, "foxglove", "--port", str(ws_port)],
+                [*BEYOND, "foxglove", "--ws-port", str(ws_port)],
                 env=env(config),
                 stderr=subprocess.DEVNULL,
             )

@@ -1,8 +1,9 @@
 """`beyond reproduce`: re-run the article's experiments on its real data and write a report.
 
-    beyond reproduce [--data DIR] --out DIR
+    beyond reproduce [--data DIR] -o DIR
 
-DIR defaults to ../shared/data (or $BEYOND_DATA). Writes report.md, one PNG per figure and
+--data defaults to $BEYOND_DATA, else the `shared/data` folder beside the project; a folder given
+is relative to the current folder. Writes report.md, one PNG per figure and
 results.json; takes a few seconds.
 """
 
@@ -10,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from rich.console import Console
 
@@ -23,9 +23,19 @@ HELP = "re-run the article's experiments 1-6 on its real data; write report.md, 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--data", type=Path, help="the article's data folder (default: ../shared/data)"
+        "--data",
+        type=argtypes.data_folder,
+        metavar="DIR",
+        help="the article's data folder (default: $BEYOND_DATA, else shared/data beside the "
+        "project)",
     )
-    parser.add_argument("--out", type=argtypes.output_dir, required=True, help="output folder")
+    argtypes.add_output(
+        parser,
+        "folder to write report.md, results.json and the plots into",
+        folder=True,
+        required=True,
+        old="--out",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     with console.status("starting") as status:
         results = run_all(data, progress=lambda text: status.update(text))
-    report = write_report(results, args.out)
+    report = write_report(results, args.output)
     console.print(f"wrote {report}, results.json and plots in {time.perf_counter() - start:.1f} s")
     print(report)
     return 0
