@@ -107,6 +107,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        return _run(module, args)
+    finally:
+        for text in getattr(args, "_notes", None) or ():  # argtypes.note: after the output
+            print(f"beyond {args.command}: note: {text}", file=sys.stderr)
+
+
+def _run(module: ModuleType, args: argparse.Namespace) -> int:
+    """Run the command; bad input of any kind is one line and exit status 2."""
+    try:
         return int(module.run(args) or 0)
     except InputError as exc:
         print(f"beyond {args.command}: error: {exc}", file=sys.stderr)

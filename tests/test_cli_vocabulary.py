@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from busutil_net import REPO, free_port
 
-from beyond_self.cli import build_parser
+from beyond_self.cli import build_parser, main
 from beyond_self.commands import argtypes
 from beyond_self.runtime.bus import open_failure
 from beyond_self.runtime.cliargs import _port, config_from_args
@@ -108,16 +108,21 @@ def parse(argv: list[str]) -> argparse.Namespace:
 def test_older_spellings_work_and_say_what_replaced_them(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """Said once the command has run, so that an error stays the first line of stderr."""
     args = parse(["foxglove", "--bus-port", "7999"])
     assert args.port == 7999 and args.ws_port == 8765
-    assert "--bus-port is deprecated; use --port" in capsys.readouterr().err
+    assert args._notes == ["--bus-port is deprecated; use --port"]
     args = parse(["reproduce", "--out", str(tmp_path / "r")])
     assert args.output == tmp_path / "r"
-    assert "--out is deprecated; use -o/--output" in capsys.readouterr().err
     args = parse(["gesture", "train", "--out", str(tmp_path / "m.json")])
     assert args.output == tmp_path / "m.json"
     with pytest.raises(SystemExit):  # one output, not two
         parse(["learn", "--out", str(tmp_path), "-o", str(tmp_path)])
+    capsys.readouterr()
+    assert main(["reproduce", "--out", str(tmp_path / "r"), "--data", str(tmp_path / "no")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("beyond reproduce: error: ") and len(err) == 2
+    assert err[1] == "beyond reproduce: note: --out is deprecated; use -o/--output"
 
 
 def test_data_folders_are_relative_to_the_current_folder(tmp_path: Path) -> None:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -77,6 +76,17 @@ seed = number(int, lo=0, hi=SEED_MAX, what="seed")
 rate = number(float, lo=0, hi=RATE_MAX, what="speed factor, 0: as fast as possible")
 
 
+NOTES = "_notes"  # attribute of the parsed arguments: notes printed once the command has run
+
+
+def note(args: argparse.Namespace, text: str) -> None:
+    """Say `text` once the command has run (on stderr, after its output and after any error's
+    one line, which stays the first line a script reads)."""
+    notes: list[str] = getattr(args, NOTES, None) or []
+    notes.append(text)
+    setattr(args, NOTES, notes)
+
+
 class _Deprecated(argparse.Action):
     """An older spelling of an option: it still works, and says what to write instead."""
 
@@ -91,16 +101,13 @@ class _Deprecated(argparse.Action):
         values: str | Sequence[Any] | None,
         option_string: str | None = None,
     ) -> None:
-        print(
-            f"{parser.prog}: {option_string} is deprecated; use {self.replacement}",
-            file=sys.stderr,
-        )
+        note(namespace, f"{option_string} is deprecated; use {self.replacement}")
         setattr(namespace, self.dest, values)
 
 
 def deprecated(container: Any, old: str, new: argparse.Action) -> argparse.Action:
     """Add `old` to `container` (a parser or group) as a deprecated spelling of the option
-    `new`: the same destination and type; using it works and prints what to use instead."""
+    `new`: the same destination and type; using it works and says what to use instead."""
     spelling = "/".join(new.option_strings)
     action: argparse.Action = container.add_argument(
         old,

@@ -83,11 +83,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {copied} messages and their Foxglove views to {args.output}")
         return 0
     config = config_from_args(args)
-    if args.port is not None:  # the one spelling whose meaning changed: say so, once
-        print(
-            "note: --port is the bus's rendezvous port, as in every command; the WebSocket "
-            "port is --ws-port (--port until 0.3)",
-            file=sys.stderr,
+    if args.port is not None:  # the one spelling whose meaning changed: say so
+        argtypes.note(
+            args,
+            "--port is the bus's rendezvous port, as in every command; the WebSocket port is "
+            "--ws-port (it was --port until 0.3)",
         )
 
     async def go(stop: asyncio.Event) -> str:

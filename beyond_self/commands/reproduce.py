@@ -16,6 +16,7 @@ from rich.console import Console
 
 from beyond_self.cognition.paths import SOURCES, shared_data_dir
 from beyond_self.commands import argtypes
+from beyond_self.commands.terminal import progress_bar
 from beyond_self.core.errors import InputError
 
 HELP = "re-run the article's experiments 1-6 on its real data; write report.md, PNGs, JSON"
@@ -51,9 +52,17 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"data folder {data} does not exist; it comes from {SOURCES}")
     console = Console(stderr=True)
     start = time.perf_counter()
-    with console.status("starting") as status:
-        results = run_all(data, progress=lambda text: status.update(text))
-    report = write_report(results, args.output)
+    with progress_bar(console) as progress:
+        task = progress.add_task("starting", total=None)
+
+        def step(text: str) -> None:  # a step begins: the one before is done
+            if progress.tasks[0].description != "starting":
+                progress.advance(task)
+            progress.update(task, description=text)
+
+        results = run_all(data, progress=step)
+        step("writing the report and the plots")
+        report = write_report(results, args.output)
     console.print(f"wrote {report}, results.json and plots in {time.perf_counter() - start:.1f} s")
     print(report)
     return 0
