@@ -10,6 +10,9 @@ other keys (health of each service, keys that are not ours) when first heard.
 Work is done only for what a client watches: a sample whose channel and views nobody subscribed
 to is not even decoded, so an idle bridge costs the pipeline one more subscriber and nothing else.
 Bad samples are counted and skipped (they are the services' problem, not the viewer's).
+Log times are the messages' stamps, so on a replay the viewer's timeline is the stream's
+(runtime.clock); a message without one is placed at its arrival moved onto the stamps' clock, and
+one that comes before any stamp (health of a service waiting for a replay to start) is skipped.
 
 Clients connect to a handshake front (runtime.foxglove_front), which accepts both names of the
 protocol, `foxglove.sdk.v1` (the SDK's, the current Foxglove app's) and `foxglove.websocket.v1`
@@ -77,6 +80,7 @@ class FoxgloveBridge:
         self.port = self._front.port
         self._channels: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
+        self._offset: int | None = None  # last stamp minus its arrival: the stamps' clock
         root = bus.keys.root
         for suffix, cls in STREAMS.values():
             self._channel(f"{root}/{suffix}", cls, "")
@@ -124,8 +128,8 @@ class FoxgloveBridge:
         if not channel.has_sinks() and not watched:
             self.stats.skipped += 1
             return
-        if cls is None:
-            channel.log(sample.payload, log_time=sample.received_ns)
+        if cls is None:  # not ours: at its arrival, on the stamps' clock once there is one
+            channel.log(sample.payload, log_time=sample.received_ns + (self._offset or 0))
             self.stats.forwarded += 1
             return
         try:
@@ -135,7 +139,14 @@ class FoxgloveBridge:
             log.debug("malformed sample on %s skipped: %s", sample.key, exc)
             return
         assert message is not None  # cls is known
-        at = message.header.stamp or sample.received_ns
+        stamp = message.header.stamp
+        if stamp:
+            self._offset = stamp - sample.received_ns
+        elif self._offset is None:  # on a replay's clock before the stream began: no time yet
+            self.stats.skipped += 1
+            return
+        # an unstamped message at its arrival moved onto the stamps' clock, as a recorder logs it
+        at = stamp or sample.received_ns + self._offset
         if channel.has_sinks():
             channel.log(to_recording_json(message), log_time=at)
             self.stats.forwarded += 1
