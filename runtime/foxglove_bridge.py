@@ -159,7 +159,7 @@ class FoxgloveBridge:
     async def run(self, stop: asyncio.Event, ready: asyncio.Event | None = None) -> BridgeStats:
         """Forward until `stop` is set; `ready` is set once subscribed to the bus."""
         sub = self.bus.subscribe_raw(self.bus.keys.everything, maxsize=1 << 14)
-        await self._front.start()
+        self._front.start()
         # alive like a service, so tools and scripts can wait for the bridge to be listening
         self.bus.declare_token(self.bus.keys.alive(ALIVE_NAME))
         if ready is not None:
@@ -176,7 +176,7 @@ class FoxgloveBridge:
         finally:
             stopper.cancel()
             sub.close()
-            await self._front.close()
+            self._front.close()
         return self.stats
 
     def close(self) -> None:

@@ -13,16 +13,18 @@ So the bridge listens itself, and the SDK's server listens on an ephemeral loopb
 it. For each connection the front reads the HTTP upgrade request; a client that offers
 `foxglove.websocket.v1` but not `foxglove.sdk.v1` is passed to the SDK asking for
 `foxglove.sdk.v1`, and the SDK's answer is passed back naming the protocol the client offered.
-Everything else, and every byte after the handshake, goes through unchanged in both directions
-(no frame is parsed, so nothing is slower than one more loopback hop).
+Everything else, and every byte after the handshake, goes through unchanged in both directions:
+no frame is parsed, and the copying runs in threads of its own with blocking sockets, off the
+bridge's event loop (which decodes the bus), so the front costs one loopback hop and a system
+call or two per chunk.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import socket
+import threading
 
 from beyond_self.core.errors import InputError
 
@@ -31,6 +33,7 @@ SDK_SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk's server accepts
 FIRST_SUBPROTOCOL = "foxglove.websocket.v1"  # the protocol's first name, offered by older clients
 SUBPROTOCOLS = (SDK_SUBPROTOCOL, FIRST_SUBPROTOCOL)
 _HEADER = b"sec-websocket-protocol"
+_END = b"\r\n\r\n"
 _HEAD_MAX = 16 * 1024  # bytes of an HTTP head (browsers send about 1 KiB)
 _HANDSHAKE_S = 10.0
 _CHUNK = 1 << 16
@@ -54,7 +57,6 @@ def listening_socket(host: str, port: int) -> socket.socket:
             f"cannot serve Foxglove on {host}:{port} ({exc.strerror or exc}); "
             "choose a free port with --ws-port"
         ) from None
-    sock.setblocking(False)
     return sock
 
 
@@ -71,12 +73,37 @@ def offered(head: bytes) -> list[str]:
 def with_subprotocol(head: bytes, subprotocol: str) -> bytes:
     """`head` (an HTTP request or response head) with one Sec-WebSocket-Protocol header, naming
     `subprotocol`, in place of those it had."""
-    lines = head.removesuffix(b"\r\n\r\n").split(b"\r\n")
+    lines = head.removesuffix(_END).split(b"\r\n")
     kept = [lines[0]] + [
         line for line in lines[1:] if line.partition(b":")[0].strip().lower() != _HEADER
     ]
     kept.append(b"Sec-WebSocket-Protocol: " + subprotocol.encode("latin-1"))
-    return b"\r\n".join(kept) + b"\r\n\r\n"
+    return b"\r\n".join(kept) + _END
+
+
+def _read_head(sock: socket.socket) -> tuple[bytes, bytes]:
+    """(HTTP head, the bytes read after it); OSError if the peer sends none in time."""
+    data = b""
+    while _END not in data:
+        if len(data) > _HEAD_MAX:
+            raise OSError("HTTP head too long")
+        more = sock.recv(4096)
+        if not more:
+            raise OSError("closed before the end of the HTTP head")
+        data += more
+    head, _, rest = data.partition(_END)
+    return head + _END, rest
+
+
+def _pipe(source: socket.socket, sink: socket.socket) -> None:
+    """Copy until `source` ends, then end `sink`'s sending side (as the peer did)."""
+    buffer = bytearray(_CHUNK)
+    view = memoryview(buffer)
+    with contextlib.suppress(OSError):
+        while n := source.recv_into(buffer):
+            sink.sendall(view[:n])
+    with contextlib.suppress(OSError):
+        sink.shutdown(socket.SHUT_WR)
 
 
 class HandshakeFront:
@@ -87,75 +114,71 @@ class HandshakeFront:
         self.sock = sock
         self.port = int(sock.getsockname()[1])
         self.upstream_port = upstream_port
-        self.renamed = 0  # connections accepted under the first name
-        self._server: asyncio.Server | None = None
-        self._connections: set[asyncio.Task[None]] = set()
+        self.renamed = 0  # connections accepted under the protocol's first name
+        self._open: set[socket.socket] = set()
+        self._lock = threading.Lock()
+        self._closed = False
 
-    async def start(self) -> None:
-        self._server = await asyncio.start_server(self._accept, sock=self.sock, limit=_HEAD_MAX)
+    def start(self) -> None:
+        threading.Thread(target=self._accept, name="foxglove front", daemon=True).start()
 
-    async def close(self) -> None:
-        if self._server is not None:
-            self._server.close()
-        for task in list(self._connections):
-            task.cancel()
-        await asyncio.gather(*self._connections, return_exceptions=True)
-        if self._server is not None:
-            await self._server.wait_closed()
+    def close(self) -> None:
+        """Stop accepting and end every connection (their threads then finish)."""
+        with self._lock:
+            self._closed = True
+            sockets = [self.sock, *self._open]
+        for sock in sockets:
+            with contextlib.suppress(OSError):
+                sock.shutdown(socket.SHUT_RDWR)
+            sock.close()
 
-    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        self._connections.add(task)
+    def _accept(self) -> None:
+        while True:
+            try:
+                client, _ = self.sock.accept()
+            except OSError:
+                return  # closed
+            threading.Thread(target=self._serve, args=(client,), daemon=True).start()
+
+    def _track(self, *socks: socket.socket) -> bool:
+        with self._lock:
+            if self._closed:
+                return False
+            self._open.update(socks)
+            return True
+
+    def _serve(self, client: socket.socket) -> None:
+        upstream: socket.socket | None = None
         try:
-            await self._serve(reader, writer)
-        except (OSError, asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError):
-            pass  # a client that went away or sent no HTTP head: its connection, not ours
-        except asyncio.CancelledError:
-            pass  # the bridge is stopping (asyncio's server would log a cancelled handler)
-        finally:
-            self._connections.discard(task)
-            writer.close()
-
-    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        head = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), _HANDSHAKE_S)
-        names = offered(head)
-        first_only = FIRST_SUBPROTOCOL in names and SDK_SUBPROTOCOL not in names
-        rename = FIRST_SUBPROTOCOL if first_only else None
-        if rename is not None:
-            head = with_subprotocol(head, SDK_SUBPROTOCOL)
-        up_reader, up_writer = await asyncio.open_connection(
-            "127.0.0.1", self.upstream_port, limit=_HEAD_MAX
-        )
-        try:
-            up_writer.write(head)
-            answer = await asyncio.wait_for(up_reader.readuntil(b"\r\n\r\n"), _HANDSHAKE_S)
-            if rename is not None and answer.startswith(b"HTTP/1.1 101"):
-                answer = with_subprotocol(answer, rename)
+            if not self._track(client):
+                return
+            client.settimeout(_HANDSHAKE_S)
+            head, early = _read_head(client)
+            names = offered(head)
+            first_only = FIRST_SUBPROTOCOL in names and SDK_SUBPROTOCOL not in names
+            if first_only:
+                head = with_subprotocol(head, SDK_SUBPROTOCOL)
+            upstream = socket.create_connection(("127.0.0.1", self.upstream_port), _HANDSHAKE_S)
+            if not self._track(upstream):
+                return
+            upstream.sendall(head + early)
+            answer, after = _read_head(upstream)
+            if first_only and answer.startswith(b"HTTP/1.1 101"):
+                answer = with_subprotocol(answer, FIRST_SUBPROTOCOL)
                 self.renamed += 1
-                log.info("client %s speaks %s", writer.get_extra_info("peername"), rename)
-            writer.write(answer)
-            pipes = [
-                asyncio.ensure_future(_pipe(reader, up_writer)),
-                asyncio.ensure_future(_pipe(up_reader, writer)),
-            ]
-            try:  # both ways until both ends close, or until one way fails
-                await asyncio.wait(pipes, return_when=asyncio.FIRST_EXCEPTION)
-            finally:
-                for pipe in pipes:
-                    pipe.cancel()
-                await asyncio.gather(*pipes, return_exceptions=True)
+                log.info("a client speaks %s", FIRST_SUBPROTOCOL)
+            client.sendall(answer + after)
+            client.settimeout(None)
+            upstream.settimeout(None)
+            back = threading.Thread(target=_pipe, args=(upstream, client), daemon=True)
+            back.start()
+            _pipe(client, upstream)
+            back.join()
+        except OSError:
+            pass  # a client that went away or sent no HTTP head: its connection, not ours
         finally:
-            up_writer.close()
-
-
-async def _pipe(source: asyncio.StreamReader, sink: asyncio.StreamWriter) -> None:
-    """Copy until `source` ends, then end `sink` (half-close, as the peer did)."""
-    try:
-        while data := await source.read(_CHUNK):
-            sink.write(data)
-            await sink.drain()
-    finally:
-        with contextlib.suppress(OSError, RuntimeError):
-            if sink.can_write_eof():
-                sink.write_eof()
+            for sock in (client, upstream):
+                if sock is not None:
+                    with self._lock:
+                        self._open.discard(sock)
+                    sock.close()
