@@ -11,7 +11,10 @@ before `Publisher.put`. Two setups, REPEATS runs each, interleaved, medians repo
   WebSocket client (Python `websockets`, this process) subscribed to the skeleton key, the
   camera key and the 3D scene view; latency = the client's receive time - the stamp (the
   frame's log time is the stamp), so it includes the bridge's decoding, JSON encoding and the
-  WebSocket hop.
+  WebSocket hop;
+- sdk (the reference for the handshake front, runtime/foxglove_front.py): the same, the client
+  connected straight to foxglove-sdk's own port behind the front (read from its log), so the
+  difference is what the front's extra loopback hop costs in latency and in the bridge's CPU.
 
 Figures: one-way latency (median, p99) in both setups and the bridge's added median; the rate
 each receiver sustained (messages delivered / s) against the rate published, and the fraction
@@ -33,12 +36,14 @@ import asyncio
 import contextlib
 import json
 import os
+import re
 import resource
 import statistics
 import struct
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -223,8 +228,21 @@ def expected_messages() -> int:
     return PASSES * sum(1 for r in read_recording(DEMO) if r.cls is not None)
 
 
-async def run_once(with_bridge: bool) -> dict[str, float]:
-    config = BusConfig(robot=f"fx{os.getpid()}{int(with_bridge)}{time.time_ns() % 10**6}")
+def sdk_port(bridge: subprocess.Popen[str]) -> int:
+    """foxglove-sdk's own port inside `beyond foxglove` (its log says), then its log drained."""
+    assert bridge.stderr is not None
+    for line in bridge.stderr:
+        found = re.search(r"Started server on 127\.0\.0\.1:(\d+)", line)
+        if found:
+            threading.Thread(target=bridge.stderr.read, daemon=True).start()
+            return int(found.group(1))
+    raise RuntimeError("beyond foxglove ended before its server started")
+
+
+async def run_once(setup: str) -> dict[str, float]:
+    """One run of `setup`: "bus", "bridge" (through the front) or "sdk" (straight to the SDK)."""
+    with_bridge = setup != "bus"
+    config = BusConfig(robot=f"fx{os.getpid()}{setup}{time.time_ns() % 10**6}")
     config = config.with_(port=free_port())
     n = expected_messages()
     procs: list[subprocess.Popen[str]] = []
@@ -239,11 +257,15 @@ async def run_once(with_bridge: bool) -> dict[str, float]:
         if with_bridge:
             ws_port = free_port()
             bridge = subprocess.Popen(
-                [*BEYOND, "foxglove", "--port", str(ws_port)],
+                [*BEYOND, "foxglove", "--ws-port", str(ws_port)],
                 env=env(config),
-                stderr=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
             )
             procs.append(bridge)
+            inner = await asyncio.to_thread(sdk_port, bridge)  # and its log drained
+            if setup == "sdk":
+                ws_port = inner
             root = bus.keys.root
             topics = [bus.keys.skeleton, bus.keys.camera_compressed, f"{root}/foxglove/scene"]
             watcher = asyncio.create_task(client(ws_port, topics, ready, stop))
@@ -400,17 +422,17 @@ def main() -> int:
         else:
             subscribe(config, int(extra[0]))
         return 0
-    runs: dict[bool, list[dict[str, float]]] = {False: [], True: []}
+    runs: dict[str, list[dict[str, float]]] = {"bus": [], "bridge": [], "sdk": []}
     for _ in range(REPEATS):
-        for with_bridge in (False, True):
-            runs[with_bridge].append(asyncio.run(run_once(with_bridge)))
+        for setup in runs:
+            runs[setup].append(asyncio.run(run_once(setup)))
     pipe: dict[bool, list[dict[str, float]]] = {False: [], True: []}
     for _ in range(REPEATS):
         for with_bridge in (False, True):
             pipe[with_bridge].append(asyncio.run(pipeline_once(with_bridge)))
     plain, watched = median_of(pipe[False]), median_of(pipe[True])
     pipeline_extra = watched["services_cpu_s"] / plain["services_cpu_s"] - 1
-    bus, bridge = median_of(runs[False]), median_of(runs[True])
+    bus, bridge, sdk = median_of(runs["bus"]), median_of(runs["bridge"]), median_of(runs["sdk"])
     extra_cpu = bridge["publisher_cpu_per_s"] / bus["publisher_cpu_per_s"] - 1
     figures = {
         "speed": SPEED,
@@ -429,6 +451,12 @@ def main() -> int:
         "services_cpu_per_s_with_bridge": bridge["publisher_cpu_per_s"],
         "services_extra_cpu_ratio": extra_cpu,
         "bridge_cpu_share_of_core": bridge["bridge_cpu_share_of_core"],
+        "sdk_direct_latency_median_us": sdk["bridge_latency_median_us"],
+        "sdk_direct_bridge_cpu_share_of_core": sdk["bridge_cpu_share_of_core"],
+        "front_added_latency_median_us": bridge["bridge_latency_median_us"]
+        - sdk["bridge_latency_median_us"],
+        "front_added_cpu_share_of_core": bridge["bridge_cpu_share_of_core"]
+        - sdk["bridge_cpu_share_of_core"],
         "pipeline_runs_exit_0": sum(r["status"] == 0 for r in pipe[False] + pipe[True]),
         "pipeline_runs": 2 * REPEATS,
         "pipeline_all_described": all(
@@ -460,6 +488,13 @@ def main() -> int:
         f"  services' CPU: {bus['publisher_cpu_per_s'] * 100:.1f}% of a core without the bridge, "
         f"{bridge['publisher_cpu_per_s'] * 100:.1f}% with it ({extra_cpu * 100:+.1f}%); "
         f"the bridge itself {bridge['bridge_cpu_share_of_core'] * 100:.1f}%"
+    )
+    print(
+        f"  straight to foxglove-sdk's port (no handshake front): latency median "
+        f"{sdk['bridge_latency_median_us']:.0f} us, the bridge "
+        f"{sdk['bridge_cpu_share_of_core'] * 100:.1f}% of a core; the front adds "
+        f"{figures['front_added_latency_median_us']:+.0f} us and "
+        f"{figures['front_added_cpu_share_of_core'] * 100:+.1f} points of a core"
     )
     print(
         f"  whole pipeline (beyond up at {SPEED:g}x, services' CPU during the replay): "

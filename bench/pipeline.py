@@ -76,9 +76,9 @@ def raw_hop_us(config: BusConfig, n: int = 2000) -> float:
     from beyond_self.runtime.config import zenoh_config
 
     child = subprocess.Popen(
-        [sys.executable, "-c", textwrap.dedent(f"""
+        [sys.executable, "-P", "-c", textwrap.dedent(f"""
             import sys, time, zenoh
-            sys.path.insert(0, {str(REPO)!r})
+            sys.path.append({str(REPO)!r})  # after the installed package, never before it
             from beyond_self.runtime.config import BusConfig, zenoh_config
             s = zenoh.open(zenoh_config(BusConfig(robot={config.robot!r}, port={config.port})))
             pub = s.declare_publisher("bench/pong")

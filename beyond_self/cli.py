@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
@@ -106,10 +107,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        return _run(module, args)
+    finally:
+        for text in getattr(args, "_notes", None) or ():  # argtypes.note: after the output
+            print(f"beyond {args.command}: note: {text}", file=sys.stderr)
+
+
+def _run(module: ModuleType, args: argparse.Namespace) -> int:
+    """Run the command; bad input of any kind is one line and exit status 2."""
+    try:
         return int(module.run(args) or 0)
     except InputError as exc:
         print(f"beyond {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `beyond inspect FILE | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
+        return 141  # as a shell reports a command ended by SIGPIPE
     except OSError as exc:
         # a file the user named (or the folder it is in) cannot be read or written: bad input
         # from the user's side, not a bug; the path checks in argtypes catch most of them earlier

@@ -403,11 +403,19 @@ def results_json(r: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _plots(r: Mapping[str, Any], out: Path) -> dict[str, str]:
-    import matplotlib
+    from beyond_self.cognition.plotting import (
+        GESTURE,
+        HMM,
+        NORM_LOGLIK,
+        OBS,
+        math,
+        p_comb,
+        p_hmm,
+        pyplot,
+    )
+    from beyond_self.cognition.plotting import word as w
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     files: dict[str, str] = {}
 
     def save(fig: Any, name: str) -> None:
@@ -421,11 +429,20 @@ def _plots(r: Mapping[str, Any], out: Path) -> dict[str, str]:
     pcomb = np.array(e1["pcomb"])
     for i, a in enumerate(e1["actions"]):
         ax.plot(e1["sweep"], pcomb[:, i], label=a)
-    ax.axvline(e1["tap_threshold"], color="grey", ls="--", lw=1)
-    ax.set_xlabel("P_HMM(tap | G)  (the other two actions share the rest)")
-    ax.set_ylabel("P_comb(Action | X_obs, G)")
+    threshold = e1["tap_threshold"]
+    ax.axvline(
+        threshold,
+        color="grey",
+        ls="--",
+        lw=1,
+        label=f"tap most probable beyond {p_hmm(w('tap'), 'G')} = {threshold:.3f}",
+    )
+    ax.set_xlabel(f"{p_hmm(w('tap'), 'G')}  (grasp and touch share the rest)")
+    ax.set_ylabel(p_comb("A", rf"{OBS}, G"))
+    ax.set_xlim(1 / 3, 1)
+    ax.set_ylim(0, 1)
     ax.set_title("Exp. 1: small slow sphere, gesture says tap")
-    ax.legend()
+    ax.legend(title="action", fontsize=8)
     save(fig, "exp1_action_vs_gesture.png")
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
@@ -439,8 +456,8 @@ def _plots(r: Mapping[str, Any], out: Path) -> dict[str, str]:
             bottom += data[:, j]
         ax.set_xticks(range(len(labels)), labels, rotation=30, fontsize=8)
         ax.set_title(f"Shape={'sphere' if shape == 'circle' else shape}")
-        ax.set_xlabel("P_HMM (grasp, tap, touch); none = network alone")
-    axes[0].set_ylabel("P_comb(ObjVel)")
+        ax.set_xlabel(f"{math(HMM)}(grasp, tap, touch); none: the network alone")
+    axes[0].set_ylabel(p_comb(w("ObjVel"), rf"{OBS}, G"))
     axes[1].legend(title="ObjVel")
     fig.suptitle("Exp. 2: effect prediction from touch to tap gesture evidence")
     save(fig, "exp2_objvel_sphere_box.png")
@@ -452,17 +469,18 @@ def _plots(r: Mapping[str, Any], out: Path) -> dict[str, str]:
     norm = np.array(e3["normalized"])
     for i, a in enumerate(e3["actions"]):
         axes[0].plot(frames, norm[:, i], label=a)
-    axes[0].set_ylabel("(1/t) log L(G_1^t | A)")
-    axes[0].legend()
-    axes[0].set_title("Exp. 3: recorded human tap, frames by frames")
+    axes[0].set_ylabel(math(NORM_LOGLIK))
+    axes[0].legend(title="action A", fontsize=8)
+    axes[0].set_title("Exp. 3: recorded human tap, frame by frame")
     for ax, shape in zip(axes[1:], ("circle", "box"), strict=True):
         ant = np.array(e3["anticipation"][shape])
         at = np.array(e3["steps"]) + first - 1
         for j, v in enumerate(("slow", "medium", "fast")):
             ax.plot(at, ant[:, j], marker="o", label=v)
-        ax.set_ylabel(f"P_comb(ObjVel | {'sphere' if shape == 'circle' else 'box'}, small)")
+        seen = "sphere" if shape == "circle" else "box"
+        ax.set_ylabel(p_comb(w("ObjVel"), rf"{w(seen)}, {w('small')}, {GESTURE}"))
         ax.set_ylim(0, 1)
-        ax.legend(fontsize=8)
+        ax.legend(title="ObjVel", fontsize=8)
     axes[2].set_xlabel("frame of the recording")
     save(fig, "exp3_anticipation.png")
 
@@ -474,7 +492,8 @@ def _plots(r: Mapping[str, Any], out: Path) -> dict[str, str]:
         [delta[w] for w in words],
         color=["tab:red" if delta[w] < 0 else "tab:green" for w in words],
     )
-    ax.set_xlabel("ΔP(word) = P(w | X_obs, tap) − P(w | X_obs)")
+    ax.axvline(0, color="grey", lw=0.8)
+    ax.set_xlabel(math(rf"\Delta P(w) = P(w \mid {OBS}, {w('tap')}) - P(w \mid {OBS})"))
     ax.set_title("Exp. 4: yellow big sphere moving fast")
     ax.tick_params(axis="y", labelsize=8)
     save(fig, "exp4_delta_words.png")
@@ -487,9 +506,10 @@ def _plots(r: Mapping[str, Any], out: Path) -> dict[str, str]:
             xs + 0.38 * k, [e5["and"][f"p_{conj}"], e5["but"][f"p_{conj}"]], 0.38, label=f'"{conj}"'
         )
     ax.set_xticks(xs + 0.19, ["grasp, ObjVel=medium", "grasp, ObjVel=slow"])
-    ax.set_ylabel("P(word present)")
+    ax.set_ylabel(math(rf"P(w\ {w('present')} \mid {OBS}, {w('grasp')})"))
+    ax.set_ylim(0, 1)
     ax.set_title('Exp. 5: P("and") and P("but")')
-    ax.legend()
+    ax.legend(title="word w")
     save(fig, "exp5_and_but.png")
     for key, title in (
         ("gesture", "yellow big sphere, fast, gesture evidence"),

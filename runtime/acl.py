@@ -177,9 +177,10 @@ def access_control(
     for d in declarations:
         health = [_key(f"{HEALTH}/{d.name}")]
         # every service reports its own Progress and may read and ask everyone's (pacing,
-        # resuming): how far each stream is handled, never any data
+        # resuming): how far each stream is handled, never any data; and every service may
+        # follow a replay's clock (runtime.clock)
         outputs = _stream_keys(d.publishes) + health + [_key(f"{PROGRESS}/{d.name}")]
-        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*")]
+        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*"), _key(STREAMS["clock"][0])]
         serves = [_key(QUERYABLES[q]) for q in d.serves] + health
         own[d.name] = rules.role(
             d.name,
@@ -234,11 +235,13 @@ def check_declared(name: str, cls: type, kind: str, key: str, robot_root: str) -
     """Refuse (InputError) a key service `name` of class `cls` did not declare for `kind`
     ("subscribe", "publish", "serve"): the rules are generated from the declarations, so a
     service must not use what it did not declare. A class that declares nothing is not checked
-    (it has no place on a secure bus). Progress may be read by all; a health queryable served by
-    all."""
+    (it has no place on a secure bus). Progress and the stream clock may be read by all; a
+    health queryable served by all."""
     if all(getattr(cls, a, None) is None for a in ("subscribes", "publishes", "serves")):
         return
-    if kind == "subscribe" and key.startswith(f"{robot_root}/{PROGRESS}/"):
+    if kind == "subscribe" and (
+        key.startswith(f"{robot_root}/{PROGRESS}/") or key == f"{robot_root}/{STREAMS['clock'][0]}"
+    ):
         return
     if kind == "serve" and key == f"{robot_root}/{HEALTH}/{name}":
         return

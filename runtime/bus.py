@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import re
 from collections.abc import Callable, Mapping
 from typing import Any, TypeVar, overload
 
@@ -18,7 +19,13 @@ import zenoh
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime import liveliness, queries
-from beyond_self.runtime.config import BusConfig, describe, load_config, zenoh_config
+from beyond_self.runtime.config import (
+    CLIENT_WAIT_MS,
+    BusConfig,
+    describe,
+    load_config,
+    zenoh_config,
+)
 from beyond_self.runtime.delivery import RELIABLE, Delivery
 from beyond_self.runtime.inbox import undeclare
 from beyond_self.runtime.publisher import Publisher, ZenohPublisher, declare_zenoh_publisher
@@ -35,6 +42,21 @@ from beyond_self.schemas.keys import Keys
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
 log = logging.getLogger("beyond.bus")
+
+
+def open_failure(config: BusConfig, exc: Exception) -> str:
+    """One line on why a session did not open: Zenoh's reason without its source location
+    (" at /root/.cargo/.../orchestrator.rs:388."), and what to do when no router answered."""
+    reason = re.sub(r"\s+at \S+\.rs:\d+\.?$", "", " ".join(str(exc).split()))
+    if "Unable to connect" in reason and config.mode == "client":
+        connect = config.endpoints()[1]
+        waited = (config.connect_timeout_ms or CLIENT_WAIT_MS) / 1000
+        start = "beyond router" + (f" --secure {config.secure}" if config.secure else "")
+        return (
+            f"no router answered at {', '.join(connect)} within {waited:g} s; start one "
+            f"(`{start}`) or give its endpoint with --connect"
+        )
+    return f"cannot open the Zenoh session ({describe(config)}): {reason}"
 
 
 class Bus:
@@ -55,7 +77,7 @@ class Bus:
         try:
             session = zenoh.open(zenoh_config(config, access_rules))
         except zenoh.ZError as exc:
-            raise InputError(f"cannot open the Zenoh session ({describe(config)}): {exc}") from None
+            raise InputError(open_failure(config, exc)) from None
         return cls(session, config)
 
     def __enter__(self) -> Bus:

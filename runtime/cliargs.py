@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from beyond_self.runtime.config import ENV_VARS, MODES, BusConfig, load_config
+from beyond_self.runtime.config import CLIENT_WAIT_MS, ENV_VARS, MODES, BusConfig, load_config
 
 
 def _port(text: str) -> int:
@@ -18,9 +18,10 @@ def _port(text: str) -> int:
     return value
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser, *, port_flag: str = "--port") -> None:
-    """The bus options; `port_flag` renames `--port` for a command whose own --port is another
-    port (`beyond foxglove --port` is its WebSocket's)."""
+def add_bus_arguments(parser: argparse.ArgumentParser) -> argparse.Action:
+    """The bus options, the same in every command (`--port` is always the rendezvous port of
+    the local peer group); returns the `--port` option, for a command that keeps an older
+    spelling of it."""
     group = parser.add_argument_group(
         "bus",
         "how to join the Zenoh network (defaults: " + "; ".join(f"{k}" for k in ENV_VARS) + ")",
@@ -34,9 +35,8 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, port_flag: str = "--po
         "--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on (repeat)"
     )
     group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file")
-    group.add_argument(
-        port_flag,
-        dest="port",
+    port = group.add_argument(
+        "--port",
         type=_port,
         help="rendezvous port of the local peer group ($BEYOND_ZENOH_PORT)",
     )
@@ -51,10 +51,13 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, port_flag: str = "--po
         metavar="NAME",
         help="whose certificate in the keystore to present ($BEYOND_ZENOH_IDENTITY)",
     )
+    return port
 
 
 def config_from_args(args: argparse.Namespace) -> BusConfig:
-    return load_config(
+    """The bus configuration the options say (over the environment's). A command that listens
+    for `--duration` seconds waits no longer than that for a router to connect to."""
+    config = load_config(
         robot=getattr(args, "robot", None),
         mode=getattr(args, "mode", None),
         connect=getattr(args, "connect", None),
@@ -64,3 +67,7 @@ def config_from_args(args: argparse.Namespace) -> BusConfig:
         secure=getattr(args, "secure", None),
         identity=getattr(args, "identity", None),
     )
+    duration = getattr(args, "duration", None)
+    if isinstance(duration, int | float) and config.mode == "client":
+        config = config.with_(connect_timeout_ms=max(1, min(CLIENT_WAIT_MS, int(duration * 1000))))
+    return config

@@ -9,7 +9,15 @@ other keys (health of each service, keys that are not ours) when first heard.
 
 Work is done only for what a client watches: a sample whose channel and views nobody subscribed
 to is not even decoded, so an idle bridge costs the pipeline one more subscriber and nothing else.
-Bad samples are counted and skipped (they are the services' problem, not the viewer's)."""
+Bad samples are counted and skipped (they are the services' problem, not the viewer's).
+Log times are the messages' stamps, so on a replay the viewer's timeline is the stream's
+(runtime.clock); a message without one is placed at its arrival moved onto the stamps' clock, and
+one that comes before any stamp (health of a service waiting for a replay to start) is skipped.
+
+Clients connect to a handshake front (runtime.foxglove_front), which accepts both names of the
+protocol, `foxglove.sdk.v1` (the SDK's, the current Foxglove app's) and `foxglove.websocket.v1`
+(the npm `@foxglove/ws-protocol` client's, Lichtblick's), and hands the connection to the SDK's
+server on a loopback port."""
 
 from __future__ import annotations
 
@@ -23,6 +31,7 @@ import foxglove
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.foxglove_front import HandshakeFront, listening_socket
 from beyond_self.runtime.foxglove_views import VIEWS, VIEWS_OF, View, encode_view, is_view_key
 from beyond_self.runtime.recording_format import JSON, JSONSCHEMA
 from beyond_self.runtime.subscription import RawSample, decode_any
@@ -55,21 +64,23 @@ class FoxgloveBridge:
         self.bus = bus
         self.stats = BridgeStats()
         self._context = foxglove.Context()
+        sock = listening_socket(host, port)  # InputError at once if the port is taken
         try:
             self._server = foxglove.start_server(
                 name=f"beyond-self ({bus.keys.robot})",
-                host=host,
-                port=port,
+                host="127.0.0.1",
+                port=0,  # behind the front, on a port of its own
                 context=self._context,
             )
         except RuntimeError as exc:
+            sock.close()
             detail = str(exc).split(":", 1)[-1].strip()
-            raise InputError(
-                f"cannot serve Foxglove on {host}:{port} ({detail}); choose a free port with --port"
-            ) from None
-        self.port = int(self._server.port)
+            raise InputError(f"cannot start the Foxglove server ({detail})") from None
+        self._front = HandshakeFront(sock, int(self._server.port))
+        self.port = self._front.port
         self._channels: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
+        self._offset: int | None = None  # last stamp minus its arrival: the stamps' clock
         root = bus.keys.root
         for suffix, cls in STREAMS.values():
             self._channel(f"{root}/{suffix}", cls, "")
@@ -117,8 +128,8 @@ class FoxgloveBridge:
         if not channel.has_sinks() and not watched:
             self.stats.skipped += 1
             return
-        if cls is None:
-            channel.log(sample.payload, log_time=sample.received_ns)
+        if cls is None:  # not ours: at its arrival, on the stamps' clock once there is one
+            channel.log(sample.payload, log_time=sample.received_ns + (self._offset or 0))
             self.stats.forwarded += 1
             return
         try:
@@ -128,7 +139,14 @@ class FoxgloveBridge:
             log.debug("malformed sample on %s skipped: %s", sample.key, exc)
             return
         assert message is not None  # cls is known
-        at = message.header.stamp or sample.received_ns
+        stamp = message.header.stamp
+        if stamp:
+            self._offset = stamp - sample.received_ns
+        elif self._offset is None:  # on a replay's clock before the stream began: no time yet
+            self.stats.skipped += 1
+            return
+        # an unstamped message at its arrival moved onto the stamps' clock, as a recorder logs it
+        at = stamp or sample.received_ns + self._offset
         if channel.has_sinks():
             channel.log(to_recording_json(message), log_time=at)
             self.stats.forwarded += 1
@@ -141,6 +159,7 @@ class FoxgloveBridge:
     async def run(self, stop: asyncio.Event, ready: asyncio.Event | None = None) -> BridgeStats:
         """Forward until `stop` is set; `ready` is set once subscribed to the bus."""
         sub = self.bus.subscribe_raw(self.bus.keys.everything, maxsize=1 << 14)
+        self._front.start()
         # alive like a service, so tools and scripts can wait for the bridge to be listening
         self.bus.declare_token(self.bus.keys.alive(ALIVE_NAME))
         if ready is not None:
@@ -157,6 +176,7 @@ class FoxgloveBridge:
         finally:
             stopper.cancel()
             sub.close()
+            self._front.close()
         return self.stats
 
     def close(self) -> None:

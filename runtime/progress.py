@@ -5,7 +5,8 @@ A service's `paced` inputs (sensor streams) are the ones a player paces itself o
 (runtime.pacing): after the handler of each message, so everything an input caused has been
 published before its progress says so, the service reports the stamp of the last message it
 handled per paced key, how many messages each subscription received and each publisher sent,
-and the last stamp each publisher sent. A restarted instance asks the player for its
+and the last stamp each publisher sent. A report is stamped by the service's clock (the stream's
+on a replay, runtime.clock), like its health. A restarted instance asks the player for its
 predecessor's last report and does not publish again what was already published.
 """
 
@@ -25,7 +26,7 @@ from beyond_self.schemas.messages import Progress
 
 
 class ProgressReport:
-    def __init__(self, name: str, header: Callable[[type[Progress], int], Header]) -> None:
+    def __init__(self, name: str, header: Callable[[type[Progress]], Header]) -> None:
         self.name = name
         self.paced: set[str] = set()  # input keys whose handled stamps are reported
         self.handled: dict[str, int] = {}
@@ -42,7 +43,7 @@ class ProgressReport:
         periodic one beside health."""
         self._pub = bus.publisher(bus.keys.progress(self.name), Progress, STATUS)
         self._pub.put(
-            Progress(header=self._header(Progress, 0), service=self.name, handled=self.handled)
+            Progress(header=self._header(Progress), service=self.name, handled=self.handled)
         )
 
     def handled_up_to(self, key: str, stamp: int) -> None:
@@ -54,7 +55,7 @@ class ProgressReport:
             return
         self._pub.put(
             Progress(
-                header=self._header(Progress, max(self.handled.values(), default=0)),
+                header=self._header(Progress),
                 service=self.name,
                 handled=self.handled,
                 published={p.key: p.sent for p in publishers},

@@ -14,10 +14,12 @@ Format decisions (see runtime/README.md):
   Foxglove shows them. Samples on keys that are not ours are stored as they came, schemaless,
   with their Zenoh encoding as the message encoding.
 - log_time = publish_time = the header stamp (the data's time), so a viewer's timeline, the
-  message's own stamp and the camera `timestamp` agree. A sample without a stamp (0: a
-  service whose recording clock has not started yet) or not ours is logged at its receive
-  time moved onto the stamps' clock (by the offset of the last stamped sample), never at 0.
-  Replay follows publish_time.
+  message's own stamp and the camera `timestamp` agree; on a replay every message is on the
+  stream's clock (runtime.clock). A sample without a stamp (0: a service on a replay's clock
+  before the stream has started) that comes before any stamped one waits for it and is logged
+  at its stamp; later, or not ours, at its receive time moved onto the stamps' clock (by the
+  offset of the last stamped sample), never before the last message of its channel, never at
+  0. A live recorder writes each chunk in log-time order. Replay follows publish_time.
 - No attachment index and, without metadata, no metadata index: an empty index group with a
   summary offset pointing at it is an error to `mcap doctor`. The data-section CRC is written.
 - Chunked and compressed (zstd); the file is written unbuffered and the open chunk is closed at

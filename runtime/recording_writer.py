@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, NamedTuple
 
 from mcap.writer import CompressionType, IndexType, Writer
 
@@ -46,6 +47,14 @@ def _library() -> str:
             return "?"
 
     return f"beyond-self {v('beyond-self')}; mcap-python {v('mcap')}"
+
+
+class _Pending(NamedTuple):
+    log_time: int
+    publish_time: int
+    channel: int
+    data: bytes
+    seq: int
 
 
 class _DirectFile:
@@ -121,8 +130,12 @@ class RecordingWriter:
         self._channels: dict[tuple[str, str], int] = {}
         self._flush_interval = flush_interval
         self._last_flush = time.monotonic()
-        self._unflushed = 0
-        self._stamp_offset = 0  # last stamp minus its receive time: the stamps' clock
+        # a live recording's messages wait here to be written in log-time order, chunk by chunk
+        # (outputs copy their input's stamp and arrive after newer inputs)
+        self._pending: list[_Pending] = []
+        self._stamp_offset: int | None = None  # last stamp minus its receive time
+        self._last_on: dict[str, int] = {}  # last log time per channel
+        self._held: list[tuple[str, int, Callable[[int], None]]] = []  # before any stamp
         self._views: dict[str, int] = {}  # view topic -> channel id
         self._with_views = foxglove_views
         self.count = 0
@@ -199,11 +212,14 @@ class RecordingWriter:
 
     def write_wire(self, key: str, payload: bytes, encoding: str, received: int) -> Message | None:
         """Store a sample as it came off the wire at `received` (ns). Ours (by encoding or key)
-        are decoded and stored as JSON at their stamp; a malformed one raises SchemaError;
-        others are stored raw at their receive time on the stamps' clock."""
+        are decoded and stored as JSON at their stamp; a malformed one raises SchemaError.
+        Others, and ours stamped 0 (a service on a replay's clock before the stream started),
+        at their receive time moved onto the stamps' clock, never before the last message of
+        their channel; before any stamp has come they wait for the first and are logged at it,
+        so a recording of a replay starts with the stream (runtime.clock)."""
         cls = type_from_encoding(encoding) or type_for_key(key)
         if cls is None:
-            self.write_raw(key, payload, encoding, received + self._stamp_offset)
+            self._unstamped(key, received, lambda at: self.write_raw(key, payload, encoding, at))
             return None
         try:
             message = decode(payload, cls, key)
@@ -211,46 +227,71 @@ class RecordingWriter:
             self.malformed += 1
             raise
         stamp = message.header.stamp
-        if stamp:
-            self._stamp_offset = stamp - received
-        self.write(key, message, log_time=stamp or received + self._stamp_offset)
+        if not stamp:
+            self._unstamped(key, received, lambda at: self.write(key, message, log_time=at))
+            return message
+        self._stamp_offset = stamp - received
+        self.write(key, message)
+        self._last_on[key] = max(self._last_on.get(key, stamp), stamp)
+        held, self._held = self._held, []
+        for held_key, _, store in held:
+            self._last_on[held_key] = max(self._last_on.get(held_key, stamp), stamp)
+            store(stamp)
         return message
+
+    def _unstamped(self, key: str, received: int, store: Callable[[int], None]) -> None:
+        """Store a message without a stamp of its own (`store(log_time)`), now or once the
+        stamps' clock is known."""
+        if self._stamp_offset is None:
+            self._held.append((key, received, store))
+            return
+        at = max(received + self._stamp_offset, self._last_on.get(key, 0))
+        self._last_on[key] = at
+        store(at)
 
     def write_raw(self, key: str, payload: bytes, encoding: str, log_time: int) -> None:
         """Store a sample that is not ours as it came, schemaless, under its encoding."""
         self._add(self._channel_id(key, None, encoding), log_time, log_time, payload, 0)
 
     def _add(self, channel: int, log_time: int, publish_time: int, data: bytes, seq: int) -> None:
-        self._writer.add_message(
-            channel_id=channel,
-            log_time=log_time,
-            publish_time=publish_time,
-            data=data,
-            sequence=seq & 0xFFFFFFFF,
-        )
+        record = _Pending(log_time, publish_time, channel, data, seq & 0xFFFFFFFF)
         self.count += 1
-        self._unflushed += 1
-        if self._flush_interval is not None:
-            now = time.monotonic()
-            if now - self._last_flush >= self._flush_interval:
-                self.flush()
+        if self._flush_interval is None:
+            self._put(record)
+            return
+        self._pending.append(record)
+        if time.monotonic() - self._last_flush >= self._flush_interval:
+            self.flush()
+
+    def _put(self, record: _Pending) -> None:
+        self._writer.add_message(
+            channel_id=record.channel,
+            log_time=record.log_time,
+            publish_time=record.publish_time,
+            data=record.data,
+            sequence=record.seq,
+        )
 
     def flush(self) -> None:
-        """Close the open chunk now so it is on disk even if this process is killed."""
+        """Write what waits, in log-time order, and close the open chunk now, so it is on disk
+        even if this process is killed."""
         self._last_flush = time.monotonic()
-        if self._unflushed:
+        pending, self._pending = self._pending, []
+        pending.sort(key=lambda r: r.log_time)  # stable: arrival order among equal times
+        for record in pending:
+            self._put(record)
+        if pending:
             # mcap-python has no public "close this chunk" call; its private one is stable
             # across 1.x. Without it only size-full chunks would be written before finish().
             finalize = getattr(self._writer, "_Writer__finalize_chunk", None)
             if finalize is not None:
                 finalize()
-            self._unflushed = 0
 
     def maybe_flush(self) -> None:
         """Flush if the interval has passed (call when idle)."""
         if (
             self._flush_interval is not None
-            and self._unflushed
+            and self._pending
             and time.monotonic() - self._last_flush >= self._flush_interval
         ):
             self.flush()
@@ -260,6 +301,10 @@ class RecordingWriter:
         if self._closed:
             return
         self._closed = True
+        held, self._held = self._held, []
+        for _, received, store in held:  # no stamp ever came: the wall clock is the only one
+            store(received)
+        self.flush()
         self._writer.finish()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
         if self._file is not None:
             self._file.close()

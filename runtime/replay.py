@@ -10,7 +10,9 @@ With a pacer the player never runs more than a window of stream time ahead of th
 consumer (runtime.pacing), so even an as-fast-as-possible replay into a pipeline is complete and
 deterministic; with a control it holds while paused and shifts its schedule by the time held.
 What a message becomes on the wire (raw publishers here, the ingest's typed and cached ones
-there) is the caller's `send`.
+there) is the caller's `send`. With `ticks` the player also publishes the stream's time as it
+goes (runtime.clock: services on the recording's clock stamp their health and progress with
+it); `replay()` does, for every robot it replays, and skips the clock a recording holds.
 
 Messages go out on reliable publishers (Zenoh blocks rather than drops when its queue is full).
 """
@@ -26,12 +28,15 @@ from typing import Any
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.clock import ClockTicks
+from beyond_self.runtime.delivery import STATUS
 from beyond_self.runtime.pacing import Pacer
 from beyond_self.runtime.recording import RecordedMessage, RecordingInfo, read_recording
 from beyond_self.runtime.replay_control import ReplayControl, check_rate
-from beyond_self.schemas.base import Message
+from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import encode_into, wire_encoding
-from beyond_self.schemas.keys import with_robot
+from beyond_self.schemas.keys import STREAMS, Keys, split_key, with_robot
+from beyond_self.schemas.messages import StreamClock
 
 log = logging.getLogger("beyond.replay")
 YIELD_EVERY = 32  # messages sent without sleeping before the event loop gets a turn
@@ -90,7 +95,8 @@ def recorded_cues(
 
 class Player:
     """Sends cues through a caller's `send` at their times scaled by `rate`, held by `control`,
-    never ahead of `pacer`'s consumers (started and stopped by the caller), until `stop`."""
+    never ahead of `pacer`'s consumers (started and stopped by the caller), until `stop`;
+    `ticks` hears the stream's time before each cue is sent, and its last at the end."""
 
     def __init__(
         self,
@@ -99,11 +105,13 @@ class Player:
         pacer: Pacer | None = None,
         control: ReplayControl | None = None,
         stop: asyncio.Event | None = None,
+        ticks: ClockTicks | None = None,
     ) -> None:
         self.rate = check_rate(rate)
         self.pacer = pacer
         self.control = control
         self.stop = stop
+        self.ticks = ticks
         self.stats = ReplayStats()
         self._began: float | None = None
 
@@ -138,6 +146,8 @@ class Player:
                 pass_start += await self.control.gate()
             if pacer is not None:
                 await pacer.before(cue.key, cue.stamp)
+            if self.ticks is not None:
+                self.ticks.at(cue.at)
             send(cue)
             if pacer is not None:
                 pacer.after(cue.key, cue.stamp)
@@ -146,6 +156,8 @@ class Player:
         stats.passes += 1
         if t0 is not None:
             stats.span_s = max(stats.span_s, (last - t0) / 1e9)
+            if self.ticks is not None:
+                self.ticks.last(last)
         stats.wall_s = loop.time() - self._began
         if pacer is not None:
             stats.held_back_s = pacer.waited_s
@@ -183,13 +195,23 @@ async def replay(
         key = with_robot(key, robot) if robot else key
         return remap(key) if remap is not None else key
 
+    clocks = StreamClocks(bus)
+
+    def replayed(key: str) -> str | None:  # the recorded stream clock: ours replaces it
+        split = split_key(key)
+        if split is not None and split[1] == STREAMS["clock"][0]:
+            return None
+        key = rename(key)
+        clocks.replaying(key)
+        return key
+
     pacer: Pacer | None = None
     if pace_for:
         from beyond_self.runtime.recording import inspect_recording
 
         pacer = Pacer(bus, pace_for, [rename(c.topic) for c in inspect_recording(path).channels])
         await pacer.start()
-    player = Player(rate=rate, pacer=pacer, control=control, stop=stop)
+    player = Player(rate=rate, pacer=pacer, control=control, stop=stop, ticks=clocks.ticks)
     stats = player.stats
     publishers: dict[tuple[str, str], Any] = {}
     buffer = bytearray()
@@ -220,7 +242,7 @@ async def replay(
     try:
         while True:
             items = read_recording(path, topics=topic_list, start=start, end=end, on_damage=damaged)
-            sent = await player.play(recorded_cues(items, rename), send)
+            sent = await player.play(recorded_cues(items, replayed), send)
             if not loop or player.stopped or sent == 0:
                 break
     finally:
@@ -228,4 +250,32 @@ async def replay(
             pacer.stop()
         for pub in publishers.values():
             pub.undeclare()
+        clocks.close()
     return stats
+
+
+class StreamClocks:
+    """`beyond replay`'s stream clock (runtime.clock), on `beyond/<robot>/clock` of every robot
+    it has replayed a key of so far."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.bus = bus
+        self.ticks = ClockTicks(self._publish)
+        self._publishers: dict[str, Any] = {}
+        self._seq = 0
+
+    def replaying(self, key: str) -> None:
+        split = split_key(key)
+        if split is not None and split[0] not in self._publishers:
+            clock = Keys(split[0]).clock
+            self._publishers[split[0]] = self.bus.publisher(clock, StreamClock, STATUS)
+
+    def _publish(self, stamp: int) -> None:
+        header = Header(version=StreamClock.VERSION, source="replay", seq=self._seq, stamp=stamp)
+        for pub in self._publishers.values():
+            pub.put(StreamClock(header=header))
+        self._seq += 1
+
+    def close(self) -> None:
+        for pub in self._publishers.values():
+            pub.close()

@@ -38,7 +38,7 @@ from beyond_self.runtime.subscription import Handler, Received, Subscription, co
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
 from beyond_self.schemas.keys import check_name
-from beyond_self.schemas.messages import ServiceHealth
+from beyond_self.schemas.messages import ServiceHealth, StreamClock
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
@@ -283,6 +283,20 @@ class Service:
             sub, handler, self.report_error, before=observe, after=progressed if paced else None
         )
 
+    def _follow_clock(self) -> None:
+        """On a replay, follow the player's stream clock (runtime.clock), so that health and
+        progress are stamped on the stream's time even when no input has come for a while."""
+        # not one of the subscriptions (nor in health's inputs): a malformed tick is counted
+        # as malformed input outside them, as a malformed query is
+        sub = self.bus.subscribe(
+            self.bus.keys.clock, StreamClock, STATUS, on_malformed=self._query_failed
+        )
+
+        def tick(message: StreamClock) -> None:
+            self.clock.observe(message.header.stamp)
+
+        self.spawn(consume(sub, tick, self.report_error), "clock")
+
     async def _report_periodically(self) -> None:
         pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, STATUS)
         while True:
@@ -327,6 +341,8 @@ class Service:
                 await resume(self.bus, self.name, self._publishers, self.log)
             for sub, handler in self._subscriptions:
                 self.spawn(self._consume(sub, handler), sub.key)
+            if self.clock.is_recording:
+                self._follow_clock()
             health_key = self.bus.keys.health(self.name)
 
             async def answer_health(_key: str, _request: None) -> list[tuple[str, Message]]:

@@ -13,7 +13,16 @@ import msgspec
 
 # Bounds checked by msgspec's C decoder as a payload is decoded (cheap: no Python per field).
 NAME_MAX = 256  # characters of a name, label, key or id string
-STAMP_MAX = 2**63 - 1  # nanoseconds since the epoch (and sequence numbers): int64, never negative
+STAMP_MAX = 2**63 - 1  # nanoseconds since the epoch: int64, never negative
+# Counts and sequence numbers: exact as JSON numbers in JavaScript (doubles). Stamps go above it,
+# which is why every JSON form writes them as a Foxglove Time (schemas.codec).
+JS_INT_MAX = 2**53 - 1
+# A stamp, in nanoseconds since the Unix epoch: the mark tells the JSON form (schemas.codec) to
+# write it as a Foxglove Time {sec, nsec}; on the wire (msgpack) it is a 64-bit integer.
+STAMP_MARK = "x-beyond-stamp"
+Stamp = Annotated[
+    int, msgspec.Meta(ge=0, le=STAMP_MAX, extra_json_schema={STAMP_MARK: "ns since the epoch"})
+]
 
 
 class Header(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -28,8 +37,8 @@ class Header(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     version: Annotated[int, msgspec.Meta(ge=0, le=1_000_000)]
     source: Annotated[str, msgspec.Meta(max_length=NAME_MAX)]
-    seq: Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
-    stamp: Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
+    seq: Annotated[int, msgspec.Meta(ge=0, le=JS_INT_MAX)]
+    stamp: Stamp
     correlation: Annotated[str, msgspec.Meta(max_length=2 * NAME_MAX)] = ""
 
 

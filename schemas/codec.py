@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 import msgspec
 
 from beyond_self.core.errors import InputError, unknown
-from beyond_self.schemas.base import Message
+from beyond_self.schemas.base import STAMP_MARK, STAMP_MAX, Message
 from beyond_self.schemas.messages import ALL_MESSAGES
 
 M = TypeVar("M", bound=Message)
@@ -198,44 +198,103 @@ def json_schema_bytes(cls: type[Message]) -> bytes:
     return msgspec.json.encode(json_schema(cls), order="sorted")
 
 
-# --- The JSON form stored in recordings ------------------------------------------------------
+# --- The JSON form: recordings, the Foxglove bridge, `beyond echo --json` ----------------------
 #
 # Form 1 (files written before it had a number) is `to_json`: stamps are JSON integers of
 # nanoseconds, above 2**53, which every JavaScript reader (Foxglove included) rounds. Form 2
-# writes every stamp (`header.stamp` and the top-level `*_stamp` fields) as Foxglove's `Time`
-# {"sec", "nsec"}, which any reader keeps exact. The bus wire format (msgpack) and the Structs
-# are unchanged; only recordings carry the form, in each channel's metadata, so older files read.
+# wrote `header.stamp` and the top-level `*_stamp` fields as Foxglove's `Time` {"sec", "nsec"}
+# (for a while only those typed plain `int`, so a form-2 file may hold either). Form 3 writes
+# every stamp as a `Time`, wherever it is: every field typed `base.Stamp` (marked in the schema),
+# in a struct, an optional, a list or a dict's values (`StreamEnd.last_stamps`,
+# `Progress.handled`), and a "none yet" stamp (-1) as null; every other integer is within
+# 2**53 (`base.JS_INT_MAX`), so every number a JSON reader sees is exact. The bus wire format
+# (msgpack) and the Structs are unchanged; each recorded channel names its form in its metadata,
+# so older files read.
 
-RECORDING_JSON_FORM = 2
-RECORDING_JSON_FORMS = (1, 2)
-_STAMP_FIELDS: dict[type[Message], tuple[str, ...]] = {}
+RECORDING_JSON_FORM = 3
+RECORDING_JSON_FORMS = (1, 2, 3)
 _TIME_SCHEMA: dict[str, Any] = {
     "title": "time",
     "description": "Foxglove Time: seconds and nanoseconds since the Unix epoch",
     "type": "object",
     "properties": {
-        "sec": {"type": "integer", "minimum": 0},
+        "sec": {"type": "integer", "minimum": 0, "maximum": STAMP_MAX // 1_000_000_000},
         "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
     },
     "required": ["sec", "nsec"],
     "additionalProperties": False,
 }
+_STAMP = "stamp"
+_STAMP_OR_NONE = "stamp or none"  # -1 on the wire, null in JSON
+# Where the stamps of a type are: a leaf (_STAMP, _STAMP_OR_NONE), a struct's fields by name,
+# ("values", plan) of a dict or ("items", plan) of a list or tuple.
+Plan = str | dict[str, "Plan"] | tuple[str, "Plan"]
+_PLANS: dict[type[Message], Plan] = {}
 
 
-def stamp_fields(cls: type[Message]) -> tuple[str, ...]:
-    """Top-level fields of `cls` holding a nanosecond stamp (besides `header.stamp`)."""
-    names = _STAMP_FIELDS.get(cls)
-    if names is None:
-        names = _STAMP_FIELDS[cls] = tuple(
-            f.name
-            for f in msgspec.structs.fields(cls)
-            if f.name.endswith("_stamp") and f.type in (int, int | None)
-        )
-    return names
+def _plan(info: msgspec.inspect.Type) -> Plan | None:
+    """Where the stamps are in a value of type `info` (None: nowhere)."""
+    mi = msgspec.inspect
+    if isinstance(info, mi.Metadata):
+        if isinstance(info.type, mi.IntType) and STAMP_MARK in (info.extra_json_schema or {}):
+            ge = info.type.ge
+            return _STAMP_OR_NONE if ge is not None and ge < 0 else _STAMP
+        return _plan(info.type)
+    if isinstance(info, mi.StructType):
+        fields = {f.encode_name: p for f in info.fields if (p := _plan(f.type)) is not None}
+        return fields or None
+    if isinstance(info, mi.DictType):
+        inner = _plan(info.value_type)
+        return None if inner is None else ("values", inner)
+    if isinstance(info, mi.ListType | mi.VarTupleType):
+        inner = _plan(info.item_type)
+        return None if inner is None else ("items", inner)
+    if isinstance(info, mi.UnionType):  # an optional: the plan of its one non-null member
+        plans = [p for t in info.types if (p := _plan(t)) is not None]
+        return plans[0] if plans else None
+    return None
 
 
-def _to_time(ns: int) -> dict[str, int]:
-    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+def stamp_plan(cls: type[Message]) -> Plan:
+    """Where `cls` holds stamps (header.stamp at least), for the JSON form."""
+    plan = _PLANS.get(cls)
+    if plan is None:
+        found = _plan(msgspec.inspect.type_info(cls))
+        assert isinstance(found, dict)  # every message has header.stamp
+        plan = _PLANS[cls] = found
+    return plan
+
+
+def stamp_paths(cls: type[Message]) -> list[str]:
+    """The stamps of `cls` as paths (`header.stamp`, `start_stamp`, `last_stamps.*`)."""
+
+    def paths(plan: Plan, prefix: str) -> list[str]:
+        if isinstance(plan, str):
+            return [prefix]
+        if isinstance(plan, dict):
+            return [p for k, sub in plan.items() for p in paths(sub, f"{prefix}.{k}")]
+        return paths(plan[1], f"{prefix}.*" if plan[0] == "values" else f"{prefix}[]")
+
+    found = [p.removeprefix(".") for p in paths(stamp_plan(cls), "")]
+    return sorted(found, key=lambda p: not p.startswith("header."))  # header.stamp first
+
+
+def _to_form(value: Any, plan: Plan) -> Any:
+    if value is None:
+        return None
+    if isinstance(plan, str):
+        if value < 0:  # only a stamp-or-none may be negative (-1), as the bounds say
+            return None
+        return {"sec": value // 1_000_000_000, "nsec": value % 1_000_000_000}
+    if isinstance(plan, dict):
+        for name, sub in plan.items():
+            if name in value:
+                value[name] = _to_form(value[name], sub)
+        return value
+    kind, sub = plan
+    if kind == "values":
+        return {k: _to_form(v, sub) for k, v in value.items()}
+    return [_to_form(v, sub) for v in value]
 
 
 def _from_time(value: Any, where: str) -> int:
@@ -250,59 +309,100 @@ def _from_time(value: Any, where: str) -> int:
     raise ValueError(f"{where} is {value!r}, expected a time {{sec, nsec}}")
 
 
+def _from_form(value: Any, plan: Plan, where: str, form: int) -> Any:
+    """The inverse of `_to_form`; form 2 (header.stamp and top-level fields only, as a time or
+    an integer) is read too."""
+    if isinstance(plan, str):
+        if value is None:
+            return -1 if plan == _STAMP_OR_NONE else None
+        if form == 2 and type(value) is int:
+            return value
+        return _from_time(value, where)
+    if not isinstance(value, dict | list):
+        return value  # the wrong shape: msgspec says what was expected
+    if isinstance(plan, dict):
+        if isinstance(value, dict):
+            for name, sub in plan.items():
+                if name in value and (form == 3 or isinstance(sub, str) or name == "header"):
+                    value[name] = _from_form(value[name], sub, f"{where}{name}.", form)
+        return value
+    kind, sub = plan
+    if kind == "values" and isinstance(value, dict):
+        return {k: _from_form(v, sub, f"{where}{k}.", form) for k, v in value.items()}
+    if kind == "items" and isinstance(value, list):
+        return [_from_form(v, sub, f"{where}[{i}].", form) for i, v in enumerate(value)]
+    return value
+
+
 def to_recording_json(message: Message) -> bytes:
-    """JSON of `message` in the current recording form (stamps as {sec, nsec})."""
-    obj: dict[str, Any] = msgspec.to_builtins(message, builtin_types=(bytes,))
-    header = obj["header"]
-    header["stamp"] = _to_time(header["stamp"])
-    for name in stamp_fields(type(message)):
-        if obj.get(name) is not None:
-            obj[name] = _to_time(obj[name])
-    return _json_encoder.encode(obj)
+    """JSON of `message` in the current form (every stamp a {sec, nsec}): what recordings, the
+    Foxglove bridge and `beyond echo --json` write."""
+    obj = msgspec.to_builtins(message, builtin_types=(bytes,))
+    return _json_encoder.encode(_to_form(obj, stamp_plan(type(message))))
+
+
+def from_recording_object(
+    obj: Any, cls: type[M], key: str = "", form: int = RECORDING_JSON_FORM
+) -> M:
+    """Strictly convert a decoded JSON object in form 2 or 3 to `cls` (`beyond pub` takes what
+    `beyond echo --json` prints)."""
+    try:
+        if not isinstance(obj, dict):
+            raise ValueError("expected a JSON object")
+        problem = _version_problem(obj, cls)
+        if problem:
+            raise ValueError(problem)
+        obj = _from_form(obj, stamp_plan(cls), "", form)
+        message: M = msgspec.convert(obj, cls)
+    except (msgspec.ValidationError, ValueError) as exc:
+        raise SchemaError(f"bad {_where(key, cls)}: {exc}") from None
+    return _check(message, cls, key)
 
 
 def from_recording_json(
     data: bytes | str, cls: type[M], key: str = "", form: int = RECORDING_JSON_FORM
 ) -> M:
-    """Strictly decode a recorded message stored in JSON form `form` (1 or 2)."""
+    """Strictly decode a recorded message stored in JSON form `form` (1, 2 or 3)."""
     if form == 1:
         return from_json(data, cls, key)
-    if form != RECORDING_JSON_FORM:
+    if form not in RECORDING_JSON_FORMS:
         raise SchemaError(
             f"bad {_where(key, cls)}: recording JSON form {form}, this build reads "
             f"{', '.join(map(str, RECORDING_JSON_FORMS))}"
         )
     try:
         obj = msgspec.json.decode(data)
-        if not isinstance(obj, dict) or not isinstance(obj.get("header"), dict):
-            raise ValueError("expected an object with a header")
-        problem = _version_problem(obj, cls)
-        if problem:
-            raise ValueError(problem)
-        header = obj["header"]
-        if "stamp" in header:
-            header["stamp"] = _from_time(header["stamp"], "header.stamp")
-        for name in stamp_fields(cls):
-            if obj.get(name) is not None:
-                obj[name] = _from_time(obj[name], name)
-        message: M = msgspec.convert(obj, cls)
-    except (msgspec.DecodeError, msgspec.ValidationError, ValueError) as exc:
+    except msgspec.DecodeError as exc:
         raise SchemaError(f"bad {_where(key, cls)}: {exc}") from None
-    return _check(message, cls, key)
+    return from_recording_object(obj, cls, key, form)
+
+
+def _schema_form(node: dict[str, Any], plan: Plan) -> dict[str, Any]:
+    if "anyOf" in node:  # an optional: its non-null member
+        node["anyOf"] = [
+            m if m.get("type") == "null" else _schema_form(m, plan) for m in node["anyOf"]
+        ]
+        return node
+    if isinstance(plan, str):
+        time = {**_TIME_SCHEMA, **({"default": node["default"]} if "default" in node else {})}
+        if plan == _STAMP_OR_NONE:
+            return {"anyOf": [time, {"type": "null", "description": "none yet"}]}
+        return time
+    if isinstance(plan, dict):
+        props = node["properties"]
+        for name, sub in plan.items():
+            props[name] = _schema_form(props[name], sub)
+        return node
+    kind, sub = plan
+    where = "additionalProperties" if kind == "values" else "items"
+    node[where] = _schema_form(node[where], sub)
+    return node
 
 
 def recording_json_schema(cls: type[Message]) -> dict[str, Any]:
-    """JSON Schema of `cls` in the current recording form: `json_schema` with every stamp a
-    {sec, nsec} object. This is what a recording's channel declares."""
-    schema = json_schema(cls)
-    props = schema["properties"]
-    props["header"]["properties"]["stamp"] = dict(_TIME_SCHEMA)
-    for name in stamp_fields(cls):
-        old = props[name]
-        time = dict(_TIME_SCHEMA)
-        props[name] = {"anyOf": [time, {"type": "null"}]} if "anyOf" in old else time
-        if "default" in old:
-            props[name]["default"] = old["default"]
+    """JSON Schema of `cls` in the current JSON form: `json_schema` with every stamp a
+    {sec, nsec} object. This is what a recording's channel and the Foxglove bridge declare."""
+    schema = _schema_form(json_schema(cls), stamp_plan(cls))
     schema["x-beyond-recording-form"] = RECORDING_JSON_FORM
     return schema
 

@@ -32,6 +32,8 @@ STREAMS: dict[str, tuple[str, type[Message]]] = {
     "words": ("language/words", m.WordProbabilities),
     "description": ("language/description", m.Description),
     "stream_end": ("sensors/end", m.StreamEnd),
+    # the time of a replayed stream, published by the player (runtime.clock)
+    "clock": ("clock", m.StreamClock),
 }
 ASK = "affordance/ask"  # queryable of the reasoner: AffordanceQuery in, AffordanceAnswer out
 HEALTH = "health"  # beyond/<robot>/health/<service>: ServiceHealth (published and queryable)
@@ -120,6 +122,10 @@ class Keys:
     @property
     def stream_end(self) -> str:
         return self.stream("stream_end")
+
+    @property
+    def clock(self) -> str:
+        return self.stream("clock")
 
     @property
     def ask(self) -> str:

@@ -14,7 +14,15 @@ from typing import Annotated, ClassVar, Literal
 
 import msgspec
 
-from beyond_self.schemas.base import NAME_MAX, STAMP_MAX, Header, Message
+from beyond_self.schemas.base import (
+    JS_INT_MAX,
+    NAME_MAX,
+    STAMP_MARK,
+    STAMP_MAX,
+    Header,
+    Message,
+    Stamp,
+)
 
 # Bytes per pixel of the raw encodings Foxglove understands.
 RAW_ENCODINGS: dict[str, int] = {
@@ -72,21 +80,22 @@ LogValue = Annotated[float, msgspec.Meta(le=FINITE)]  # a log-probability: -inf 
 NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=FINITE)]
 Speed = Annotated[float, msgspec.Meta(ge=0.0, le=SPEED_MAX)]
 Seconds = Annotated[float, msgspec.Meta(ge=0.0, le=SECONDS_MAX)]
-Stamp = Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
 FrameIndex = Annotated[int, msgspec.Meta(ge=0, le=FRAME_MAX)]
 Id = Annotated[int, msgspec.Meta(ge=0, le=ID_MAX)]
-Count = Annotated[int, msgspec.Meta(ge=0, le=STAMP_MAX)]
+Count = Annotated[int, msgspec.Meta(ge=0, le=JS_INT_MAX)]
 Name = Annotated[str, msgspec.Meta(max_length=NAME_MAX)]
 Text = Annotated[str, msgspec.Meta(max_length=TEXT_MAX)]
 Distribution = Annotated[dict[Name, Probability], msgspec.Meta(max_length=VALUES_MAX)]
 Assignment = Annotated[dict[Name, Name], msgspec.Meta(max_length=VARIABLES_MAX)]
 Features = Annotated[list[Finite], msgspec.Meta(max_length=FEATURES_MAX)]
 Likelihoods = Annotated[dict[Name, NonNegative], msgspec.Meta(max_length=VALUES_MAX)]
-# per key expression (Progress): -1 = nothing yet
-PerKey = Annotated[
-    dict[Text, Annotated[int, msgspec.Meta(ge=-1, le=STAMP_MAX)]],
-    msgspec.Meta(max_length=VARIABLES_MAX),
+# a stamp, or -1: nothing yet (Progress); the JSON form writes -1 as null
+StampOrNone = Annotated[
+    int, msgspec.Meta(ge=-1, le=STAMP_MAX, extra_json_schema={STAMP_MARK: "ns, -1: none yet"})
 ]
+# per key expression (Progress)
+StampsPerKey = Annotated[dict[Text, StampOrNone], msgspec.Meta(max_length=VARIABLES_MAX)]
+CountsPerKey = Annotated[dict[Text, Count], msgspec.Meta(max_length=VARIABLES_MAX)]
 
 
 class Joint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -400,14 +409,21 @@ class Progress(Message, frozen=True):
     outruns the slowest consumer and nothing is dropped."""
 
     service: Name
-    handled: PerKey
+    handled: StampsPerKey
     # messages published so far per output key: a consumer that has received that many knows
     # it has everything this service derived from the inputs handled so far
-    published: PerKey = msgspec.field(default_factory=dict)
-    received: PerKey = msgspec.field(default_factory=dict)  # per input key
+    published: CountsPerKey = msgspec.field(default_factory=dict)
+    received: CountsPerKey = msgspec.field(default_factory=dict)  # per input key
     # stamp of the last message published per output key: a restarted instance of the service
     # does not publish again what its predecessor already did
-    published_stamps: PerKey = msgspec.field(default_factory=dict)
+    published_stamps: StampsPerKey = msgspec.field(default_factory=dict)
+
+
+class StreamClock(Message, frozen=True):
+    """The time of the stream being replayed (ROS's /clock): its header stamp, published by the
+    player (the ingest service, `beyond replay`) as it plays. Services on the recording's clock
+    (`BEYOND_CLOCK=recording`) stamp their health and progress with it, so every message of a
+    replay is on one clock; while the player is paused the clock stands still."""
 
 
 class AffordanceQuery(Message, frozen=True):
@@ -451,6 +467,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     ServiceHealth,
     StreamEnd,
     Progress,
+    StreamClock,
     AffordanceQuery,
     AffordanceAnswer,
 )

@@ -13,7 +13,10 @@ source plug-in.
   numbers them. A bounded queue sits between the plug-in and the bus: when the bus cannot keep up
   the oldest item is dropped and counted, never silently.
 When the source is exhausted a `StreamEnd` message says how many messages were published and
-the last stamp of each stream, so consumers know when they have seen everything.
+the last stamp of each stream, so consumers know when they have seen everything. A recording or a
+log is played on its own clock: ingest publishes the stream's time (`StreamClock`, ROS's /clock,
+runtime.clock) as it plays, which the services of a replay stamp their health and progress with,
+and stamps its own health and the end marker with it too; a live source is on the wall clock.
 
 Replays never outrun their consumers: the services this ingest waits for report how far they
 have handled each sensor stream, and publishing waits while the slowest is more than
@@ -35,7 +38,8 @@ import numpy as np
 
 from beyond_self.cognition.gestures.logs import read_hand_log
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.delivery import CAMERA, EVENTS
+from beyond_self.runtime.clock import Clock, ClockTicks
+from beyond_self.runtime.delivery import CAMERA, EVENTS, STATUS
 from beyond_self.runtime.images import message_from_image
 from beyond_self.runtime.log import event
 from beyond_self.runtime.pacing import DEFAULT_WINDOW_S, Pacer
@@ -44,14 +48,21 @@ from beyond_self.runtime.recording import read_recording
 from beyond_self.runtime.replay import Cue, Player, recorded_cues
 from beyond_self.runtime.replay_control import rate_option
 from beyond_self.runtime.service import Service
-from beyond_self.schemas import CameraFrame, CompressedCameraFrame, Joint, SkeletonFrame, StreamEnd
+from beyond_self.schemas import (
+    CameraFrame,
+    CompressedCameraFrame,
+    Joint,
+    SkeletonFrame,
+    StreamClock,
+    StreamEnd,
+)
 from beyond_self.schemas.keys import with_robot
 
 
 class SensorIngest(Service):
     name = "ingest"
     subscribes = ()
-    publishes = ("skeleton", "camera", "camera_compressed", "stream_end")
+    publishes = ("skeleton", "camera", "camera_compressed", "stream_end", "clock")
     serves = ("progress",)  # the pacer answers restarted consumers
 
     def __init__(
@@ -79,6 +90,8 @@ class SensorIngest(Service):
                 "valid: recording=FILE.mcap, log=DIR_OR_DATA_LOG, plugin=module:function"
             )
         self.recording, self.log_path, self.plugin = recording, log, plugin
+        if plugin is None and "clock" not in base:  # a replay: on the stream's clock, always
+            self.clock = Clock("recording")
         self.rate = rate_option(rate)  # None: as fast as possible
         self.loop = loop
         self.scale = scale
@@ -103,7 +116,13 @@ class SensorIngest(Service):
         self.camera = self.publisher(keys.camera, CameraFrame, CAMERA)
         self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame, CAMERA)
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
+        self.stream_clock = self.publisher(keys.clock, StreamClock, STATUS)
         self.spawn(self._play(), "source")
+
+    def _tick(self, stamp: int) -> None:
+        """The stream's time, for this service's own clock and everyone's (runtime.clock)."""
+        self.clock.observe(stamp)
+        self.stream_clock.put(StreamClock(header=self.header(StreamClock, stamp)))
 
     async def _play(self) -> None:
         # Publishing before the consumers' subscriptions reached this session would lose the
@@ -118,7 +137,8 @@ class SensorIngest(Service):
             window_s=self.window_s,
         )
         await self.pacer.start()
-        self.player = Player(rate=self.rate, pacer=self.pacer)
+        ticks = ClockTicks(self._tick) if self.plugin is None else None  # live: the wall's
+        self.player = Player(rate=self.rate, pacer=self.pacer, ticks=ticks)
         if self.start_delay_s:
             await asyncio.sleep(self.start_delay_s)
         try:

@@ -44,9 +44,17 @@ def hosts() -> Iterator[TwoHosts]:
 
 
 # The JavaScript packages third-party tools read our files and streams with: @mcap/core (the MCAP
-# reader Foxglove uses), fzstd (its zstd decompressor) and @foxglove/schemas (the official JSON
-# Schemas of Foxglove's message types). Installed once per run into a temporary folder.
-NODE_PACKAGES = ("@mcap/core@2", "@foxglove/schemas@2", "fzstd@0.1")
+# reader Foxglove uses), fzstd (its zstd decompressor), @foxglove/schemas (the official JSON
+# Schemas of Foxglove's message types), and @foxglove/ws-protocol (the npm Foxglove WebSocket
+# client) on ws (the WebSocket its README names for Node.js). Installed once per run into a
+# temporary folder.
+NODE_PACKAGES = (
+    "@mcap/core@2",
+    "@foxglove/schemas@2",
+    "fzstd@0.1",
+    "@foxglove/ws-protocol@0.8",
+    "ws@8",
+)
 
 
 @pytest.fixture(scope="session")

@@ -105,7 +105,7 @@ def _start_reaper(namespaces: list[str]) -> subprocess.Popen[bytes]:
     )
     here = str(Path(__file__).resolve().parent)
     return subprocess.Popen(
-        [sys.executable, "-c", code, here, str(os.getpid()), *namespaces],
+        [sys.executable, "-P", "-c", code, here, str(os.getpid()), *namespaces],
         stdin=subprocess.DEVNULL,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,

@@ -250,7 +250,7 @@ def test_same_seed_same_results(small_run: LearningResults) -> None:
 
 
 def test_cli_writes_outputs_and_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    args = ["learn", "--out", str(tmp_path), "--json", "--demos", "3", "--test", "4"]
+    args = ["learn", "-o", str(tmp_path), "--json", "--demos", "3", "--test", "4"]
     args += ["--sizes", "3", "--states", "3", "--iter", "2", "--seed", "1"]
     assert cli(args) == 0
     data = json.loads(capsys.readouterr().out)
@@ -271,7 +271,7 @@ def test_cli_writes_outputs_and_json(tmp_path: Path, capsys: pytest.CaptureFixtu
 def test_cli_bad_input_exits_2(
     extra: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert cli(["learn", "--out", str(tmp_path), "--sizes", "3", "--demos", "3", *extra]) == 2
+    assert cli(["learn", "-o", str(tmp_path), "--sizes", "3", "--demos", "3", *extra]) == 2
     err = capsys.readouterr().err
     assert "error" in err and "Traceback" not in err
 

@@ -53,7 +53,8 @@ CONSUMERS = ["gestures", "objects", "reasoner", "describer"]
 def busy_machine() -> Iterator[None]:
     """Three processes spinning on the CPU for as long as the matrix runs (a loaded 2-core
     machine: the services get a fraction of a core each)."""
-    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(3)]
+    spin = [sys.executable, "-P", "-c", "while True: pass"]
+    spinners = [subprocess.Popen(spin) for _ in range(3)]
     try:
         yield
     finally:

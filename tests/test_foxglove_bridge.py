@@ -1,9 +1,11 @@
-"""The Foxglove bridge seen by a client nobody here wrote: Python `websockets` speaking the
+"""The Foxglove bridge seen by clients nobody here wrote: Python `websockets` speaking the
 Foxglove WebSocket protocol to `beyond up --foxglove` while it replays a recording, with every
-message checked against the official Foxglove JSON Schemas (`@foxglove/schemas`, from npm).
+message checked against the official Foxglove JSON Schemas (`@foxglove/schemas`, from npm); and
+the npm client `@foxglove/ws-protocol` with its defaults.
 
-The protocol is foxglove.websocket.v1; foxglove-sdk 0.30 serves it under its new name
-foxglove.sdk.v1 only (same messages), so the client offers both names, as Foxglove does."""
+The protocol has two names: foxglove.sdk.v1, the only one foxglove-sdk 0.30's server accepts,
+and foxglove.websocket.v1, the only one the npm client offers; the first client offers both, as
+the Foxglove app does, the npm client only its own (runtime/foxglove_front.py)."""
 
 from __future__ import annotations
 
@@ -20,11 +22,14 @@ import jsonschema
 from busutil_net import REPO, env_for, free_port, private_config
 from websockets.asyncio.client import connect
 
+import beyond_self.schemas as s
 from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.foxglove_bridge import FoxgloveBridge
 from beyond_self.services.launcher import BEYOND
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 RECORDING = REPO / "recordings" / "touch-box.mcap"
+NPM_CLIENT = REPO / "tests" / "js" / "foxglove_client.js"
 
 
 def official_schemas(node_modules: Path) -> dict[str, Any]:
@@ -145,7 +150,7 @@ def test_port_in_use_is_one_line_and_exit_2() -> None:
         taken.listen()
         port = taken.getsockname()[1]
         done = subprocess.run(
-            [*BEYOND, "foxglove", "--port", str(port)],
+            [*BEYOND, "foxglove", "--ws-port", str(port)],
             env=env_for(config),
             capture_output=True,
             text=True,
@@ -153,4 +158,44 @@ def test_port_in_use_is_one_line_and_exit_2() -> None:
         )
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and f"127.0.0.1:{port}" in lines[0] and "--port" in lines[0]
+    assert len(lines) == 1 and f"127.0.0.1:{port}" in lines[0] and "--ws-port" in lines[0]
+
+
+async def test_the_npm_client_connects_with_its_defaults(node_modules: Path) -> None:
+    """@foxglove/ws-protocol offers only foxglove.websocket.v1: accepted under that name, it
+    subscribes and reads a message exactly (stamps as Foxglove Time, log time = the stamp)."""
+    stamp = 1_546_300_801_433_333_333
+    header = s.Header(version=s.Description.VERSION, source="t", seq=1, stamp=stamp)
+    sentence = s.ScoredSentence(text="the robot tapped the ball", score=-0.5)
+    description = s.Description(
+        header=header, segment_id=1, sentences=[sentence], evidence=s.Evidence()
+    )
+    with Bus.open(private_config()) as bus:
+        bridge = FoxgloveBridge(bus, port=0)
+        stop, ready = asyncio.Event(), asyncio.Event()
+        serving = asyncio.create_task(bridge.run(stop, ready))
+        try:
+            await asyncio.wait_for(ready.wait(), 30)
+            node = await asyncio.create_subprocess_exec(
+                *("node", str(NPM_CLIENT), f"ws://127.0.0.1:{bridge.port}", bus.keys.description),
+                env={**os.environ, "NODE_PATH": str(node_modules)},
+                stdout=asyncio.subprocess.PIPE,
+            )
+            pub = bus.publisher(bus.keys.description, s.Description)
+            output = asyncio.ensure_future(node.communicate())
+            while not output.done():  # until the client has subscribed and heard one
+                pub.put(description)
+                await asyncio.wait([output], timeout=0.2)
+            printed, _ = output.result()
+        finally:
+            stop.set()
+            await serving
+            bridge.close()
+    report = json.loads(printed)
+    assert node.returncode == 0, report
+    assert report["offered"] == report["subprotocol"] == "foxglove.websocket.v1"
+    assert report["schemaName"] == "beyond.Description"
+    got = report["message"]
+    assert got["header"]["stamp"] == {"sec": stamp // 10**9, "nsec": stamp % 10**9}
+    assert int(report["logTime"]) == stamp
+    assert got["sentences"][0]["text"] == "the robot tapped the ball"

@@ -49,7 +49,7 @@ def test_stream_table_and_bad_input(
 
 def test_train_then_evaluate_synthetic(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model_file = tmp_path / "models.json"
-    argv = ["gesture", "train", "--out", str(model_file), "--count", "4", "--iter", "3",
+    argv = ["gesture", "train", "-o", str(model_file), "--count", "4", "--iter", "3",
             "--states", "4", "--mix", "1"]  # fmt: skip
     assert main(argv) == 0
     models = load_models(model_file)
@@ -58,14 +58,14 @@ def test_train_then_evaluate_synthetic(tmp_path: Path, capsys: pytest.CaptureFix
     capsys.readouterr()
     plots = tmp_path / "plots"
     argv = ["gesture", "evaluate", str(model_file), "synthetic", "--count", "3", "--json",
-            "--out", str(plots)]  # fmt: skip
+            "-o", str(plots)]  # fmt: skip
     assert main(argv) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["n"] == 9
     assert len(report["early"]["fractions"]) == 10
     assert np.array(report["confusion"]).sum() == 9
     assert (plots / "confusion.png").is_file() and (plots / "early_recognition.png").is_file()
-    assert main(["gesture", "train", "--out", str(tmp_path / "m.pkl")]) == 2
+    assert main(["gesture", "train", "-o", str(tmp_path / "m.pkl")]) == 2
 
 
 def _write_mcap(path: Path, actions: list[str], seed: int, metadata: dict[str, str]) -> None:
@@ -101,13 +101,13 @@ def test_train_and_evaluate_from_mcap_recordings(
     )
     _write_mcap(folder / "tap_extra.mcap", ["tap", "tap"], seed=22, metadata={})
     model_file = tmp_path / "m.json"
-    argv = ["gesture", "train", "--data", str(folder), "--out", str(model_file),
+    argv = ["gesture", "train", "--data", str(folder), "-o", str(model_file),
             "--states", "4", "--mix", "1", "--iter", "3"]  # fmt: skip
     assert main(argv) == 0
     assert load_models(model_file).meta["sequences"] == {"grasp": 2, "tap": 4, "touch": 2}
     capsys.readouterr()
     argv = ["gesture", "evaluate", str(model_file), str(folder / "session.mcap"), "--json",
-            "--out", str(tmp_path / "plots")]  # fmt: skip
+            "-o", str(tmp_path / "plots")]  # fmt: skip
     assert main(argv) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["n"] == 6

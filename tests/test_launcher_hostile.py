@@ -43,7 +43,7 @@ os.write(1, b"\nlast\n")
 
 async def test_reader_survives_any_line_length_and_any_bytes() -> None:
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-c", NOISY_CHILD, stdout=asyncio.subprocess.PIPE
+        sys.executable, "-P", "-c", NOISY_CHILD, stdout=asyncio.subprocess.PIPE
     )
     assert proc.stdout is not None
     lines: list[str] = []

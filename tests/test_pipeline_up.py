@@ -1,19 +1,26 @@
-"""The whole pipeline as separate processes (`beyond up`), and a service killed and restarted."""
+"""The whole pipeline as separate processes (`beyond up`), from a folder of decoy packages and
+recorded beside it, and a service killed and restarted."""
 
 from __future__ import annotations
 
 import asyncio
+import json
 import re
 import signal
 import subprocess
 from pathlib import Path
 
 import pytest
-from busutil_net import env_for, private_config, skeleton_recording
+from busutil_net import REPO, env_for, private_config, skeleton_recording
+from third_party_readers import assert_trusted, doctor, js_reports, unsafe_integers
 
 import beyond_self.schemas as s
 from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
+from beyond_self.cognition.paths import DEMO_RECORDING
+from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.replay import Player, recorded_cues
 from beyond_self.services.deployment import Deployment
 from beyond_self.services.launcher import BEYOND
 
@@ -84,23 +91,77 @@ async def test_a_killed_service_restarts_and_is_picked_up() -> None:
     await asyncio.sleep(0)
 
 
+DECOYS = ("schemas", "runtime", "core", "services", "cognition", "beyond", "beyond_self")
+
+
+def readme_demo_lines() -> list[str]:
+    """The gesture lines the README promises the demo prints."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    block = text.split("```text", 1)[1].split("```", 1)[0]
+    return [line for line in block.splitlines() if line.startswith("gesture ")]
+
+
 @pytest.mark.slow
-def test_demo_watches_the_bundled_recording_and_describes_it(tmp_path: Path) -> None:
-    """`make demo`'s job, on a private bus: the tapped ball and the grasped box, in words."""
-    env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}
-    cmd = [*BEYOND, "demo", "--no-live"]
-    done = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150)
-    assert done.returncode == 0, done.stdout + done.stderr[-3000:]
-    described = dict(re.findall(r'^gesture (\d+): "(.*)"$', done.stdout, re.M))
-    assert set(described) == {"1", "2"}, done.stdout
-    assert re.search(VERBS["tap"], described["1"]) and re.search(
-        r"\b(ball|sphere)\b", described["1"]
+async def test_up_from_a_folder_of_decoys_prints_the_readme_and_records_on_one_clock(
+    node_modules: Path, tmp_path: Path
+) -> None:
+    """`beyond up` (the demo recording) run from a folder holding a package of every name we
+    import, each raising when imported: no process it starts imports them, and it prints the
+    README's gesture lines word for word. `beyond record` beside it (issue 23): every channel
+    (data, health, progress, the clock, the end marker) on the stream's clock, so the file spans
+    the stream, its log times never step back, `pymcap-cli doctor` finds nothing to say, it
+    replays with the stream's timing, and every number a JavaScript reader sees is exact."""
+    work = tmp_path / "decoys"
+    for name in DECOYS:
+        (work / name).mkdir(parents=True)
+        (work / name / "__init__.py").write_text("raise ImportError('decoy imported')\n")
+    config = private_config()
+    env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
+    out = tmp_path / "up.mcap"
+    recorder = subprocess.Popen(
+        [*BEYOND, "record", "-o", str(out)],
+        env=env,
+        cwd=work,
+        stderr=subprocess.PIPE,
+        text=True,
     )
-    assert re.search(VERBS["grasp"], described["2"])
-    assert re.search(r"\b(box|cube|square)\b", described["2"])
-    # the effect of the tap is anticipated while the gesture unfolds
-    anticipated = re.findall(
-        r"^gesture 1: anticipates ObjVel=(\w+) .* at frame (\d+)", done.stdout, re.M
-    )
-    ended = int(re.findall(r"^gesture 1: ended at frame (\d+)", done.stdout, re.M)[0])
-    assert anticipated and anticipated[-1][0] == "fast" and int(anticipated[-1][1]) < ended
+    try:
+        with Bus.open(config) as bus:  # the recorder listens once it matches a publisher
+            await bus.publisher(bus.keys.stream_end, s.StreamEnd).wait_matching(timeout=30)
+        up = await asyncio.create_subprocess_exec(
+            *(*BEYOND, "up", "--no-live", "--rate", "0"),
+            env=env,
+            cwd=work,
+            stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.PIPE,
+        )
+        printed, errors = await asyncio.wait_for(up.communicate(), 150)
+        assert up.returncode == 0, printed.decode() + errors.decode()[-3000:]
+        recorder.send_signal(signal.SIGINT)
+        assert await asyncio.to_thread(recorder.wait, 30) == 0
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.wait()
+    assert "decoy" not in errors.decode()
+    gestures = [line for line in printed.decode().splitlines() if line.startswith("gesture ")]
+    assert gestures == readme_demo_lines()
+    recorded, played = inspect_recording(out), inspect_recording(DEMO_RECORDING)
+    assert (recorded.start, recorded.end) == (played.start, played.end)  # the stream's span
+    times: dict[str, list[int]] = {}
+    for item in read_recording(out):
+        times.setdefault(item.key, []).append(item.log_time)
+        if item.encoding == "json":
+            assert list(unsafe_integers(json.loads(item.data))) == [], item.key
+    root = f"beyond/{config.robot}"
+    for key in ("clock", "health/ingest", "health/speech", "progress/objects", "sensors/end"):
+        assert f"{root}/{key}" in times, sorted(times)
+    for key, logged in times.items():
+        assert logged == sorted(logged), f"{key} steps back in time"
+    found = doctor(out)
+    assert [f["code"] for f in found["findings"]] == ["NO_ATTACHMENTS"], found
+    (report,) = js_reports(node_modules, [out])
+    assert_trusted(report, out)
+    player = Player(rate=None)  # `beyond replay`'s schedule, as fast as possible and nowhere
+    await player.play(recorded_cues(read_recording(out)), lambda cue: None)
+    assert player.stats.span_s == (played.end - played.start) / 1e9  # at rate 1, it takes that

@@ -5,64 +5,21 @@ also checks that every stamp it sees equals the message's log time exactly."""
 from __future__ import annotations
 
 import asyncio
-import json
-import os
-import shutil
 import subprocess
-import sys
 from pathlib import Path
-from typing import Any
 
 import pytest
 from busutil_net import REPO, env_for, private_config
+from third_party_readers import assert_trusted, js_reports
 
 import beyond_self.schemas as s
 from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.clock import ClockTicks
 from beyond_self.runtime.recording import inspect_recording, read_recording
 from beyond_self.runtime.replay import replay
 from beyond_self.services.launcher import BEYOND
 
 SHIPPED = sorted((REPO / "recordings").glob("*.mcap"))
-CHECKER = REPO / "tests" / "js" / "mcap_check.js"
-
-
-def js_reports(node_modules: Path, paths: list[Path]) -> list[dict[str, Any]]:
-    done = subprocess.run(
-        ["node", str(CHECKER), *map(str, paths)],
-        env={**os.environ, "NODE_PATH": str(node_modules)},
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    )
-    return [json.loads(line) for line in done.stdout.splitlines()]
-
-
-def doctor(path: Path) -> dict[str, Any]:
-    exe = shutil.which("pymcap-cli", path=str(Path(sys.executable).parent))
-    if exe is None:
-        pytest.skip("pymcap-cli is not installed (pip install -e '.[dev]')")
-    done = subprocess.run(
-        [exe, "doctor", "--format", "jsonl", str(path)], capture_output=True, text=True, timeout=60
-    )
-    lines = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
-    summary = next(x for x in lines if x["type"] == "summary")
-    summary["findings"] = [x for x in lines if x["type"] == "finding"]
-    summary["returncode"] = done.returncode
-    return summary
-
-
-def assert_trusted(report: dict[str, Any], path: Path) -> None:
-    assert "error" not in report, report
-    assert report["messages"] == inspect_recording(path).messages > 0
-    assert report["data_section_crc_ok"], report
-    assert report["publish_time_zero"] == 0, report
-    assert report["json_errors"] == 0, report
-    assert report["stamp_mismatch"] == {}, report
-    assert report["timestamp_mismatch"] == {}, report
-    found = doctor(path)
-    errors = [f for f in found["findings"] if f["severity"] in ("error", "warning")]
-    assert found["errors"] == 0 and errors == [] and found["returncode"] == 0, found
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=[p.name for p in SHIPPED])
@@ -112,7 +69,12 @@ async def test_beyond_record_file_is_trusted(node_modules: Path, tmp_path: Path)
     config = private_config()
     out = tmp_path / "recorded.mcap"
     source = REPO / "recordings" / "touch-box.mcap"
-    expected = inspect_recording(source).messages + 2
+    ticks: list[int] = []  # the replay's stream clock, which it publishes as it plays
+    clock = ClockTicks(ticks.append)
+    for item in read_recording(source):
+        clock.at(item.publish_time)
+    clock.last(item.publish_time)
+    expected = inspect_recording(source).messages + len(ticks) + 2
     with Bus.open(config) as bus:
         proc = subprocess.Popen(
             [
@@ -145,6 +107,8 @@ async def test_beyond_record_file_is_trusted(node_modules: Path, tmp_path: Path)
     # logged on the stamps' clock (after the replayed data), not at 0 nor at today's wall time
     assert unstamped[0].log_time == unstamped[0].publish_time >= max(stamps)
     assert unstamped[0].log_time < max(stamps) + 60 * 10**9
+    clocks = [r.message().header.stamp for r in items if r.key.endswith("/clock")]
+    assert clocks == ticks and clocks[0] == min(stamps) and clocks[-1] == max(stamps)
     # the Foxglove views went in too, one scene per skeleton frame, and replay skips them
     counts = {c.topic: c.count for c in inspect_recording(out).channels}
     assert counts[f"beyond/{config.robot}/foxglove/scene"] == len(stamps) > 0

@@ -15,7 +15,7 @@ from beyond_self.cognition.published import FIG7A, FIG7B, TABLE_II
 @pytest.fixture(scope="module")
 def results(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     out = tmp_path_factory.mktemp("reproduce")
-    assert main(["reproduce", "--data", str(shared_data), "--out", str(out)]) == 0
+    assert main(["reproduce", "--data", str(shared_data), "-o", str(out)]) == 0
     return out, json.loads((out / "results.json").read_text())
 
 
@@ -116,6 +116,6 @@ def test_report_says_which_unseen_rule_each_published_figure_needs(
 def test_missing_data_says_where_to_get_it(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["reproduce", "--data", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert main(["reproduce", "--data", str(tmp_path), "-o", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "salvi2012/networkDefinition.txt" in err and "AffordancesAndSpeech" in err

@@ -224,3 +224,34 @@ async def test_replay_timing_filters_and_robot_rename(tmp_path: Path) -> None:
         assert [(await cams.recv(timeout=5)).message.header.seq for _ in range(11)] == list(
             range(0, 31, 3)
         )
+
+
+def test_a_live_recording_has_one_timeline(tmp_path: Path) -> None:
+    """What `beyond record` writes from the wire: a message stamped 0 before any stamp (progress
+    or health of a service waiting for a replay) waits and is logged at the stream's first
+    instant; an output that arrives after newer inputs is written in log-time order within its
+    chunk; one stamped 0 later goes on its channel, never before that channel's last message."""
+    path = tmp_path / "live.mcap"
+    wall = 1_796_000_000 * 10**9  # arrival times: today's wall clock, years after the stream's
+
+    def progress(stamp: int) -> bytes:  # a service's report, stamped by its clock
+        header = s.Header(version=1, source="x", seq=0, stamp=stamp)
+        return s.encode(s.Progress(header=header, service="x", handled={}))
+
+    frames = skeleton_frames(3)
+    stamps = [f.header.stamp for f in frames]
+    report, skeleton = ROBOT_KEYS.progress("x"), ROBOT_KEYS.skeleton
+    enc = s.wire_encoding
+    with RecordingWriter(path, flush_interval=3600.0) as w:
+        w.write_wire(report, progress(0), enc(s.Progress), wall)  # before the stream
+        for i in (1, 2, 0):  # frame 0 arrives last (a late output), same chunk
+            w.write_wire(skeleton, s.encode(frames[i]), enc(s.SkeletonFrame), wall + 10 + i)
+        w.write_wire(report, progress(stamps[2] + 5), enc(s.Progress), wall + 20)
+        w.write_wire(report, progress(0), enc(s.Progress), wall + 15)  # arrival < last
+    logged = [(r.key, r.log_time) for r in read_recording(path)]
+    reported = [t for k, t in logged if k == report]  # the first stamp seen, then on
+    assert reported == [stamps[1], stamps[2] + 5, stamps[2] + 5]
+    assert max(t for _, t in logged) - min(t for _, t in logged) < 10**9  # no wall time
+    with open(path, "rb") as f:  # as written, chunk by chunk: never back in time
+        written = [m.log_time for _, _, m in make_reader(f).iter_messages(log_time_order=False)]
+    assert written == sorted(written) and len(written) == 6

@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import json
 
+import jsonschema
 import msgspec
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from third_party_readers import unbounded_integers, unsafe_integers
 
 import beyond_self.schemas as s
 from beyond_self.core.errors import InputError
+from beyond_self.schemas import codec
+from beyond_self.schemas.base import STAMP_MARK
 from beyond_self.schemas.messages import IMAGE_BYTES_MAX
 
 H = s.Header(version=1, source="test", seq=7, stamp=1_700_000_000_123_456_789, correlation="x/1")
@@ -119,10 +123,12 @@ def examples() -> list[s.Message]:
         s.Progress(
             header=H,
             service="objects",
-            handled={"beyond/robot/sensors/camera/raw": 4},
+            handled={"beyond/robot/sensors/camera/raw": H.stamp, "beyond/robot/x": -1},
             published={"beyond/robot/vision/objects": 3},
             received={"beyond/robot/gesture/segment": 2},
+            published_stamps={"beyond/robot/vision/objects": H.stamp},
         ),
+        s.StreamClock(header=H),
         s.AffordanceQuery(
             header=H,
             query=["ObjVel"],
@@ -310,3 +316,54 @@ def test_keys_are_prefixed_by_robot() -> None:
         s.Keys("bad/name")
     with pytest.raises(InputError, match="invalid service name"):
         keys.alive("a*")
+
+
+@pytest.mark.parametrize("cls", list(s.REGISTRY.values()), ids=lambda c: c.__name__)
+def test_every_json_schema_is_exact_in_javascript(cls: type[s.Message]) -> None:
+    """The JSON form (recordings, the Foxglove bridge, `beyond echo --json`, `schemas export`'s
+    recording/ folder) allows no integer a double would round; on the bus (msgpack) the only
+    integers beyond 2^53 are the stamps, each marked as one."""
+    assert list(unbounded_integers(codec.recording_json_schema(cls))) == []
+    bus = codec.json_schema(cls)
+    for where in unbounded_integers(bus):
+        node = bus
+        for part in where.removeprefix("$.").replace("[", ".").replace("]", "").split("."):
+            node = node[int(part)] if isinstance(node, list) else node[part]
+        assert STAMP_MARK in node, f"{cls.__name__}: {where} is no stamp, and is unbounded"
+
+
+@pytest.mark.parametrize("message", examples(), ids=lambda m: type(m).__name__)
+def test_json_form_round_trip_with_every_stamp_a_time(message: s.Message) -> None:
+    cls = type(message)
+    text = codec.to_recording_json(message)
+    obj = json.loads(text)
+    assert list(unsafe_integers(obj)) == []
+    jsonschema.validate(obj, codec.recording_json_schema(cls))
+    assert obj["header"]["stamp"] == {"sec": H.stamp // 10**9, "nsec": H.stamp % 10**9}
+    assert codec.from_recording_json(text, cls, "k") == message
+
+
+def test_nested_stamps_are_times_and_none_yet_is_null() -> None:
+    progress = next(m for m in examples() if isinstance(m, s.Progress))
+    obj = json.loads(codec.to_recording_json(progress))
+    assert obj["handled"]["beyond/robot/x"] is None
+    assert obj["published_stamps"]["beyond/robot/vision/objects"]["nsec"] == 123_456_789
+    assert obj["published"] == {"beyond/robot/vision/objects": 3}  # counts stay numbers
+    end = next(m for m in examples() if isinstance(m, s.StreamEnd))
+    assert json.loads(codec.to_recording_json(end))["last_stamps"]["skeleton"] == {
+        "sec": 0,
+        "nsec": 5,
+    }
+    assert codec.stamp_paths(s.GestureSegment) == ["header.stamp", "start_stamp", "end_stamp"]
+    with pytest.raises(s.SchemaError, match="start_stamp"):  # form 3: a time, not a number
+        bad = {**json.loads(codec.to_recording_json(examples()[5])), "start_stamp": 1}
+        codec.from_recording_json(json.dumps(bad), s.GestureSegment, "k")
+
+
+def test_a_form_2_file_reads_with_stamps_as_numbers_or_times() -> None:
+    """Form 2 wrote header.stamp and the top-level stamps as times, except those typed with
+    bounds (GestureSegment's, for a while): both read."""
+    segment = next(m for m in examples() if isinstance(m, s.GestureSegment))
+    obj = json.loads(s.to_json(segment))
+    obj["header"]["stamp"] = {"sec": H.stamp // 10**9, "nsec": H.stamp % 10**9}
+    assert codec.from_recording_json(json.dumps(obj), s.GestureSegment, "k", form=2) == segment

@@ -83,8 +83,15 @@ def test_rules_follow_the_declarations() -> None:
     assert "beyond/*/language/description" in describer_puts
     assert not any("sensors" in k or "affordance" in k for k in describer_puts)
     assert by_id["describer-in-ingress"]["key_exprs"] == sorted(
-        ["beyond/*/language/words", "beyond/*/language/words/@adv/**", "beyond/*/progress/*"]
+        [
+            "beyond/*/language/words",
+            "beyond/*/language/words/@adv/**",
+            "beyond/*/progress/*",
+            "beyond/*/clock",  # a replay's stream clock, which every service may follow
+        ]
     )
+    assert "beyond/*/clock" in by_id["ingest-out-ingress"]["key_exprs"]  # the player's
+    assert "beyond/*/clock" not in describer_puts
     assert "beyond/*/affordance/ask" in by_id["reasoner-serve-ingress"]["key_exprs"]
     tools = [r for r in rules["rules"] if r["id"].startswith("tools-")]
     assert tools and not any(

@@ -131,3 +131,28 @@ async def test_reasoner_answers_ad_hoc_queries_and_rejects_bad_ones(bus: Bus) ->
     with pytest.raises(InputError, match="valid: Action"):
         await bus.query(bus.keys.ask, s.AffordanceAnswer, payload=bad, timeout=5)
     await _stop(service)
+
+
+async def test_on_a_replay_health_is_on_the_streams_clock_also_before_it_and_paused(
+    bus: Bus,
+) -> None:
+    """runtime.clock: a service on the recording's clock publishes health every period whatever
+    the stream does (it shows the service is alive): stamped 0 before the player's first tick,
+    then with the stream's time, which stands still while the player is paused."""
+    from beyond_self.runtime.clock import Clock
+
+    health = bus.subscribe(bus.keys.health("describer"), s.ServiceHealth)
+    service = await _start("describer", bus, clock=Clock("recording"))
+    assert (await health.recv(timeout=10)).message.header.stamp == 0
+    ticks = bus.publisher(bus.keys.clock, s.StreamClock)
+    await ticks.wait_matching(timeout=10)
+    stream_time = 1_546_300_801_433_333_333
+    ticks.put(s.StreamClock(header=_header(0, stream_time)))
+    for _ in range(200):
+        if (await health.recv(timeout=10)).message.header.stamp == stream_time:
+            break
+    else:
+        raise AssertionError("health never took the stream's time")
+    paused = [(await health.recv(timeout=10)).message.header.stamp for _ in range(3)]
+    assert paused == [stream_time] * 3  # no tick: the clock stands still, health goes on
+    await _stop(service)

@@ -11,8 +11,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from beyond_self.runtime.replay_control import RATE_MAX
 
@@ -56,6 +57,7 @@ def number(
         return value
 
     parse.__name__ = kind.__name__  # argparse names the type in some messages
+    parse.what = what  # type: ignore[attr-defined]  # what the number is (tests/test_cli_flags.py)
     return parse
 
 
@@ -72,6 +74,84 @@ seed = number(int, lo=0, hi=SEED_MAX, what="seed")
 # a replay's speed as typed: 0 means as fast as possible (runtime.replay_control.rate_option
 # turns it into the engine's None), so every command takes the same values
 rate = number(float, lo=0, hi=RATE_MAX, what="speed factor, 0: as fast as possible")
+
+
+NOTES = "_notes"  # attribute of the parsed arguments: notes printed once the command has run
+
+
+def note(args: argparse.Namespace, text: str) -> None:
+    """Say `text` once the command has run (on stderr, after its output and after any error's
+    one line, which stays the first line a script reads)."""
+    notes: list[str] = getattr(args, NOTES, None) or []
+    notes.append(text)
+    setattr(args, NOTES, notes)
+
+
+class _Deprecated(argparse.Action):
+    """An older spelling of an option: it still works, and says what to write instead."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        self.replacement: str = kwargs.pop("replacement")
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
+        note(namespace, f"{option_string} is deprecated; use {self.replacement}")
+        setattr(namespace, self.dest, values)
+
+
+def deprecated(container: Any, old: str, new: argparse.Action) -> argparse.Action:
+    """Add `old` to `container` (a parser or group) as a deprecated spelling of the option
+    `new`: the same destination and type; using it works and says what to use instead."""
+    spelling = "/".join(new.option_strings)
+    action: argparse.Action = container.add_argument(
+        old,
+        action=_Deprecated,
+        replacement=spelling,
+        dest=new.dest,
+        type=new.type,
+        metavar=new.metavar or new.dest.upper(),
+        default=argparse.SUPPRESS,
+        help=f"deprecated spelling of {spelling}",
+    )
+    return action
+
+
+def add_output(
+    parser: argparse.ArgumentParser,
+    help: str,
+    *,
+    folder: bool = False,
+    required: bool = False,
+    default: Path | None = None,
+    old: str | None = None,
+) -> argparse.Action:
+    """-o/--output: what a command writes, the same flag wherever there is one (a file, or with
+    `folder` a folder it writes into), relative to the current folder; `old` is a spelling the
+    command used before, kept as a deprecated alias."""
+    container: Any = parser.add_mutually_exclusive_group(required=True) if required else parser
+    action: argparse.Action = container.add_argument(
+        "-o",
+        "--output",
+        type=output_dir if folder else output_file,
+        default=default,
+        metavar="DIR" if folder else "FILE",
+        help=help,
+    )
+    if old is not None:
+        deprecated(container, old, action)
+    return action
+
+
+def data_folder(text: str) -> Path:
+    """A folder of input data, relative to the current folder (made absolute at once, so a
+    report and an error name the folder that was read)."""
+    return _path(text, "folder").expanduser().resolve()
 
 
 def add_listen_seconds(parser: argparse.ArgumentParser, help: str) -> None:

@@ -28,10 +28,17 @@ HELP = "query the running affordance reasoner (exact posterior, with optional ge
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--query", nargs="+", required=True, metavar="VAR")
+    parser.add_argument(
+        "--query", nargs="+", required=True, metavar="VAR", help="variables to ask about (joint)"
+    )
     add_evidence_arguments(parser, gesture_log=False)
-    parser.add_argument("--timeout", type=argtypes.seconds(), default=3.0)
-    parser.add_argument("--json", action="store_true")
+    parser.add_argument(
+        "--timeout",
+        type=argtypes.seconds(),
+        default=3.0,
+        help="seconds to wait for the reasoner's answer (default 3)",
+    )
+    parser.add_argument("--json", action="store_true", help="print the answer as JSON")
     add_bus_arguments(parser)
 
 

@@ -38,6 +38,9 @@ from beyond_self.core.errors import InputError
 HELP = "learn, show and query the Affordance–Words Bayesian network"
 
 
+MODEL_HELP = "network model file (.json, from `beyond bn learn`)"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="bn_command", metavar="SUBCOMMAND", required=True)
 
@@ -56,7 +59,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="network definition (default: networkDefinition.txt beside BAG if there is one, "
         "else the bundled synthetic definition)",
     )
-    learn.add_argument("-o", "--output", type=argtypes.output_file, required=True, metavar="MODEL")
+    learn.add_argument(
+        "-o",
+        "--output",
+        type=argtypes.output_file,
+        required=True,
+        metavar="MODEL",
+        help="model file to write (.json)",
+    )
     learn.add_argument(
         "--unseen",
         choices=UNSEEN_RULES,
@@ -66,7 +76,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "all-zero column: the configuration leaves the joint; the article's Table II), uniform, "
         "dirichlet",
     )
-    learn.add_argument("--max-parents", type=argtypes.count(0, 64), default=DEFAULT_MAX_PARENTS)
+    learn.add_argument(
+        "--max-parents",
+        type=argtypes.count(0, 64),
+        default=DEFAULT_MAX_PARENTS,
+        help=f"most parents K2 gives a node (default {DEFAULT_MAX_PARENTS})",
+    )
     learn.add_argument(
         "--scorer",
         choices=("counts", "pgmpy"),
@@ -75,19 +90,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
     show = sub.add_parser("show", help="nodes, values, arcs and per-node log-likelihood")
-    show.add_argument("model", type=Path, metavar="MODEL")
-    show.add_argument("--json", action="store_true")
+    show.add_argument("model", type=Path, metavar="MODEL", help=MODEL_HELP)
+    show.add_argument("--json", action="store_true", help="print the model as JSON")
 
     query = sub.add_parser("query", help="exact posterior of one or more variables")
-    query.add_argument("model", type=Path, metavar="MODEL")
-    query.add_argument("--query", nargs="+", required=True, metavar="VAR")
+    query.add_argument("model", type=Path, metavar="MODEL", help=MODEL_HELP)
+    query.add_argument(
+        "--query", nargs="+", required=True, metavar="VAR", help="variables to ask about (joint)"
+    )
     add_evidence_arguments(query)
-    query.add_argument("--json", action="store_true")
+    query.add_argument("--json", action="store_true", help="print the posterior as JSON")
 
     words = sub.add_parser("words", help="P(word present) for every word")
-    words.add_argument("model", type=Path, metavar="MODEL")
+    words.add_argument("model", type=Path, metavar="MODEL", help=MODEL_HELP)
     add_evidence_arguments(words)
-    words.add_argument("--json", action="store_true")
+    words.add_argument("--json", action="store_true", help="print the probabilities as JSON")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -39,8 +39,14 @@ HELP = "N-best sentences describing the evidence (exact search over the grammar 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", type=Path, metavar="MODEL", help="network model file (.json)")
     add_evidence_arguments(parser)
-    parser.add_argument("--json", action="store_true")
-    parser.add_argument("--nbest", type=argtypes.count(1, NBEST_MAX), default=10, metavar="N")
+    parser.add_argument("--json", action="store_true", help="print the sentences as JSON")
+    parser.add_argument(
+        "--nbest",
+        type=argtypes.count(1, NBEST_MAX),
+        default=10,
+        metavar="N",
+        help=f"sentences to list, best first (default 10, at most {NBEST_MAX:,})",
+    )
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--sentences", type=Path, metavar="FILE", help="re-score these sentences")
     source.add_argument(

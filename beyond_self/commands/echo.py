@@ -11,7 +11,7 @@ from beyond_self.commands.terminal import stop_on_signals
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.subscription import decode_any
-from beyond_self.schemas.codec import SchemaError, to_json
+from beyond_self.schemas.codec import SchemaError, to_recording_json
 
 HELP = "print the messages on a key expression, decoded"
 
@@ -20,7 +20,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "keyexpr", type=argtypes.keyexpr, help="key expression, e.g. beyond/robot/sensors/skeleton"
     )
-    parser.add_argument("--json", action="store_true", help="one JSON object per line")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object per line, in the recordings' JSON form (stamps as {sec, nsec})",
+    )
     parser.add_argument("--count", type=argtypes.count(), help="stop after this many messages")
     parser.add_argument("--duration", type=argtypes.seconds(), help="stop after this many seconds")
     add_bus_arguments(parser)
@@ -53,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
                     text = f"<{len(sample.payload)} bytes, {sample.encoding}>"
                     line = f'{{"key":"{sample.key}","raw":"{text}"}}' if args.json else text
                 elif args.json:
-                    line = f'{{"key":"{sample.key}","message":{to_json(message).decode()}}}'
+                    text = to_recording_json(message).decode()  # stamps as {sec, nsec}
+                    line = f'{{"key":"{sample.key}","message":{text}}}'
                 else:
                     line = repr(message)
                 print(line if args.json else f"{sample.key}: {line}", flush=True)

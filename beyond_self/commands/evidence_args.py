@@ -35,7 +35,14 @@ from beyond_self.core.errors import InputError
 
 
 def add_evidence_arguments(parser: argparse.ArgumentParser, *, gesture_log: bool = True) -> None:
-    parser.add_argument("--evidence", nargs="+", action="extend", default=[], metavar=EVIDENCE_FORM)
+    parser.add_argument(
+        "--evidence",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar=EVIDENCE_FORM,
+        help="what is known for sure, e.g. Shape=circle Size=small",
+    )
     parser.add_argument(
         "--soft",
         nargs="+",

@@ -1,5 +1,7 @@
-"""`beyond foxglove [--port 8765]`: watch the bus live in Foxglove (open a Foxglove WebSocket
-connection to ws://localhost:8765; see README, "Watch the demo in Foxglove").
+"""`beyond foxglove [--ws-port 8765]`: watch the bus live in Foxglove (open a Foxglove WebSocket
+connection to ws://localhost:8765; see README, "Watch the demo in Foxglove"). `--port` is the
+bus's rendezvous port, as in every command (until 0.3 it was the WebSocket port here, and the
+bus's was `--bus-port`, still accepted).
 
 `beyond foxglove --export IN.mcap -o OUT.mcap` adds the same views to a recording made without
 them (`beyond record --foxglove` writes them as it records)."""
@@ -26,23 +28,25 @@ HELP = "serve the bus to Foxglove over its WebSocket protocol"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--port",
-        dest="ws_port",
+        "--ws-port",
         type=argtypes.number(int, lo=0, hi=65535, what="TCP port, 0: any free one"),
         default=DEFAULT_PORT,
-        help=f"WebSocket port (default {DEFAULT_PORT})",
+        metavar="PORT",
+        help=f"WebSocket port Foxglove connects to (default {DEFAULT_PORT}; 0: any free one)",
     )
-    parser.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="address the WebSocket listens on (default: loopback)"
+    )
     parser.add_argument(
         "--export", metavar="IN.mcap", help="write IN.mcap plus its Foxglove views to -o FILE"
     )
-    parser.add_argument("-o", "--output", metavar="OUT.mcap", help="file written by --export")
+    argtypes.add_output(parser, "file written by --export")
     parser.add_argument(
         "--layout",
         metavar="FILE",
         help="write the Foxglove layout for --robot to FILE (import it in Foxglove) and exit",
     )
-    add_bus_arguments(parser, port_flag="--bus-port")
+    argtypes.deprecated(parser, "--bus-port", add_bus_arguments(parser))
 
 
 def export(source: str, target: str) -> int:
@@ -79,6 +83,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {copied} messages and their Foxglove views to {args.output}")
         return 0
     config = config_from_args(args)
+    if args.port is not None:  # the one spelling whose meaning changed: say so
+        argtypes.note(
+            args,
+            "--port is the bus's rendezvous port, as in every command; the WebSocket port is "
+            "--ws-port (it was --port until 0.3)",
+        )
 
     async def go(stop: asyncio.Event) -> str:
         with Bus.open(config) as bus:

@@ -1,8 +1,8 @@
 """`beyond gesture`: train, run and evaluate the per-action gesture HMMs.
 
-    beyond gesture train [--data synthetic|DIR] --out MODELS.json
+    beyond gesture train [--data synthetic|DIR] -o MODELS.json
     beyond gesture stream MODELS LOG [--frames A:B] [--scale S] [--json]
-    beyond gesture evaluate MODELS|cv DATA [--json] [--out DIR]
+    beyond gesture evaluate MODELS|cv DATA [--json] [-o DIR]
 
 MODELS is a model file written by `train` or one of the article's MATLAB files. DATA is
 `synthetic` (the seeded generator), a folder of hand recordings named <action><n>... (the
@@ -79,9 +79,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="'synthetic' (default), a folder of hand recordings (grasp1_hand/ ...), "
         "or MCAP recordings (a .mcap file or a folder of them)",
     )
-    train.add_argument(
-        "--out", required=True, type=argtypes.output_file, help="model file to write (.json)"
-    )
+    argtypes.add_output(train, "model file to write (.json)", required=True, old="--out")
     add_training_options(train, mix=3, iterations=30, states="HMM states per action")
     _data_args(train, TRAIN_SEED)
 
@@ -108,11 +106,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ev.add_argument("models", help="model file, or 'cv' for leave-one-gesture-out cross-validation")
     ev.add_argument("data", help="'synthetic', a folder of hand recordings, or MCAP recordings")
     ev.add_argument("--json", action="store_true", help="print the report as JSON")
-    ev.add_argument(
-        "--out",
-        type=argtypes.output_dir,
+    argtypes.add_output(
+        ev,
+        "folder for the PNG plots (default ./gesture-evaluation)",
+        folder=True,
         default=Path("gesture-evaluation"),
-        help="folder for the PNG plots (default ./gesture-evaluation)",
+        old="--out",
     )
     add_training_options(ev, mix=3, iterations=30, states="HMM states per action")
     _data_args(ev, EVAL_SEED)
@@ -188,8 +187,8 @@ def _gestures(args: argparse.Namespace, spec: str) -> list[LabelledGesture]:
 
 def _train(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
-    if args.out.suffix.lower() != ".json":
-        raise InputError(f"--out {args.out} must end in .json")
+    if args.output.suffix.lower() != ".json":
+        raise InputError(f"--output {args.output} must end in .json")
     cfg = training_config(args)
     with console.status(f"loading gestures from {args.data}"):
         gestures = _gestures(args, args.data)
@@ -204,9 +203,9 @@ def _train(args: argparse.Namespace) -> int:
             meta={"data": str(args.data), "seed": args.seed if args.data == SYNTHETIC else None},
             on_model=lambda a: progress.advance(task),
         )
-    save_models(models, args.out)
+    save_models(models, args.output)
     counts = ", ".join(f"{a} {len(data[a])}" for a in models.actions)
-    console.print(f"wrote {args.out}: {len(models.actions)} models ({counts} gestures)")
+    console.print(f"wrote {args.output}: {len(models.actions)} models ({counts} gestures)")
     return 0
 
 
@@ -284,7 +283,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             report = evaluate(models, gestures, on_gesture=lambda: progress.advance(task))
     report.meta["data"] = str(args.data)
     report.meta["models"] = str(args.models)
-    plots = plot_report(report, args.out, title=Path(str(args.data)).name)
+    plots = plot_report(report, args.output, title=Path(str(args.data)).name)
     if args.json:
         out = report.to_dict()
         out["plots"] = [str(p) for p in plots]

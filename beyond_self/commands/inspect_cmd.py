@@ -5,22 +5,45 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import asdict
+from typing import Any
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.recording import inspect_recording
+from beyond_self.runtime.recording import RecordingInfo, inspect_recording
+from beyond_self.schemas.messages import Time
 
 HELP = "list the channels, schemas, message counts and duration of an MCAP recording"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="MCAP recording")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object (stamps as {sec, nsec}, exact in JavaScript)",
+    )
+
+
+def as_json(info: RecordingInfo) -> dict[str, Any]:
+    """`info` as JSON, every stamp a Foxglove Time as in recordings (schemas.codec)."""
+
+    def time(ns: int | None) -> dict[str, int] | None:
+        if ns is None:
+            return None
+        t = Time.from_ns(ns)
+        return {"sec": t.sec, "nsec": t.nsec}
+
+    obj = {**asdict(info), "duration_s": info.duration_s}
+    obj["start"], obj["end"] = time(info.start), time(info.end)
+    for channel in obj["channels"]:
+        channel["first_stamp"] = time(channel["first_stamp"])
+        channel["last_stamp"] = time(channel["last_stamp"])
+    return obj
 
 
 def run(args: argparse.Namespace) -> int:
     info = inspect_recording(args.file)
     if args.json:
-        print(json.dumps({**asdict(info), "duration_s": info.duration_s}))
+        print(json.dumps(as_json(info)))
     else:
         print(f"file:      {info.path} ({info.size} bytes)")
         print(f"library:   {info.library}")

@@ -26,11 +26,11 @@ HELP = "make the secure bus's keystore (CA, certificates) and show its access ru
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="keys_command", metavar="ACTION", required=True)
     init = sub.add_parser("init", help="a new CA and one certificate per identity")
-    init.add_argument("dir", type=Path)
+    init.add_argument("dir", type=Path, help="keystore folder to create (mode 0700)")
     days = argtypes.count(1, 36500, "days")
     init.add_argument("--days", type=days, default=365, help="validity of the certificates")
     add = sub.add_parser("add", help="a certificate for one more identity (or renew one)")
-    add.add_argument("name")
+    add.add_argument("name", help="identity: a service name, a side, or tools")
     add.add_argument("--days", type=days, default=365, help="validity of the certificate")
     show = sub.add_parser("show", help="the certificates in the keystore and their expiry")
     for p in (add, show):

@@ -1,13 +1,13 @@
 """`beyond learn`: the robot learns to recognise a human's gestures from its own affordance model.
 
-    beyond learn [--robot-data synthetic|DIR|BAG] [--human-data synthetic|DIR] --out DIR [--json]
+    beyond learn [--robot-data synthetic|DIR|BAG] [--human-data synthetic|DIR] -o DIR [--json]
 
 Self phase on the robot's exploration data (the bundled synthetic set by default; the article's
 salvi2012 folder or one of its bag tables when given), then watching human demonstrations
 (synthetic by default; a folder of hand recordings such as human_data/ gives real gestures with
 simulated scenes), labelling them with the network, training gesture HMMs on those labels and
 evaluating everything on held-out demonstrations, with ablations over words and the number of
-demonstrations. Writes learning.md, results.json and PNG plots into --out; --json also prints
+demonstrations. Writes learning.md, results.json and PNG plots into -o/--output; --json also prints
 the results on stdout. The default run takes well under 3 minutes on 2 cores.
 """
 
@@ -52,7 +52,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="synthetic",
         help="'synthetic' (default) or a folder of hand recordings (grasp1_hand/ ...)",
     )
-    parser.add_argument("--out", type=argtypes.output_dir, required=True, help="output folder")
+    argtypes.add_output(
+        parser,
+        "folder to write learning.md, results.json and the plots into",
+        folder=True,
+        required=True,
+        old="--out",
+    )
     parser.add_argument("--json", action="store_true", help="also print results.json on stdout")
     for flag, default, what in (
         ("--demos", 20, "demonstrations watched per action"),
@@ -110,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
 
         results = run_learning(config, args.robot_data, args.human_data, progress=report)
         progress.update(task, description="writing report and plots")
-        paths = write_outputs(results, args.out)
+        paths = write_outputs(results, args.output)
     acc = {s: results.main.accuracy(s) for s in ("hmm_inferred", "hmm_true", "network", "fused")}
     check = results.acceptance()
     console.print(

@@ -1,9 +1,11 @@
 """`beyond pub KEY TYPE JSON`: publish a message typed in by hand, checked against its schema.
 
-The JSON is the message without the parts a sender adds: `type` and `header` may be left out
-(the header is filled in: this build's schema version, source `beyond-pub`, a sequence number and
-the wall-clock stamp). Anything else is checked exactly as a subscriber would check it, so a
-message refused here would have been refused by the services too."""
+The JSON is the message in the JSON form `beyond echo --json` prints and recordings hold (every
+stamp a Foxglove Time {"sec", "nsec"}, schemas.codec), without the parts a sender adds: `type` and
+`header` may be left out (the header is filled in: this build's schema version, source
+`beyond-pub`, a sequence number and the wall-clock stamp). Anything else is checked exactly as a
+subscriber would check it, so a message refused here would have been refused by the services
+too."""
 
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.schemas.base import Message
-from beyond_self.schemas.codec import from_object, lookup, to_json
+from beyond_self.schemas.codec import from_recording_object, lookup, to_recording_json
 
 HELP = "publish one message (or a stream) given as JSON, validated against its schema"
 SOURCE = "beyond-pub"
@@ -32,7 +34,11 @@ SOURCE = "beyond-pub"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", help="key, e.g. beyond/robot/language/description")
     parser.add_argument("type", help="message type, e.g. Description (see `beyond schemas`)")
-    parser.add_argument("json", help="the message as JSON ('-' reads it from stdin)")
+    parser.add_argument(
+        "json",
+        help="the message as JSON, as `beyond echo --json` prints it (stamps as {sec, nsec}; "
+        "'-' reads it from stdin)",
+    )
     parser.add_argument(
         "--rate",
         type=argtypes.number(float, lo=0.0, hi=1e6, lo_open=True, what="Hz"),
@@ -59,11 +65,9 @@ def build(text: str, cls: type[Message], key: str, seq: int, stamp: int) -> Mess
     if not isinstance(obj, dict):
         raise InputError(f"JSON for {cls.type_name()} must be an object, got {text[:40]!r}")
     obj.setdefault("type", cls.type_name())
-    obj.setdefault(
-        "header",
-        {"version": cls.VERSION, "source": SOURCE, "seq": seq, "stamp": stamp},
-    )
-    return from_object(obj, cls, key)
+    now = {"sec": stamp // 1_000_000_000, "nsec": stamp % 1_000_000_000}
+    obj.setdefault("header", {"version": cls.VERSION, "source": SOURCE, "seq": seq, "stamp": now})
+    return from_recording_object(obj, cls, key)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
                 pub.put(message)
                 sent += 1
                 if sent == 1:
-                    print(to_json(message).decode(), file=sys.stderr)
+                    print(to_recording_json(message).decode(), file=sys.stderr)
                 if args.rate and (count is None or sent < count):
                     delay = start + sent / args.rate - loop.time()
                     if delay > 0:

@@ -34,9 +34,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--chunk-size",
         type=argtypes.count(1024, 2**30, "bytes"),
         default=DEFAULT_CHUNK_SIZE,
-        help="bytes",
+        help=f"bytes of a chunk before it is closed (default {DEFAULT_CHUNK_SIZE:,})",
     )
-    parser.add_argument("--compression", choices=list(COMPRESSIONS), default="zstd")
+    parser.add_argument(
+        "--compression",
+        choices=list(COMPRESSIONS),
+        default="zstd",
+        help="how chunks are compressed (default zstd)",
+    )
     parser.add_argument(
         "--flush-interval",
         type=argtypes.seconds(),

@@ -26,12 +26,13 @@ class _Bar(Progress):
 
 
 def progress_bar(console: Console, *, transient: bool = True) -> Progress:
-    """A bar with description, count and elapsed time (on stderr when `console` is)."""
+    """A bar with count, elapsed time and what is being done (on stderr when `console` is; the
+    description last, so a long one never squeezes the numbers)."""
     return _Bar(
-        TextColumn("[bold]{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
+        TextColumn("[bold]{task.description}"),
         console=console,
         transient=transient,
         disable=not console.is_terminal,

@@ -66,7 +66,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     source.add_argument("--log", type=Path, help="YARP hand log (the article's data.log)")
     source.add_argument("--live-source", metavar="MODULE:FUNCTION", help="live source plug-in")
     parser.add_argument("--config", help="YAML/JSON file with per-service options")
-    parser.add_argument("--profile", choices=list(PROFILES), default="all")
+    parser.add_argument(
+        "--profile",
+        choices=list(PROFILES),
+        default="all",
+        help="which services: all (default), the robot's side or the workstation's",
+    )
     parser.add_argument(
         "--skip",
         action="append",
@@ -76,9 +81,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--rate",
-        type=argtypes.number(float, lo=0, hi=1e6),
+        type=argtypes.rate,
         default=1.0,
-        help="replay speed (0: as fast as possible)",
+        help="speed factor of a replayed source (default 1; 0: as fast as possible)",
     )
     parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
     parser.add_argument(

@@ -12,11 +12,9 @@ from beyond_self.core.errors import InputError
 
 def plot_nbest(items: Sequence[ScoredSentence], path: str | Path, title: str) -> Path:
     """Write a PNG of the scores with the sentences as labels; −inf scores are marked, not drawn."""
-    import matplotlib
+    from beyond_self.cognition.plotting import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     if not items:
         raise InputError("cannot plot an empty N-best list; give at least one sentence")
     path = Path(path)
@@ -38,7 +36,10 @@ def plot_nbest(items: Sequence[ScoredSentence], path: str | Path, title: str) ->
     ax.set_yticklabels([it.sentence for it in items], fontsize=9)
     ax.invert_yaxis()  # best first, at the top
     ax.set_xlim(left, right)
-    ax.set_xlabel("score: mean log P(word) over the sentence (higher is better)")
+    ax.set_xlabel(
+        r"score $= \frac{1}{L}\sum_i \log P(w_i)$, the mean over the sentence's $L$ words "
+        "(higher is better)"
+    )
     ax.set_title(title)
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()

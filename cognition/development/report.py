@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from beyond_self.cognition import plotting
 from beyond_self.cognition.development.learning import (
     SOURCE_NAMES,
     SOURCES,
@@ -37,17 +38,8 @@ _COLOURS = {
 }
 
 
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_confusions(results: LearningResults, path: Path) -> Path:
-    plt = _pyplot()
+    plt = plotting.pyplot()
     actions = results.actions
     k = len(actions)
     fig, axes = plt.subplots(
@@ -80,7 +72,7 @@ def plot_confusions(results: LearningResults, path: Path) -> Path:
 
 
 def plot_curves(results: LearningResults, path: Path) -> Path:
-    plt = _pyplot()
+    plt = plotting.pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 5.4), layout="constrained")
     for words, style in ((True, "-"), (False, "--")):
         conds = sorted(

@@ -3,7 +3,7 @@
 Training takes about 20 s, so the result ships with the package. It is regenerated, byte for
 byte, by
 
-    beyond gesture train --out cognition/gestures/data/synthetic_models.json
+    beyond gesture train -o cognition/gestures/data/synthetic_models.json
 
 (30 synthetic gestures per action, seed 0, 6 states, 3 Gaussians); a test checks that it still
 is what that command makes.

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from beyond_self.cognition import plotting
 from beyond_self.cognition.gestures.hmm import (
     GestureModels,
     TrainingConfig,
@@ -229,18 +230,9 @@ def cross_validate(
 # Plots
 
 
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_report(report: EvaluationReport, out_dir: str | Path, title: str = "") -> list[Path]:
     """Confusion matrix and early-recognition curve as PNGs in `out_dir`; returns their paths."""
-    plt = _pyplot()
+    plt = plotting.pyplot()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     k = len(report.actions)
@@ -288,7 +280,7 @@ def plot_stream(
     result: SequenceResult, path: str | Path, title: str = "", first_frame: int = 1
 ) -> Path:
     """(1/t) log L(G_1^t | A) and P_HMM(A | G_1^t) over the frames of one gesture, as a PNG."""
-    plt = _pyplot()
+    plt = plotting.pyplot()
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     frames = np.arange(first_frame, first_frame + len(result))
@@ -296,14 +288,14 @@ def plot_stream(
     for i, a in enumerate(result.actions):
         top.plot(frames, result.normalized[:, i], label=a)
         bottom.plot(frames, result.posterior[:, i], label=a)
-    top.set_ylabel("(1/t) log L(G|A)")
+    top.set_ylabel(plotting.math(plotting.NORM_LOGLIK))
     lo = float(np.nanpercentile(result.normalized[np.isfinite(result.normalized)], 5))
     hi = float(np.nanmax(result.normalized[np.isfinite(result.normalized)]))
     top.set_ylim(lo - 0.5, hi + 0.5)
-    bottom.set_ylabel("P_HMM(A | G)")
+    bottom.set_ylabel(plotting.p_hmm())
     bottom.set_ylim(-0.03, 1.03)
     bottom.set_xlabel("frame")
-    top.legend(loc="lower right")
+    top.legend(title="action A", loc="lower right")
     top.grid(alpha=0.3)
     bottom.grid(alpha=0.3)
     if title:

@@ -72,11 +72,9 @@ class Evaluation:
 
     def plot(self, path: str | Path, title: str = "") -> Path:
         """All confusion matrices in one PNG."""
-        import matplotlib
+        from beyond_self.cognition.plotting import pyplot
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
+        plt = pyplot()
         present = [v for v in VARIABLES if self.count(v)]
         ncol = min(4, len(present))
         nrow = -(-len(present) // ncol)

@@ -15,6 +15,12 @@ function stampOf(value) {
   return typeof value === "number" ? BigInt(Math.round(value)) : null;
 }
 
+function unsafeNumbers(value) {
+  if (typeof value === "number") return Number.isSafeInteger(value) || !Number.isInteger(value) ? 0 : 1;
+  if (value === null || typeof value !== "object") return 0;
+  return Object.values(value).reduce((n, v) => n + unsafeNumbers(v), 0);
+}
+
 async function check(path) {
   const bytes = fs.readFileSync(path);
   const readable = {
@@ -38,6 +44,7 @@ async function check(path) {
     unstamped: 0,
     unchecked: 0,
     json_errors: 0,
+    unsafe_numbers: 0, // integers beyond Number.MAX_SAFE_INTEGER: JSON.parse has rounded them
   };
   for await (const m of reader.readMessages({ validateCrcs: true })) {
     report.messages += 1;
@@ -51,6 +58,7 @@ async function check(path) {
       report.json_errors += 1;
       continue;
     }
+    report.unsafe_numbers += unsafeNumbers(obj);
     // Our messages carry header.stamp; Foxglove views (no header) a timestamp, or one per entity.
     if (obj.header) {
       const stamp = stampOf(obj.header.stamp);
