@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -70,6 +72,19 @@ def node_modules(tmp_path_factory: pytest.TempPathFactory) -> Path:
         last = (done.stderr.strip().splitlines() or ["?"])[-1]
         pytest.skip(f"npm install {' '.join(NODE_PACKAGES)} failed: {last}")
     return folder / "node_modules"
+
+
+@pytest.fixture(scope="module")
+def busy_machine() -> Iterator[None]:
+    """Three processes spinning on the CPU for as long as the module's tests run (a loaded
+    2-core machine: the services get a fraction of a core each)."""
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(3)]
+    try:
+        yield
+    finally:
+        for p in spinners:
+            p.kill()
+            p.wait()
 
 
 # -- figures a passing test shows in CI's log ---------------------------------------------------
