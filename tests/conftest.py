@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from busutil_net import busy_loops
 from netns_util import TwoHosts, unavailable
 
 from beyond_self.cognition.paths import SOURCES, shared_data_dir
@@ -78,13 +77,8 @@ def node_modules(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def busy_machine() -> Iterator[None]:
     """Three processes spinning on the CPU for as long as the module's tests run (a loaded
     2-core machine: the services get a fraction of a core each)."""
-    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(3)]
-    try:
+    with busy_loops(3):
         yield
-    finally:
-        for p in spinners:
-            p.kill()
-            p.wait()
 
 
 # -- figures a passing test shows in CI's log ---------------------------------------------------

@@ -32,7 +32,8 @@ now on starts after `t - onset_s` (the segmenter places an onset at most that fa
 older frames outside open windows can go. A start looks back past them to the last frame that
 showed an object: the last such frame dropped is remembered, and frames dropped before anyone
 described them are kept aside (at most `EVICTED_KEPT`, then the newest is described) until one of
-them is known to show an object. `buffer_bytes` is a last-resort cap on top.
+them is known to show an object. `buffer_bytes` is a last-resort cap on top (a frame it drops
+that a gesture has queued is analysed for it first).
 
 Bounded against nonsense: at most `max_open` gestures under way (a start beyond is refused),
 a start older than anything the segmenter can still announce is refused, and a gesture that has
@@ -319,6 +320,10 @@ class ObjectWatch(Generic[R]):
             self._drop_oldest()
         while len(self.buffer) > 1 and self._buffered_bytes > self.buffer_bytes:
             self.evicted_early += 1
+            oldest = self.buffer[0].stamp
+            for window in self.windows.values():  # analysed now, so its image can go
+                while window.pending and window.pending[0].stamp <= oldest:
+                    self._step(window)
             self._drop_oldest()
 
     def _drop_oldest(self) -> None:
