@@ -9,10 +9,11 @@ never for a wall-clock timer. One `GestureObject` and one `ObjectEffects` per ge
 or saying why not. Frame numbers are the camera messages' own sequence numbers.
 
 Gestures first, so a description comes within a beat on a loaded machine too: a camera frame is
-handled for the gestures (kept, fed to the windows of the gestures under way) as it arrives,
-after any gesture event already waiting, and their results are published at once; the frame's
-own objects (`vision/objects`, the costly part: the table estimated from the frame) are described
-on a worker thread, so the event loop stays free for gesture events meanwhile. A replay
+handled for the gestures as it arrives, after any gesture event already waiting (kept, queued for
+the windows of the gestures under way), and their results are published at once; the queued
+frames are analysed one at a time between messages (`ObjectWatch.catch_up`), and only then is a
+frame's own objects described (`vision/objects`, the costly part: the table estimated from the
+frame), on a worker thread, so the event loop stays free for gesture events meanwhile. A replay
 (`skip_frames` off, the default on the recording clock) describes every frame before it reports
 the frame handled, so the player paces itself on it and the outputs are those of `beyond
 analyse`. A live source (`skip_frames` on, the default on the wall clock) is not held back: when
