@@ -31,10 +31,12 @@ the belief's frame alone, which includes the segmenter's look-back.
 
 Stage costs: the object segmenter's work per camera frame, in this process, on simulated
 320×240 and 640×480 JPEG frames with BLAS on one thread (as the services run): decoding, the
-gestures' share (kept, pushed into the window of a gesture under way), the frame's own objects
-(the table estimated from the frame), a gesture's start (its lead frames caught up) and its end
-(the effects from the frames pushed: one frame's work), next to the 66.7 ms a 15 fps camera
-allows, and the batch analysis of the same gesture's frames that an end used to cost.
+gestures' share (kept, and analysed in the window of a gesture under way, one step at a time as
+the service does between messages: the longest step is how long a message may wait), the
+frame's own objects (the table estimated from the frame), a gesture's start (its lead frames
+queued, then analysed in steps) and its end (the effects from the frames analysed: one frame's
+work), next to the 66.7 ms a 15 fps camera allows, and the batch analysis of the same gesture's
+frames for reference.
 
 Raw reference: a raw zenoh-python ping-pong with a child process (payload bytes, no decoding),
 one-way = round trip / 2. Throughput (idle only): frames per second one gesture streamer process
@@ -375,7 +377,8 @@ def stage_costs(width: int, height: int) -> dict[str, float]:
 
     clusters = ClusterModel.load()
     rng = np.random.default_rng(0)
-    stages = ("decode", "gestures", "objects", "start", "end", "batch", "objects_default_blas")
+    stages = ("decode", "gestures", "step", "objects", "start", "end", "batch")
+    stages += ("objects_default_blas",)
     t: dict[str, list[float]] = {k: [] for k in stages}
     step, t0 = round(1e9 / 15), 10**18
     lead = 4  # frames kept before the gesture's start (lead_s 0.3 s at 15 fps, and one)
@@ -395,8 +398,14 @@ def stage_costs(width: int, height: int) -> dict[str, float]:
                 if k == lead:
                     with timed(t["start"]):
                         watch.started(1, t0 + k * step, 0)
-                with timed(t["gestures"]):
+                with timed(t["gestures"]):  # queued, then analysed one step at a time
                     watch.camera(t0 + k * step, k, image)
+                    while True:
+                        with timed(t["step"]):
+                            more = watch.catch_up()
+                        if not more:
+                            t["step"].pop()  # the step that found nothing to do
+                            break
                 with timed(t["objects"]):
                     watch.describe(image)
             end = t0 + (len(jpegs) - 1) * step
@@ -411,19 +420,23 @@ def stage_costs(width: int, height: int) -> dict[str, float]:
                 watch.describe(image)
     costs = {k: statistics.median(v) for k, v in t.items()}
     costs["gestures_p99"] = float(np.percentile(t["gestures"], 99))
+    costs["step_max"] = max(t["step"])
     costs["objects_p99"] = float(np.percentile(t["objects"], 99))
     return costs
 
 
 def run_passes(config: BusConfig, items: list[s.Message], throughput: bool) -> dict[str, Any]:
-    """Every pass once, on the machine as it is."""
-    figures: dict[str, Any] = {"raw_hop_us": raw_hop_us(config)}
+    """Every pass once, on the machine as it is (its load average before and after is kept:
+    a shared machine is never quite idle)."""
+    figures: dict[str, Any] = {"load_before": os.getloadavg()[0]}
+    figures["raw_hop_us"] = raw_hop_us(config)
     latencies, fps, _ = asyncio.run(pipeline_latency(config, throughput))
     figures["no_vision_ms"] = latencies
     if throughput:
         figures["streamer_frames_per_s"] = fps
     figures["vision"] = asyncio.run(vision_latency(config, items))
     figures["stages"] = {f"{w}x{h}": stage_costs(w, h) for w, h in ((320, 240), (640, 480))}
+    figures["load_after"] = os.getloadavg()[0]
     return figures
 
 
@@ -435,6 +448,7 @@ def report(column: str, f: dict[str, Any]) -> dict[str, Any]:
     """The figures of one column (idle or loaded) for the JSON line."""
     v = f["vision"]
     out: dict[str, Any] = {
+        "machine_load_average": [round(f["load_before"], 2), round(f["load_after"], 2)],
         "raw_zenoh_hop_us_median": round(f["raw_hop_us"], 1),
         "no_vision_latency_ms_median": round(_p(f["no_vision_ms"], 50), 3),
         "no_vision_latency_ms_p99": round(_p(f["no_vision_ms"], 99), 3),
@@ -468,6 +482,10 @@ def print_table(columns: dict[str, dict[str, Any]]) -> None:
     def pct(values: list[float]) -> str:
         return f"{_p(values, 50):.1f} / {_p(values, 99):.1f}"
 
+    row(
+        "machine's load average, before / after the passes",
+        lambda f: f"{f['load_before']:.1f} / {f['load_after']:.1f}",
+    )
     row("raw Zenoh hop, one way (us)", lambda f: f"{f['raw_hop_us']:.0f}")
     row(
         "no vision: ending frame -> description, ms (median / p99)",
@@ -494,10 +512,11 @@ def print_table(columns: dict[str, dict[str, Any]]) -> None:
               f"{FRAME_BUDGET_MS:.1f})")  # fmt: skip
         stages = (
             ("decode (JPEG)", "decode"),
-            ("for the gestures (kept, pushed into a window)", "gestures"),
+            ("for the gestures (kept, analysed in a gesture's window)", "gestures"),
+            ("  longest step between two messages (max)", "step_max"),
             ("its own objects (table estimated per frame)", "objects"),
             ("  the same with BLAS's default threads", "objects_default_blas"),
-            ("a gesture's start (lead frames caught up)", "start"),
+            ("a gesture's start (its lead frames queued)", "start"),
             ("a gesture's end (effects: one frame)", "end"),
             ("  batch analysis of its frames, for reference", "batch"),
         )
