@@ -168,6 +168,8 @@ class ObjectSegmenter(Service):
             await self._frame_waiting.wait()
             await self._caught_up.wait()  # the gestures' frames first, then the newest
             self._frame_waiting.clear()
+            if self.watch.awaits_frame:
+                continue  # the next frame decides a gesture: no description in its way
             if self._waiting is not None:
                 (msg, image), self._waiting = self._waiting, None
                 await self._describe(msg, image)

@@ -266,6 +266,12 @@ class ObjectWatch(Generic[R]):
             self.camera_done = True
         return self._decide()
 
+    @property
+    def awaits_frame(self) -> bool:
+        """A gesture's object or effects will be decided by the next camera frame (its start or
+        its end has been announced): a service keeps that frame's way clear."""
+        return any(not w.object_decided or w.end is not None for w in self.windows.values())
+
     def catch_up(self) -> bool:
         """Push one frame a gesture under way has not taken in yet (the oldest, of the earliest
         gesture); False when there is none. The frames a gesture needs are pushed at the latest
