@@ -234,6 +234,10 @@ class ObjectSegmenter(Service):
                 self.at_start_out.put(_gesture_object(self.derive(out.ref, GestureObject), out))
             elif isinstance(out, GestureEffects):
                 self.effects_out.put(_effects(self.derive(out.ref, ObjectEffects), out))
+        if outputs:
+            # said at once, not after the frame's own objects: an instance restarted meanwhile
+            # learns from the player's copy of this report not to publish them again
+            self.publish_progress()
 
 
 def _detected(o: FoundObject) -> DetectedObject:
