@@ -11,16 +11,17 @@ or saying why not. Frame numbers are the camera messages' own sequence numbers.
 Gestures first, so a description comes within a beat on a loaded machine too: a camera frame is
 handled for the gestures as it arrives, after any gesture event already waiting (kept, queued for
 the windows of the gestures under way), and their results are published at once; the queued
-frames are analysed one at a time between messages (`ObjectWatch.catch_up`), and only then is a
-frame's own objects described (`vision/objects`, the costly part: the table estimated from the
-frame), on a worker thread, so the event loop stays free for gesture events meanwhile. A replay
-(`skip_frames` off, the default on the recording clock) describes every frame before it reports
-the frame handled, so the player paces itself on it and the outputs are those of `beyond
-analyse`. A live source (`skip_frames` on, the default on the wall clock) is not held back: when
-frames come faster than they are described, the newest wins, and each `DetectedObjects` says how
-many frames it overtook (`skipped`, also summed in health). Skipping never touches a gesture's
-results: every frame still goes through the gestures' windows, and the frame a gesture's object
-comes from is described for it.
+frames are analysed one at a time between messages (`ObjectWatch.catch_up`). A frame's own
+objects (`vision/objects`, the costly part: the table estimated from the frame) are described in
+a process of its own (services/frame_describer.py), so the event loop and the interpreter stay
+free for the gestures meanwhile. A replay (`skip_frames` off, the default on the recording clock)
+describes every frame before it reports the frame handled, so the player paces itself on it and
+the outputs are those of `beyond analyse`. A live source (`skip_frames` on, the default on the
+wall clock) is not held back: its describer runs at a lower priority, when frames come faster
+than they are described the newest wins, and each `DetectedObjects` says how many frames it
+overtook (`skipped`, also summed in health). Skipping never touches a gesture's results: every
+frame still goes through the gestures' windows, and the frame a gesture's object comes from is
+described for it.
 
 Camera history is dropped only once no gesture can still need it: the gesture streamer's
 `Progress` says how many gesture events it had published by the time it handled a skeleton
@@ -57,8 +58,10 @@ from beyond_self.schemas import (
     ServiceHealth,
     StreamEnd,
 )
+from beyond_self.services.frame_describer import FrameDescriber
 
 _YIELDS_TO_EVENTS = 8  # turns of the event loop a camera frame gives waiting gesture events
+LIVE_NICENESS = 10  # of a live source's describer process: what the gestures leave, it gets
 
 
 class ObjectSegmenter(Service):
@@ -88,8 +91,6 @@ class ObjectSegmenter(Service):
         self._overtaken = 0  # frames skipped since the last DetectedObjects
         self._frame_waiting = asyncio.Event()
         self._gestures_behind = asyncio.Event()  # frames may be queued for gestures' windows
-        self._caught_up = asyncio.Event()  # no frame is: a frame's own objects may go now
-        self._caught_up.set()
         self.watch_options: dict[str, Any] = dict(
             lead_s=lead_s,
             fps=fps,
@@ -102,6 +103,9 @@ class ObjectSegmenter(Service):
         self.watch: ObjectWatch[Header] = ObjectWatch(
             ClusterModel.load(self.clusters_path), **self.watch_options
         )
+        # a live source's descriptions run at a lower priority than the gestures' work
+        niceness = LIVE_NICENESS if self.skip_frames else 0
+        self.describer = FrameDescriber(self.clusters_path, niceness)
         keys = self.bus.keys
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
@@ -143,8 +147,6 @@ class ObjectSegmenter(Service):
             self._gestures_behind.clear()
             while self.watch.catch_up():
                 await asyncio.sleep(0)
-            if not self._gestures_behind.is_set():
-                self._caught_up.set()
 
     async def on_camera(self, msg: CameraMessage) -> None:
         for _ in range(_YIELDS_TO_EVENTS):  # a gesture event already here goes first
@@ -166,22 +168,18 @@ class ObjectSegmenter(Service):
         """Describe the newest frame whenever the last description is done (live sources)."""
         while True:
             await self._frame_waiting.wait()
-            await self._caught_up.wait()  # the gestures' frames first, then the newest
             self._frame_waiting.clear()
-            if self.watch.awaits_frame:
-                continue  # the next frame decides a gesture: no description in its way
             if self._waiting is not None:
                 (msg, image), self._waiting = self._waiting, None
                 await self._describe(msg, image)
 
     async def _describe(self, msg: CameraMessage, image: np.ndarray) -> None:
-        """Publish the objects of a frame, described on a worker thread (unless a gesture
-        needed them first): the event loop goes on with gesture events meanwhile."""
+        """Publish the objects of a frame, described in the worker process (unless a gesture
+        needed them first): the event loop goes on with the gestures meanwhile."""
         stamp = msg.header.stamp
         objects = self.watch.known_objects(stamp)
         if objects is None:
-            await self._caught_up.wait()  # the gestures' frames first
-            objects = await asyncio.to_thread(self.watch.describe, image)
+            objects = await self.describer.describe(image)
             self.watch.described(stamp, objects)
         skipped, self._overtaken = self._overtaken, 0
         self.objects_out.put(
@@ -192,6 +190,9 @@ class ObjectSegmenter(Service):
                 skipped=skipped,
             )
         )
+
+    async def teardown(self) -> None:
+        self.describer.close()
 
     def health_report(self) -> ServiceHealth:
         return msgspec.structs.replace(super().health_report(), skipped=self.skipped)
@@ -227,8 +228,7 @@ class ObjectSegmenter(Service):
             self.emit(self.watch.skeleton_at(skeleton))
 
     def emit(self, outputs: list[Any]) -> None:
-        self._caught_up.clear()  # whatever the watch was told may have queued frames
-        self._gestures_behind.set()
+        self._gestures_behind.set()  # whatever the watch was told may have queued frames
         for out in outputs:
             if isinstance(out, ObjectAtStart):
                 self.at_start_out.put(_gesture_object(self.derive(out.ref, GestureObject), out))

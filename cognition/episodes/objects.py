@@ -13,8 +13,8 @@ queues it for the windows of the gestures under way, whose analysers segment aga
 table model, one frame per `catch_up` (a service calls it between messages, so a gesture's lead
 frames and its frames are analysed while they come, and its end costs one frame, not a batch;
 what is still queued when its effects are decided is analysed then). A frame is described when
-its objects are asked for (`frame_objects`, or `describe` elsewhere, such as a worker thread, the
-result handed back with `described`) or when a gesture's object needs it, once either way.
+its objects are asked for (`frame_objects`, or elsewhere, such as a worker process, the result
+handed back with `described`) or when a gesture's object needs it, once either way.
 
 Why the decisions wait for what they wait for: the camera stream arrives in stamp order, so a
 frame stamped at or after an instant proves every frame before it has been seen. The object at a
@@ -265,12 +265,6 @@ class ObjectWatch(Generic[R]):
         if self.watermark >= self.camera_last:
             self.camera_done = True
         return self._decide()
-
-    @property
-    def awaits_frame(self) -> bool:
-        """A gesture's object or effects will be decided by the next camera frame (its start or
-        its end has been announced): a service keeps that frame's way clear."""
-        return any(not w.object_decided or w.end is not None for w in self.windows.values())
 
     def catch_up(self) -> bool:
         """Push one frame a gesture under way has not taken in yet (the oldest, of the earliest
