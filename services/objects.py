@@ -91,6 +91,7 @@ class ObjectSegmenter(Service):
         self._overtaken = 0  # frames skipped since the last DetectedObjects
         self._frame_waiting = asyncio.Event()
         self._gestures_behind = asyncio.Event()  # frames may be queued for gestures' windows
+        self.describer: FrameDescriber | None = None
         self.watch_options: dict[str, Any] = dict(
             lead_s=lead_s,
             fps=fps,
@@ -179,6 +180,7 @@ class ObjectSegmenter(Service):
         stamp = msg.header.stamp
         objects = self.watch.known_objects(stamp)
         if objects is None:
+            assert self.describer is not None, "made in setup, before any subscription"
             objects = await self.describer.describe(image)
             self.watch.described(stamp, objects)
         skipped, self._overtaken = self._overtaken, 0
@@ -192,7 +194,8 @@ class ObjectSegmenter(Service):
         )
 
     async def teardown(self) -> None:
-        self.describer.close()
+        if self.describer is not None:
+            self.describer.close()
 
     def health_report(self) -> ServiceHealth:
         return msgspec.structs.replace(super().health_report(), skipped=self.skipped)
