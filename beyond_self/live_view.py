@@ -19,15 +19,16 @@ def _bar(p: float) -> str:
 
 def render(monitor: PipelineMonitor, expected: list[str]) -> RenderableType:
     health = Table(title="services", expand=True)
-    for col in ("service", "in", "out", "dropped", "malformed", "errors", "last error"):
+    columns = ("service", "in", "out", "dropped", "skipped", "malformed", "errors", "last error")
+    for col in columns:
         health.add_column(col, justify="left" if col in ("service", "last error") else "right")
     for name in expected:
         h = monitor.health_reports.get(name)
         if h is None:
-            health.add_row(name, "-", "-", "-", "-", "-", "starting")
+            health.add_row(name, *["-"] * (len(columns) - 2), "starting")
             continue
         health.add_row(
-            name, str(h.messages_in), str(h.messages_out), str(h.dropped),
+            name, str(h.messages_in), str(h.messages_out), str(h.dropped), str(h.skipped),
             str(h.malformed), str(h.errors), h.last_error[:40],
         )  # fmt: skip
     parts: list[RenderableType] = [health]

@@ -3,8 +3,9 @@
 `PipelineMonitor` subscribes to the outputs of every service and feeds them to
 `cognition.episodes.GestureReport`, which makes the lines `beyond analyse` prints offline. It
 also keeps the state a live terminal view draws (per-service health, current action posterior,
-effect prediction, last description), and knows when a replayed source has been fully
-described.
+effect prediction, last description), knows when a source has been fully described, and
+when waiting on the pipeline has gone on too long (`waited_too_long`: start-up and the tail after
+the source's end, never a source's silence).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from beyond_self.schemas import (
     ActionPosterior,
     AffordancePrediction,
     Description,
+    DetectedObjects,
     GestureSegment,
     Message,
     Progress,
@@ -48,8 +50,11 @@ class PipelineMonitor:
         self.prediction: AffordancePrediction | None = None
         self.description: Description | None = None
         self.stream_end: StreamEnd | None = None
+        self.frames_described = 0  # camera frames whose objects were published
+        self.frames_skipped = 0  # and those a live source's object segmenter skipped
         self.changed = asyncio.Event()
         self.last_message = time.monotonic()
+        self.moving = False  # a service has handled a sensor message, or published
         self._tasks: list[asyncio.Task[None]] = []
 
     def start(self) -> None:
@@ -60,6 +65,7 @@ class PipelineMonitor:
             (keys.gesture_posterior, ActionPosterior, self.on_posterior),
             (keys.affordance, AffordancePrediction, self.on_prediction),
             (keys.description, Description, self.on_description),
+            (keys.objects, DetectedObjects, self.on_objects),
             (keys.stream_end, StreamEnd, self.on_end),
             (keys.health(), ServiceHealth, self.on_health),
             (keys.progress(), Progress, self.on_progress),
@@ -75,6 +81,7 @@ class PipelineMonitor:
     def _seen(self, received: Received[Any]) -> None:
         if not isinstance(received.message, ServiceHealth | Progress):
             self.last_message = time.monotonic()
+            self.moving = True
         self.changed.set()
 
     def _failed(self, key: str, exc: Exception) -> None:
@@ -118,10 +125,15 @@ class PipelineMonitor:
             self.report.described(msg.segment_id, msg.sentences[0].text)
             self._flush()
 
+    def on_objects(self, msg: DetectedObjects) -> None:
+        self.frames_described += 1
+        self.frames_skipped += msg.skipped
+
     def on_progress(self, msg: Progress) -> None:
         mine = self.progress.setdefault(msg.service, {})
         for key, stamp in msg.handled.items():
             mine[key] = max(mine.get(key, -1), stamp)
+            self.moving = self.moving or stamp >= 0
 
     def on_end(self, msg: StreamEnd) -> None:
         self.stream_end = msg
@@ -148,6 +160,17 @@ class PipelineMonitor:
             return False
         return time.monotonic() - self.last_message >= quiet_s
 
+    def waited_too_long(self, timeout_s: float, since: float, now: float | None = None) -> bool:
+        """Waiting has lasted over `timeout_s` (times on `time.monotonic`'s clock): nothing has
+        moved since `since` (start-up: no service has handled a sensor message or published), or
+        the source has ended and nothing has moved for that long (a description that does not
+        come). A source that is silent while it runs (a live camera paused, a gap in a
+        recording) is never waited out."""
+        now = time.monotonic() if now is None else now
+        if not self.moving:
+            return now - since > timeout_s
+        return self.stream_end is not None and now - self.last_message > timeout_s
+
     def summary(self) -> str:
         end = self.stream_end
         source = (
@@ -157,4 +180,10 @@ class PipelineMonitor:
         )
         gestures = [g for g in self.report.gestures.values() if g.started is not None]
         described = sum(1 for g in gestures if g.description)
-        return f"{source}{described} of {len(gestures)} gesture(s) described"
+        skipped = (
+            f"; {self.frames_skipped} of {self.frames_described + self.frames_skipped} camera "
+            "frames not described, to keep up with the live camera (every gesture used them all)"
+            if self.frames_skipped
+            else ""
+        )
+        return f"{source}{described} of {len(gestures)} gesture(s) described{skipped}"

@@ -541,7 +541,7 @@ def check_scene(
             watched(watch.gestures_complete(int(skel_s[i])))
             i += 1
         else:
-            watched(watch.camera(int(cam_s[j]), j + 1, images[j], j))
+            watched(watch.camera(int(cam_s[j]), j + 1, images[j]))
             j += 1
     tracked(tracker.finish())
     watched(watch.camera_ended(int(cam_s[-1]) if len(cam_s) else None))

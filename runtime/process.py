@@ -28,8 +28,18 @@ def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
 
 
 def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
-    """Run `work()` in a fresh event loop with logging set up; 0, or 2 for bad input (one
-    line logged, no traceback)."""
+    """Run `work()` in a fresh event loop with logging set up and BLAS on one thread; 0, or 2
+    for bad input (one line logged, no traceback).
+
+    Why one BLAS thread: a service is one event loop among the pipeline's processes, and its
+    matrix products are small (the table model's upsampling, the network's factors). OpenBLAS's
+    own threads spin while they wait for work, so on a loaded machine they take the cores the
+    other services need: the object segmenter's per-frame description took 2 to 3 times longer
+    beside three busy processes with them than without (bench/pipeline.py, stage costs)."""
+    import numpy  # noqa: F401  (loads OpenBLAS, so the limit reaches it)
+    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+    threadpool_limits(limits=1, user_api="blas")
     setup_logging()
     try:
         asyncio.run(work())

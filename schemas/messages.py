@@ -221,8 +221,18 @@ class DetectedObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 
 class DetectedObjects(Message, frozen=True):
+    """The objects of one camera frame.
+
+    Version 2: `skipped` counts the camera frames since the previous `DetectedObjects` that were
+    not described: a live camera faster than the object segmenter has its newest frame described
+    and the ones it overtook skipped (they were still used for every gesture). A replay never
+    skips, so a stream whose `skipped` are all 0 equals the offline analysis of its recording."""
+
+    VERSION: ClassVar[int] = 2
+
     frame: FrameIndex
     objects: Annotated[list[DetectedObject], msgspec.Meta(max_length=OBJECTS_MAX)]
+    skipped: Count = 0
 
 
 class ObjectEffect(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -367,7 +377,12 @@ class Description(Message, frozen=True):
 
 
 class ServiceHealth(Message, frozen=True):
-    """Periodic self-report of a service."""
+    """Periodic self-report of a service.
+
+    Version 2: `skipped` counts inputs whose per-frame work was skipped to keep up with a live
+    source (camera frames the object segmenter did not describe; never per-gesture work)."""
+
+    VERSION: ClassVar[int] = 2
 
     service: Name
     uptime_s: Seconds
@@ -383,6 +398,7 @@ class ServiceHealth(Message, frozen=True):
     outputs: Annotated[list[Text], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
         default_factory=list
     )
+    skipped: Count = 0
 
 
 class StreamEnd(Message, frozen=True):

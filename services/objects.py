@@ -8,6 +8,21 @@ the end of the source, or for a deadline in skeleton stream time when the camera
 never for a wall-clock timer. One `GestureObject` and one `ObjectEffects` per gesture, measured
 or saying why not. Frame numbers are the camera messages' own sequence numbers.
 
+Gestures first, so a description comes within a beat on a loaded machine too: a camera frame is
+handled for the gestures as it arrives, after any gesture event already waiting (kept, queued for
+the windows of the gestures under way), and their results are published at once; the queued
+frames are analysed one at a time between messages (`ObjectWatch.catch_up`). A frame's own
+objects (`vision/objects`, the costly part: the table estimated from the frame) are described in
+a process of its own (services/frame_describer.py), so the event loop and the interpreter stay
+free for the gestures meanwhile. A replay (`skip_frames` off, the default on the recording clock)
+describes every frame before it reports the frame handled, so the player paces itself on it and
+the outputs are those of `beyond analyse`. A live source (`skip_frames` on, the default on the
+wall clock) is not held back: its describer runs at a lower priority, when frames come faster
+than they are described the newest wins, and each `DetectedObjects` says how many frames it
+overtook (`skipped`, also summed in health). Skipping never touches a gesture's results: every
+frame still goes through the gestures' windows, and the frame a gesture's object comes from is
+described for it.
+
 Camera history is dropped only once no gesture can still need it: the gesture streamer's
 `Progress` says how many gesture events it had published by the time it handled a skeleton
 stamp, so once that many have arrived here the gesture stream is complete up to that stamp.
@@ -15,14 +30,20 @@ stamp, so once that many have arrived here the gesture stream is complete up to 
 
 from __future__ import annotations
 
+import asyncio
 from collections import deque
 from typing import Any
 
-from beyond_self.cognition.episodes import FrameObjects, GestureEffects, ObjectAtStart, ObjectWatch
+import msgspec
+import numpy as np
+
+from beyond_self.cognition.episodes import GestureEffects, ObjectAtStart, ObjectWatch
 from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.images import CameraMessage, image_from_message
 from beyond_self.runtime.service import Service
+from beyond_self.runtime.subscription import Subscription
 from beyond_self.schemas import (
     CameraFrame,
     CompressedCameraFrame,
@@ -34,8 +55,13 @@ from beyond_self.schemas import (
     ObjectEffect,
     ObjectEffects,
     Progress,
+    ServiceHealth,
     StreamEnd,
 )
+from beyond_self.services.frame_describer import FrameDescriber
+
+_YIELDS_TO_EVENTS = 8  # turns of the event loop a camera frame gives waiting gesture events
+LIVE_NICENESS = 10  # of a live source's describer process: what the gestures leave, it gets
 
 
 class ObjectSegmenter(Service):
@@ -53,10 +79,19 @@ class ObjectSegmenter(Service):
         deadline_s: float = 5.0,
         onset_s: float = 2.0,
         buffer_mb: float = 160.0,
+        skip_frames: bool | None = None,
         **base: Any,
     ) -> None:
         super().__init__(**base)
         self.clusters_path = clusters
+        # a live source (wall clock) is not held back, a replay (recording clock) is paced
+        self.skip_frames = not self.clock.is_recording if skip_frames is None else skip_frames
+        self.skipped = 0  # frames not described: a newer one overtook them
+        self._waiting: tuple[CameraMessage, np.ndarray] | None = None  # the next to describe
+        self._overtaken = 0  # frames skipped since the last DetectedObjects
+        self._frame_waiting = asyncio.Event()
+        self._gestures_behind = asyncio.Event()  # frames may be queued for gestures' windows
+        self.describer: FrameDescriber | None = None
         self.watch_options: dict[str, Any] = dict(
             lead_s=lead_s,
             fps=fps,
@@ -69,6 +104,9 @@ class ObjectSegmenter(Service):
         self.watch: ObjectWatch[Header] = ObjectWatch(
             ClusterModel.load(self.clusters_path), **self.watch_options
         )
+        # a live source's descriptions run at a lower priority than the gestures' work
+        niceness = LIVE_NICENESS if self.skip_frames else 0
+        self.describer = FrameDescriber(self.clusters_path, niceness)
         keys = self.bus.keys
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
@@ -78,11 +116,16 @@ class ObjectSegmenter(Service):
         self.subscribe(
             keys.camera_compressed, CompressedCameraFrame, self.on_camera, CAMERA, paced=True
         )
-        self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, EVENTS)
-        self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
+        self.events: list[Subscription[Any]] = [
+            self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, EVENTS),
+            self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS),
+        ]
         self.subscribe(keys.progress("gestures"), Progress, self.on_gestures_progress)
         self.segments_received = 0
         self.gestures_progress: deque[tuple[int, int]] = deque(maxlen=4096)  # (stamp, events)
+        if self.skip_frames:
+            self.spawn(self._describe_newest(), "objects of the newest frame")
+        self.spawn(self._catch_up(), "gesture windows")
 
     def on_gestures_progress(self, msg: Progress) -> None:
         stamp = msg.handled.get(self.bus.keys.skeleton, -1)
@@ -97,9 +140,65 @@ class ObjectSegmenter(Service):
         if complete >= 0:
             self.emit(self.watch.gestures_complete(complete))
 
-    def on_camera(self, msg: CameraMessage) -> None:
+    async def _catch_up(self) -> None:
+        """Feed the gestures' windows the frames queued for them, one at a time, letting
+        messages through in between: a gesture's lead frames do not hold up the next event."""
+        while True:
+            await self._gestures_behind.wait()
+            self._gestures_behind.clear()
+            while self.watch.catch_up():
+                await asyncio.sleep(0)
+
+    async def on_camera(self, msg: CameraMessage) -> None:
+        for _ in range(_YIELDS_TO_EVENTS):  # a gesture event already here goes first
+            if not any(sub.pending for sub in self.events):
+                break
+            await asyncio.sleep(0)
         image = image_from_message(msg)
-        self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image, msg.header))
+        self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image))
+        if not self.skip_frames:
+            await self._describe(msg, image)  # before the frame counts as handled: paced
+            return
+        if self._waiting is not None:
+            self.skipped += 1
+            self._overtaken += 1
+        self._waiting = (msg, image)
+        self._frame_waiting.set()
+
+    async def _describe_newest(self) -> None:
+        """Describe the newest frame whenever the last description is done (live sources)."""
+        while True:
+            await self._frame_waiting.wait()
+            self._frame_waiting.clear()
+            if self._waiting is not None:
+                (msg, image), self._waiting = self._waiting, None
+                await self._describe(msg, image)
+
+    async def _describe(self, msg: CameraMessage, image: np.ndarray) -> None:
+        """Publish the objects of a frame, described in the worker process (unless a gesture
+        needed them first): the event loop goes on with the gestures meanwhile."""
+        stamp = msg.header.stamp
+        objects = self.watch.known_objects(stamp)
+        if objects is None:
+            assert self.describer is not None, "made in setup, before any subscription"
+            objects = await self.describer.describe(image)
+            self.watch.described(stamp, objects)
+        skipped, self._overtaken = self._overtaken, 0
+        self.objects_out.put(
+            DetectedObjects(
+                header=self.derive(msg.header, DetectedObjects),
+                frame=msg.header.seq,
+                objects=[_detected(o) for o in objects],
+                skipped=skipped,
+            )
+        )
+
+    async def teardown(self) -> None:
+        if self.describer is not None:
+            self.describer.close()
+
+    def health_report(self) -> ServiceHealth:
+        return msgspec.structs.replace(super().health_report(), skipped=self.skipped)
 
     def received_counts(self) -> dict[str, int]:
         # gesture events carry their own index: the last one here says what has arrived, also
@@ -132,22 +231,19 @@ class ObjectSegmenter(Service):
             self.emit(self.watch.skeleton_at(skeleton))
 
     def emit(self, outputs: list[Any]) -> None:
+        self._gestures_behind.set()  # whatever the watch was told may have queued frames
         for out in outputs:
-            if isinstance(out, FrameObjects):
-                self.objects_out.put(
-                    DetectedObjects(
-                        header=self.derive(out.ref, DetectedObjects),
-                        frame=out.frame,
-                        objects=[_detected(o) for o in out.objects],
-                    )
-                )
-            elif isinstance(out, ObjectAtStart):
+            if isinstance(out, ObjectAtStart):
                 self.at_start_out.put(_gesture_object(self.derive(out.ref, GestureObject), out))
             elif isinstance(out, GestureEffects):
                 self.effects_out.put(_effects(self.derive(out.ref, ObjectEffects), out))
+        if outputs:
+            # said at once, not after the frame's own objects: an instance restarted meanwhile
+            # learns from the player's copy of this report not to publish them again
+            self.publish_progress()
 
 
-def _detected(o: Any) -> DetectedObject:
+def _detected(o: FoundObject) -> DetectedObject:
     f = o.features
     return DetectedObject(
         id=o.id,

@@ -1,4 +1,5 @@
-"""Helpers for bus tests: a private Zenoh group per test and synthetic skeleton frames.
+"""Helpers for bus tests: a private Zenoh group per test, synthetic skeleton frames, and a
+loaded machine (also used by bench/pipeline.py).
 
 Every test gets its own rendezvous port (probed free on 127.0.0.1) and its own robot name, so
 tests never meet each other or other people's processes; multicast scouting is off by default.
@@ -6,11 +7,14 @@ tests never meet each other or other people's processes; multicast scouting is o
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import socket
+import subprocess
 import sys
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 from beyond_self.runtime.config import BusConfig
@@ -25,6 +29,20 @@ def free_port() -> int:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+@contextlib.contextmanager
+def busy_loops(n: int) -> Iterator[None]:
+    """`n` processes spinning on the CPU (`while True: pass`) while the block runs: on a 2-core
+    machine, three leave the pipeline a fraction of a core per service."""
+    spin = [sys.executable, "-P", "-c", "while True: pass"]
+    spinners = [subprocess.Popen(spin) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in spinners:
+            p.kill()
+            p.wait()
 
 
 def private_config() -> BusConfig:

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from busutil_net import busy_loops
 from netns_util import TwoHosts, unavailable
 
 from beyond_self.cognition.paths import SOURCES, shared_data_dir
@@ -78,6 +79,14 @@ def node_modules(tmp_path_factory: pytest.TempPathFactory) -> Path:
         last = (done.stderr.strip().splitlines() or ["?"])[-1]
         pytest.skip(f"npm install {' '.join(NODE_PACKAGES)} failed: {last}")
     return folder / "node_modules"
+
+
+@pytest.fixture(scope="module")
+def busy_machine() -> Iterator[None]:
+    """Three processes spinning on the CPU for as long as the module's tests run (a loaded
+    2-core machine: the services get a fraction of a core each)."""
+    with busy_loops(3):
+        yield
 
 
 # -- figures a passing test shows in CI's log ---------------------------------------------------

@@ -76,7 +76,8 @@ def _impossible(robot: str, rng: random.Random) -> list[tuple[str, bytes, str]]:
         id=0, centroid=(1.0, 1.0), area=1.0, colour=[0.0], shape=[0.0], size=[0.0],
         colour_label="blue", shape_label="box", size_label="big",
     )  # fmt: skip
-    objects = s.DetectedObjects(header=header, frame=1, objects=[obj])
+    objects_header = msgspec.structs.replace(header, version=s.DetectedObjects.VERSION)
+    objects = s.DetectedObjects(header=objects_header, frame=1, objects=[obj])
     cases = [
         (keys.skeleton, wire(s.SkeletonFrame, skeleton, frame=-(2**62)), s.SkeletonFrame),
         (

@@ -4,10 +4,12 @@ streams interleave in: only the order within each stream is kept, as on the bus.
 from __future__ import annotations
 
 import random
+from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -28,6 +30,7 @@ from beyond_self.cognition.episodes import (
     Outcome,
     Started,
 )
+from beyond_self.cognition.episodes.objects import EVICTED_KEPT
 from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
 from beyond_self.cognition.gestures import extract_features
 from beyond_self.cognition.gestures.default_models import default_models
@@ -66,14 +69,26 @@ def interleave(rng: random.Random, *lanes: list[Any]) -> list[tuple[int, Any]]:
     return out
 
 
-def watch_outputs(order: list[tuple[int, Any]]) -> list[tuple[Any, ...]]:
-    watch: ObjectWatch[int] = ObjectWatch(ClusterModel.load())
+def watch_outputs(
+    order: list[tuple[int, Any]],
+    described: Callable[[int], bool] = lambda frame: True,
+    steps: Callable[[], int] = lambda: 0,
+    **options: Any,
+) -> list[tuple[Any, ...]]:
+    """The watch's outputs for the inputs in `order`, the objects of the frames `described`
+    asked for after each (a live object segmenter skips some), and `steps()` calls of
+    `catch_up` after each input (a service makes them between messages)."""
+    watch: ObjectWatch[int] = ObjectWatch(ClusterModel.load(), **options)
     segment_events = [e for e in streams()[1] if isinstance(e, Started | Ended | Cancelled)]
     seen = 0
     outputs: list[Any] = []
     for lane, item in order:
+        for _ in range(steps()):
+            watch.catch_up()
         if lane == 0:
-            outputs += watch.camera(item.stamp, item.frame, item.image, item.frame)
+            outputs += watch.camera(item.stamp, item.frame, item.image)
+            if described(item.frame):
+                outputs.append(watch.frame_objects(item.stamp, item.frame, item.image, item.frame))
         elif lane == 1:
             seen += 1
             if isinstance(item, Started):
@@ -106,32 +121,91 @@ def watch_outputs(order: list[tuple[int, Any]]) -> list[tuple[Any, ...]]:
     return summary
 
 
-@cache
-def watch_reference() -> list[tuple[Any, ...]]:
-    """The object watch's outputs with everything in stamp order, as the offline analysis feeds
-    it (the same for every example: computed once)."""
+def stamp_order() -> list[tuple[int, Any]]:
+    """Camera frames and gesture events in stamp order, as the offline analysis feeds them."""
     cameras, events, _ = streams()
     segment_events = [e for e in events if isinstance(e, Started | Ended | Cancelled)]
-    return watch_outputs(
-        sorted(
-            [(0, c) for c in cameras] + [(1, e) for e in segment_events],
-            key=lambda x: (
-                x[1].stamp if x[0] == 0 else getattr(x[1], "end_stamp", None) or x[1].stamp
-            ),
-        )
+    return sorted(
+        [(0, c) for c in cameras] + [(1, e) for e in segment_events],
+        key=lambda x: x[1].stamp if x[0] == 0 else getattr(x[1], "end_stamp", None) or x[1].stamp,
     )
 
 
+@cache
+def watch_reference() -> list[tuple[Any, ...]]:
+    """The object watch's outputs in stamp order (the same for every example: computed once)."""
+    return watch_outputs(stamp_order())
+
+
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(seed=st.integers(0, 2**32 - 1))
-def test_object_watch_ignores_arrival_order(seed: int) -> None:
+@given(seed=st.integers(0, 2**32 - 1), share=st.sampled_from([0.0, 0.3, 1.0]))
+def test_object_watch_ignores_arrival_order_and_skipped_frames(seed: int, share: float) -> None:
+    """Any interleaving, any share of the frames described for their own sake (a live segmenter
+    skips frames under load), and the gestures' frames analysed early or late (`catch_up`): the
+    per-gesture results are the reference's, and every frame described has the reference's
+    objects."""
     cameras, events, progress = streams()
     segment_events = [e for e in events if isinstance(e, Started | Ended | Cancelled)]
     reference = watch_reference()
-    shuffled = watch_outputs(interleave(random.Random(seed), cameras, segment_events, progress))
-    assert shuffled == reference
+    rng = random.Random(seed)
+    order = interleave(rng, cameras, segment_events, progress)
+    chosen = {c.frame for c in cameras if rng.random() < share}
+    shuffled = watch_outputs(order, chosen.__contains__, lambda: rng.randrange(3))
+    assert [o for o in shuffled if o[0] != "frame"] == [o for o in reference if o[0] != "frame"]
+    assert [o for o in shuffled if o[0] == "frame"] == [
+        o for o in reference if o[0] == "frame" and o[1] in chosen
+    ]
     kinds = {s[0] for s in reference}
     assert kinds == {"frame", "start", "effects"}  # the recording's gesture was seen and measured
+
+
+def test_the_history_cap_analyses_a_gestures_queued_frames_before_dropping_them() -> None:
+    """Nobody catches up (no `catch_up` calls) and the history holds a dozen frames, fewer than
+    the gesture has: the frames it queued are analysed as the cap drops them, not lost."""
+    cameras, _, _ = streams()
+    capped = watch_outputs(
+        stamp_order(), lambda frame: False, buffer_bytes=12 * cameras[0].image.nbytes
+    )
+    reference = watch_reference()
+    assert [o for o in capped if o[0] != "frame"] == [o for o in reference if o[0] != "frame"]
+    assert any(o[0] == "effects" and o[2] for o in capped)  # measured
+
+
+def test_a_start_looks_back_past_frames_dropped_undescribed() -> None:
+    """The object at a start is the last frame at or before it that showed one, also when that
+    frame and many after it were dropped from the history before anyone described them."""
+    cameras, _, _ = streams()
+    with_object = cameras[0]
+    table = np.broadcast_to(
+        np.median(with_object.image.reshape(-1, 3), axis=0).astype(np.uint8),
+        with_object.image.shape,
+    )
+    step = 66_666_667
+    frames = [(with_object.stamp, 1, with_object.image)] + [
+        (with_object.stamp + k * step, k + 1, table) for k in range(1, EVICTED_KEPT + 8)
+    ]
+    start = frames[-1][0] + step
+    results = []
+    for eager in (False, True):
+        watch: ObjectWatch[int] = ObjectWatch(ClusterModel.load())
+        for stamp, frame, image in frames:
+            watch.camera(stamp, frame, image)
+            if eager:
+                watch.frame_objects(stamp, frame, image, frame)
+        watch.gestures_complete(start + 10**10)  # everything before can be dropped
+        assert not watch.buffer
+        watch.camera(start + step, len(frames) + 1, table)
+        results += [o for o in watch.started(1, start, 0) if isinstance(o, ObjectAtStart)]
+    assert [(r.frame, r.reason) for r in results] == [(1, ""), (1, "")]
+    assert (
+        results[0].labels
+        == results[1].labels
+        == {
+            "Color": "green2",
+            "Shape": "box",
+            "Size": "medium",
+        }
+    )
 
 
 @pytest.fixture(scope="module")

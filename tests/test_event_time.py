@@ -16,9 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import random
-import subprocess
-import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -47,20 +45,6 @@ DERIVED = (
     "description",
 )
 CONSUMERS = ["gestures", "objects", "reasoner", "describer"]
-
-
-@pytest.fixture(scope="module")
-def busy_machine() -> Iterator[None]:
-    """Three processes spinning on the CPU for as long as the matrix runs (a loaded 2-core
-    machine: the services get a fraction of a core each)."""
-    spin = [sys.executable, "-P", "-c", "while True: pass"]
-    spinners = [subprocess.Popen(spin) for _ in range(3)]
-    try:
-        yield
-    finally:
-        for p in spinners:
-            p.kill()
-            p.wait()
 
 
 def offline_lines(name: str) -> list[str]:

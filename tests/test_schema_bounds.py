@@ -52,7 +52,8 @@ def _wire(message: s.Message, **fields: object) -> bytes:
 
 
 def _objects(objects: list[s.DetectedObject]) -> s.DetectedObjects:
-    return s.DetectedObjects(header=HEADER, frame=1, objects=objects)
+    header = msgspec.structs.replace(HEADER, version=s.DetectedObjects.VERSION)
+    return s.DetectedObjects(header=header, frame=1, objects=objects)
 
 
 def _effects(effects: list[s.ObjectEffect]) -> s.ObjectEffects:

@@ -37,7 +37,7 @@ def examples() -> list[s.Message]:
             data=b"\x89PNG",
         ),
         s.DetectedObjects(
-            header=H,
+            header=_h(s.DetectedObjects),
             frame=3,
             objects=[
                 s.DetectedObject(
@@ -104,7 +104,7 @@ def examples() -> list[s.Message]:
             evidence=s.Evidence(hard={"Shape": "sphere"}, soft={"Action": {"tap": 1.0}}),
         ),
         s.ServiceHealth(
-            header=H,
+            header=_h(s.ServiceHealth),
             service="x",
             uptime_s=1.0,
             messages_in=1,

@@ -8,9 +8,12 @@ Starts the services of the profile on the configured bus (default: Zenoh peers o
 source last (it waits for their liveliness before it publishes), as a `services.deployment.
 Deployment`: this module is the command line and the terminal around it. Service logs go to
 stderr with the service name; pipeline events (recognised action, anticipated effect,
-description) to stdout, and a live view when stdout is a terminal. With a recording or log it
-exits once every gesture has its final description (status 0) or after --timeout (status 1);
-Ctrl-C stops everything cleanly.
+description) to stdout, and a live view when stdout is a terminal. With a source it exits once
+the source has ended and every gesture has its final description (status 0); Ctrl-C stops
+everything cleanly. --timeout bounds start-up (nothing handled or published that long after the
+services are up) and the tail (the source ended, and nothing moved that long): status 1. A source
+that is silent while it runs, a live camera paused for an hour or a gap in a recording played at
+rate 1, is never timed out: the pipeline waits for it, and describes the next gesture.
 
 Two machines (see README, Deployment): `--profile robot` (ingest, gestures, objects) and
 `--profile workstation` (reasoner, describer, speech) start one side each, against a router
@@ -36,6 +39,7 @@ import argparse
 import asyncio
 import os
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -98,8 +102,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--timeout",
         type=argtypes.seconds(),
         default=None,
-        help=f"give up after S seconds (default {DEFAULT_TIMEOUT:.0f} with a source or "
-        "--until-stream-end, else run until stopped)",
+        help="give up when nothing has moved S seconds after start-up, or S seconds after the "
+        f"source ended (default {DEFAULT_TIMEOUT:.0f} with a source or --until-stream-end, else "
+        "never); a source's silence while it runs never counts",
     )
     parser.add_argument(
         "--wait-for",
@@ -240,8 +245,8 @@ def deployment(
 
 async def up(args: argparse.Namespace, config: BusConfig) -> int:
     lines = EventLines()
-    side, replayed = deployment(args, config, lines)
-    finite = replayed or args.until_stream_end
+    side, _ = deployment(args, config, lines)
+    finite = "ingest" in side.services or args.until_stream_end  # ends when its source does
     timeout = args.timeout
     if timeout is None and ("ingest" in side.services or finite):
         timeout = DEFAULT_TIMEOUT
@@ -280,14 +285,27 @@ async def watch(
     live: bool,
 ) -> Ending:
     """Wait for the side to end, with the live view drawn meanwhile on a terminal; say why it
-    ended unless it was asked to or done."""
+    ended unless it was asked to or done. `timeout` bounds start-up and the tail after the
+    source's end (`PipelineMonitor.waited_too_long`), never a running source's silence."""
     console = Console()
     if live and console.is_terminal:
         view = lambda: render(pipeline, side.services)  # noqa: E731
         lines.live = Live(get_renderable=view, console=console, refresh_per_second=8)
         lines.live.start()
+    since = time.monotonic()
+    timed_out = False
+
+    def over() -> bool:
+        nonlocal timed_out
+        if finite and pipeline.done():
+            return True
+        timed_out = timeout is not None and pipeline.waited_too_long(timeout, since)
+        return timed_out
+
     try:
-        ending = await side.wait(timeout, done=pipeline.done if finite else None)
+        ending = await side.wait(done=over)
+        if timed_out:
+            ending = Ending("timeout")
     finally:
         if lines.live is not None:
             lines.live.stop()  # drawn once more, as it ends

@@ -1,8 +1,20 @@
 """What the camera says about each gesture: the object it is about and the effects on it.
 
-Per camera frame: the segmented, labelled objects. Per gesture: the object acted on as seen when
-the gesture began (`ObjectAtStart`) and the effects measured over the gesture's own frames
-(`GestureEffects`), each exactly once, measured or with the reason it could not be.
+Per gesture: the object acted on as seen when the gesture began (`ObjectAtStart`) and the effects
+measured over the gesture's own frames (`GestureEffects`), each exactly once, measured or with the
+reason it could not be. Per camera frame, apart from them: the segmented, labelled objects
+(`frame_objects`), which a live source may skip under overload without changing any per-gesture
+result.
+
+Why the per-frame description is apart: it estimates the table from each frame, the costliest step
+of the object segmenter (bench/pipeline.py prints the budget), and no gesture needs it but for the
+one frame its object comes from. So `camera` does only what gestures need: it keeps the frame and
+queues it for the windows of the gestures under way, whose analysers segment against their own
+table model, one frame per `catch_up` (a service calls it between messages, so a gesture's lead
+frames and its frames are analysed while they come, and its end costs one frame, not a batch;
+what is still queued when its effects are decided is analysed then). A frame is described when
+its objects are asked for (`frame_objects`, or elsewhere, such as a worker process, the result
+handed back with `described`) or when a gesture's object needs it, once either way.
 
 Why the decisions wait for what they wait for: the camera stream arrives in stamp order, so a
 frame stamped at or after an instant proves every frame before it has been seen. The object at a
@@ -11,12 +23,17 @@ a frame after its end has; or when the camera is known to be complete (`camera_e
 stamp is known from the stream's end marker and that frame has been handled, or it never had a
 frame); or when the camera has fallen silent while the skeleton moved `deadline_s` of stream time
 past the instant (`skeleton_time`, told by the gesture events). Nothing is decided on a wall
-clock, so the same frames and events give the same outputs in any arrival order.
+clock, so the same frames and events give the same outputs in any arrival order, whichever frames
+were described for their own sake.
 
 Camera history is kept until no gesture can still need it: `gestures_complete(t)` says every
 gesture event derived from the skeleton up to `t` has been received, so a gesture announced from
 now on starts after `t - onset_s` (the segmenter places an onset at most that far back), and
-older frames outside open windows can go. `buffer_bytes` is a last-resort cap on top.
+older frames outside open windows can go. A start looks back past them to the last frame that
+showed an object: the last such frame dropped is remembered, and frames dropped before anyone
+described them are kept aside (at most `EVICTED_KEPT`, then the newest is described) until one of
+them is known to show an object. `buffer_bytes` is a last-resort cap on top (a frame it drops
+that a gesture has queued is analysed for it first).
 
 Bounded against nonsense: at most `max_open` gestures under way (a start beyond is refused),
 a start older than anything the segmenter can still announce is refused, and a gesture that has
@@ -45,6 +62,7 @@ R = TypeVar("R")
 EFFECT_VARIABLES = ("ObjVel", "HandVel", "ObjHandVel", "Contact")
 MIN_WINDOW_FRAMES = 3
 FPS_FRAMES = 4  # frames of a gesture's window its frame rate is measured on
+EVICTED_KEPT = 16  # dropped frames nobody described, kept for a start that looks back to them
 
 
 @dataclass(frozen=True)
@@ -83,7 +101,7 @@ class GestureEffects(Generic[R]):
         return {k: v for k, v in labels.items() if k not in EFFECT_VARIABLES}
 
 
-Output = FrameObjects[R] | ObjectAtStart[R] | GestureEffects[R]
+Output = ObjectAtStart[R] | GestureEffects[R]
 
 
 @dataclass
@@ -91,7 +109,14 @@ class _Buffered:
     stamp: int
     frame: int
     image: np.ndarray
-    labels: dict[str, str]  # of the biggest object, empty when none
+    objects: list[DetectedObject] | None = None  # None until described
+
+    @property
+    def labels(self) -> dict[str, str]:
+        """Labels of the biggest object (empty when none); the frame must be described."""
+        assert self.objects is not None
+        biggest = max(self.objects, key=lambda o: o.features.area, default=None)
+        return dict(biggest.labels) if biggest else {}
 
 
 @dataclass
@@ -100,15 +125,16 @@ class _Window(Generic[R]):
     start_stamp: int
     lo: int  # first stamp of the window (start - lead)
     start_ref: R
-    stamps: list[int] = field(default_factory=list)
-    early: list[np.ndarray] = field(default_factory=list)  # until the frame rate is known
+    pending: deque[_Buffered] = field(default_factory=deque)  # its frames not yet taken in
+    stamps: list[int] = field(default_factory=list)  # of the frames taken in
+    early: deque[np.ndarray] = field(default_factory=deque)  # taken in, not yet analysed
     analyser: RecordingAnalyser | None = None
     object_decided: bool = False
     end: tuple[int, int, R] | None = None  # (end stamp, end frame, ref) once ended
 
 
 class ObjectWatch(Generic[R]):
-    """Camera frames and gesture events in, per-frame objects and per-gesture results out.
+    """Camera frames and gesture events in, per-gesture results out; per-frame objects on request.
 
     lead_s: the window of a gesture opens this long before its first frame (the hand approaching
     shows in the camera before the skeleton segmenter calls it a gesture). fps: the camera's rate,
@@ -141,10 +167,14 @@ class ObjectWatch(Generic[R]):
         self.abandoned = 0  # gestures dropped: never ended within max_gesture_s
         self.complete_until = -1  # gesture events are complete up to this skeleton stamp
         self.evicted_early = 0  # frames the byte cap dropped while a gesture could need them
+        # the last dropped frame known to show an object, and the frames dropped after it that
+        # nobody described (a later start may look back to them)
         self._last_evicted: tuple[int, int, dict[str, str]] | None = None
+        self._evicted_unknown: list[_Buffered] = []
         self.buffer_bytes = buffer_bytes
         self.fps = fps
         self.buffer: deque[_Buffered] = deque()
+        self._by_stamp: dict[int, _Buffered] = {}
         self._buffered_bytes = 0
         self.watermark = -1  # stamp of the last camera frame handled
         self.camera_last: int | None = None  # last camera stamp, from the stream's end marker
@@ -154,25 +184,23 @@ class ObjectWatch(Generic[R]):
 
     # -- inputs ---------------------------------------------------------------------------
 
-    def camera(self, stamp: int, frame: int, image: np.ndarray, ref: R) -> list[Output[R]]:
-        """One camera frame: the results it completes, then its own objects."""
+    def camera(self, stamp: int, frame: int, image: np.ndarray) -> list[Output[R]]:
+        """One camera frame, for the gestures: kept, queued for the windows of the gestures
+        under way, and the results it completes. Its own objects: `frame_objects`."""
         if stamp <= self.watermark:
             raise InputError(
                 f"camera frame {frame} stamped {stamp} is not after the last one handled "
                 f"({self.watermark}); valid: frames in increasing stamp order"
             )
-        result = describe_frame(image, self.clusters, require_objects=False)
-        biggest = max(result.objects, key=lambda o: o.features.area, default=None)
-        self._keep(_Buffered(stamp, frame, image, dict(biggest.labels) if biggest else {}))
+        item = _Buffered(stamp, frame, image)
+        self._keep(item)
         self.watermark = stamp
         for window in self.windows.values():
             if stamp >= window.lo and (window.end is None or window.end[0] >= stamp):
-                self._push(window, stamp, image)
+                window.pending.append(item)
         if self.camera_last is not None and stamp >= self.camera_last:
             self.camera_done = True
-        outputs = self._decide()
-        outputs.append(FrameObjects(stamp, frame, ref, result.objects))
-        return outputs
+        return self._decide()
 
     def started(self, segment_id: int, start_stamp: int, ref: R) -> list[Output[R]]:
         if segment_id in self.windows:
@@ -190,10 +218,8 @@ class ObjectWatch(Generic[R]):
                 f"{(self.onset_ns + self.max_gesture_ns) / 1e9:g} s of it)"
             )
         window = _Window(segment_id, start_stamp, start_stamp - self.lead_ns, ref)
+        window.pending.extend(b for b in self.buffer if b.stamp >= window.lo)
         self.windows[segment_id] = window
-        for b in self.buffer:
-            if b.stamp >= window.lo:
-                self._push(window, b.stamp, b.image)
         self._skeleton_at(start_stamp)
         return self._decide()
 
@@ -205,13 +231,16 @@ class ObjectWatch(Generic[R]):
                 f"gesture {segment_id} ends at {end_stamp}, before its start {start_stamp}"
             )
         window = self.windows.get(segment_id)
+        outputs: list[Output[R]] = []
         if window is None:  # its start was never seen: open the window from the buffer
-            self.started(segment_id, start_stamp, ref)
+            outputs = self.started(segment_id, start_stamp, ref)
             window = self.windows[segment_id]
         if window.end is None:
             window.end = (end_stamp, frame, ref)
+            while window.pending and window.pending[-1].stamp > end_stamp:
+                window.pending.pop()  # after its end: not the gesture's
         self._skeleton_at(end_stamp)
-        return self._decide()
+        return outputs + self._decide()
 
     def cancelled(self, segment_id: int) -> list[Output[R]]:
         self.windows.pop(segment_id, None)
@@ -237,6 +266,40 @@ class ObjectWatch(Generic[R]):
             self.camera_done = True
         return self._decide()
 
+    def catch_up(self) -> bool:
+        """Push one frame a gesture under way has not taken in yet (the oldest, of the earliest
+        gesture); False when there is none. The frames a gesture needs are pushed at the latest
+        when its effects are decided, so calling this changes no output: a service calls it
+        between messages, so a gesture's start (the lead frames it looks back to) and its frames
+        are analysed while they come, and its end costs one frame."""
+        return any(self._step(self.windows[segment_id]) for segment_id in sorted(self.windows))
+
+    # -- per-frame objects ------------------------------------------------------------------
+
+    def describe(self, image: np.ndarray) -> list[DetectedObject]:
+        """The labelled objects of one frame. Reads nothing the watch changes, so it may run on
+        another thread while the watch goes on; hand the result back with `described`."""
+        return describe_frame(image, self.clusters, require_objects=False).objects
+
+    def known_objects(self, stamp: int) -> list[DetectedObject] | None:
+        """The objects of the kept frame stamped `stamp` if it has been described already."""
+        item = self._by_stamp.get(stamp)
+        return None if item is None else item.objects
+
+    def described(self, stamp: int, objects: list[DetectedObject]) -> None:
+        """`describe`'s result for the frame stamped `stamp`, kept for the gestures' use."""
+        item = self._by_stamp.get(stamp)
+        if item is not None and item.objects is None:
+            item.objects = objects
+
+    def frame_objects(self, stamp: int, frame: int, image: np.ndarray, ref: R) -> FrameObjects[R]:
+        """The objects of a frame (`camera` first): described now unless it was already."""
+        objects = self.known_objects(stamp)
+        if objects is None:
+            objects = self.describe(image)
+            self.described(stamp, objects)
+        return FrameObjects(stamp, frame, ref, objects)
+
     # -- internals ------------------------------------------------------------------------
 
     def _skeleton_at(self, stamp: int) -> None:
@@ -244,6 +307,7 @@ class ObjectWatch(Generic[R]):
 
     def _keep(self, item: _Buffered) -> None:
         self.buffer.append(item)
+        self._by_stamp[item.stamp] = item
         self._buffered_bytes += item.image.nbytes
         self._evict()
 
@@ -256,27 +320,58 @@ class ObjectWatch(Generic[R]):
             self._drop_oldest()
         while len(self.buffer) > 1 and self._buffered_bytes > self.buffer_bytes:
             self.evicted_early += 1
+            oldest = self.buffer[0].stamp
+            for window in self.windows.values():  # analysed now, so its image can go
+                while window.pending and window.pending[0].stamp <= oldest:
+                    self._step(window)
             self._drop_oldest()
 
     def _drop_oldest(self) -> None:
         old = self.buffer.popleft()
+        del self._by_stamp[old.stamp]
         self._buffered_bytes -= old.image.nbytes
-        if old.labels:  # a later start looks back to the last frame that showed an object
-            self._last_evicted = (old.stamp, old.frame, old.labels)
+        # a later start looks back to the last frame that showed an object
+        if old.objects is None:
+            self._evicted_unknown.append(old)
+            if len(self._evicted_unknown) > EVICTED_KEPT:
+                self._settle_evicted()
+        elif labels := old.labels:
+            self._last_evicted = (old.stamp, old.frame, labels)
+            self._evicted_unknown.clear()
 
-    def _push(self, window: _Window[R], stamp: int, image: np.ndarray) -> None:
-        window.stamps.append(stamp)
-        if window.analyser is None:
-            window.early.append(image)
-            if self.fps is None and len(window.stamps) < FPS_FRAMES:
-                return
+    def _settle_evicted(self) -> None:
+        """Describe the dropped frames nobody described, newest first, until one shows an
+        object: only it can still be looked back to."""
+        for item in reversed(self._evicted_unknown):
+            if labels := self._labels(item):
+                self._last_evicted = (item.stamp, item.frame, labels)
+                break
+        self._evicted_unknown.clear()
+
+    def _labels(self, item: _Buffered) -> dict[str, str]:
+        if item.objects is None:
+            item.objects = self.describe(item.image)
+        return item.labels
+
+    def _step(self, window: _Window[R]) -> bool:
+        """One frame's work for `window`, in stamp order (False: none left): analyse the oldest
+        frame taken in, or take in the next one. A window's first frames wait until its frame
+        rate is measured on them (`FPS_FRAMES`), then are analysed one per step."""
+        if window.analyser is not None and window.early:
+            window.analyser.push(window.early.popleft())
+            return True
+        if not window.pending:
+            return False
+        item = window.pending.popleft()
+        window.stamps.append(item.stamp)
+        if window.analyser is not None:
+            window.analyser.push(item.image)
+            return True
+        window.early.append(item.image)
+        if self.fps is not None or len(window.stamps) >= FPS_FRAMES:
             fps = self.fps or float(1e9 / np.median(np.diff(window.stamps)))
             window.analyser = RecordingAnalyser(fps, self.clusters)
-            for img in window.early:
-                window.analyser.push(img)
-            window.early.clear()
-        else:
-            window.analyser.push(image)
+        return True
 
     def _silent_since(self, stamp: int) -> bool:
         return self.watermark < stamp and self.skeleton_time >= stamp + self.deadline_ns
@@ -307,16 +402,18 @@ class ObjectWatch(Generic[R]):
         return outputs
 
     def _object_at_start(self, window: _Window[R]) -> ObjectAtStart[R]:
-        seen = [(b.stamp, b.frame, b.labels) for b in self.buffer if b.labels]
-        if self._last_evicted is not None:
-            seen.insert(0, self._last_evicted)
-        seen = [item for item in seen if item[0] <= window.start_stamp]
-        if seen:
-            _, frame, labels = seen[-1]
+        """The biggest object of the last frame at or before the start that showed one (frames
+        described on the way back, newest first, as few as it takes)."""
+        start = window.start_stamp
+        for item in reversed([*self._evicted_unknown, *self.buffer]):
+            if item.stamp <= start and (labels := self._labels(item)):
+                return ObjectAtStart(window.segment_id, item.frame, labels, "", window.start_ref)
+        if self._last_evicted is not None and self._last_evicted[0] <= start:
+            _, frame, labels = self._last_evicted
             return ObjectAtStart(window.segment_id, frame, dict(labels), "", window.start_ref)
         if self.watermark < 0:
             reason = "no camera frame before the gesture began"
-        elif self.watermark < window.start_stamp and not self.camera_done:
+        elif self.watermark < start and not self.camera_done:
             reason = "the camera stopped before the gesture began"
         else:
             reason = "no object on the table when the gesture began"
@@ -325,6 +422,8 @@ class ObjectWatch(Generic[R]):
     def _effects(self, window: _Window[R]) -> GestureEffects[R]:
         assert window.end is not None
         end_stamp, frame, ref = window.end
+        while self._step(window):  # what nobody caught up on yet
+            pass
         within = sum(1 for s in window.stamps if window.lo <= s <= end_stamp)
         if within < MIN_WINDOW_FRAMES:
             what = "no camera stream" if self.watermark < 0 else f"only {within} camera frames"
@@ -336,8 +435,8 @@ class ObjectWatch(Generic[R]):
         if window.analyser is None:  # fewer than FPS_FRAMES frames in all: measure on them
             fps = float(1e9 / np.median(np.diff(window.stamps)))
             window.analyser = RecordingAnalyser(fps, self.clusters)
-            for img in window.early:
-                window.analyser.push(img)
+            while window.early:
+                window.analyser.push(window.early.popleft())
         try:
             analysis = window.analyser.finish(within)
         except InputError as exc:

@@ -130,7 +130,7 @@ def analyse_stream(
             tracked(tracker.push(item.stamp, item.frame, x, None))
         else:
             last_camera = item.stamp
-            watched(watch.camera(item.stamp, item.frame, item.image, None))
+            watched(watch.camera(item.stamp, item.frame, item.image))
         release()
     tracked(tracker.finish())
     watched(watch.camera_ended(last_camera))

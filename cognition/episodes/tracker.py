@@ -9,6 +9,11 @@ came back), so every start is answered.
 
 `ref` is whatever the caller wants handed back with each event (a message header): events say
 which input frame they derive from, so a service can copy that frame's stamp and sequence.
+
+The final belief is the streaming recogniser's own at the gesture's last frame (it has run over
+exactly the gesture's frames since its start), so a gesture's end costs nothing more than a
+frame; it is recomputed over the gesture's frames only when the segmenter's segment is not the
+one the recogniser followed.
 """
 
 from __future__ import annotations
@@ -105,6 +110,8 @@ class GestureTracker(Generic[R]):
         self.last_stamp: int | None = None
         self._segmenter_start: int | None = None
         self._start_stamp = 0
+        self._results: list[FrameResult] = []  # the recogniser's, frame by frame since the start
+        self._results_from = -1  # stream index of the frame the first of them is about
 
     def push(self, stamp: int, number: int, x: np.ndarray, ref: R) -> list[Event[R]]:
         """The events at this frame (x: the hand in feature space, see extract_features)."""
@@ -130,8 +137,13 @@ class GestureTracker(Generic[R]):
         if start is not None and not self.in_gesture:
             events += self._begin(start)
         elif self.in_gesture:
-            events.append(self._belief(self.recognizer.push(item.x), item))
+            events.append(self._belief(self._recognise(item.x), item))
         return events
+
+    def _recognise(self, x: np.ndarray) -> FrameResult:
+        result = self.recognizer.push(x)
+        self._results.append(result)
+        return result
 
     def finish(self) -> list[Event[R]]:
         """End of the stream: end the gesture under way, or cancel it if it is not kept."""
@@ -162,7 +174,8 @@ class GestureTracker(Generic[R]):
         self._start_stamp = first.stamp
         events: list[Event[R]] = [Started(self.segment_id, first.number, first.stamp, first.ref)]
         self.recognizer.reset()
-        events += [self._belief(self.recognizer.push(f.x), f) for f in frames]
+        self._results, self._results_from = [], first.t
+        events += [self._belief(self._recognise(f.x), f) for f in frames]
         return events
 
     def _end(self, segment: Segment) -> list[Event[R]]:
@@ -171,7 +184,11 @@ class GestureTracker(Generic[R]):
         if not frames:
             last = self.buffer[-1]
             return [Cancelled(self.segment_id, last.number, last.stamp, last.ref)]
-        result = recognize_sequence(self.models, np.stack([f.x for f in frames])).final
+        n = segment.stop - segment.start
+        if segment.start == self._results_from and len(frames) == n <= len(self._results):
+            result = self._results[n - 1]  # over exactly the gesture's frames already
+        else:
+            result = recognize_sequence(self.models, np.stack([f.x for f in frames])).final
         last = frames[-1]
         return [
             self._belief(result, last, final=True),

@@ -1,0 +1,75 @@
+"""The object segmenter's per-frame description, in a process of its own.
+
+Why a process: describing a frame (the table estimated from it, every object measured and
+labelled) is the costliest thing the object segmenter does, and no gesture result waits for it.
+On a thread it shared the interpreter lock with the gestures' work, and the cores at the same
+priority: on a loaded machine the frame that completes a gesture waited behind it. In a process
+of its own, at a lower priority when the source is live (`niceness`), the operating system runs
+the gestures' work first and the descriptions with what is left; the frames nothing was left for
+are the ones a live segmenter skips. A replay's describer keeps its priority: every frame is
+described there, and the player waits for it.
+
+Crash-only: the worker watches its parent and leaves when it is gone, so a SIGKILLed segmenter
+leaves no process behind; one started again starts its own.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import multiprocessing
+import os
+import threading
+import time
+
+import numpy as np
+
+from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.cognition.vision.pipeline import DetectedObject, describe_frame
+
+_PARENT_CHECK_S = 1.0
+_clusters: ClusterModel | None = None  # the worker's own copy, loaded once
+
+
+class FrameDescriber:
+    """`await describe(image)`: the frame's labelled objects, computed in the worker process."""
+
+    def __init__(self, clusters: str | None, niceness: int = 0) -> None:
+        context = multiprocessing.get_context("spawn")  # nothing of ours (a Zenoh session) forked
+        self._pool = concurrent.futures.ProcessPoolExecutor(
+            1, mp_context=context, initializer=_start, initargs=(clusters, niceness, os.getpid())
+        )
+        self._pool.submit(_ready)  # start it now, not at the first frame
+
+    async def describe(self, image: np.ndarray) -> list[DetectedObject]:
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._pool, _describe, image)
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _start(clusters: str | None, niceness: int, parent: int) -> None:
+    global _clusters
+    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+    threadpool_limits(limits=1, user_api="blas")
+    if niceness:
+        os.nice(niceness)
+    _clusters = ClusterModel.load(clusters)
+    threading.Thread(target=_leave_with, args=(parent,), daemon=True).start()
+
+
+def _leave_with(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(_PARENT_CHECK_S)
+    os._exit(0)
+
+
+def _ready() -> bool:
+    return _clusters is not None
+
+
+def _describe(image: np.ndarray) -> list[DetectedObject]:
+    assert _clusters is not None, "the worker's initializer loads the clusters"
+    return describe_frame(image, _clusters, require_objects=False).objects
