@@ -12,7 +12,7 @@ publishers, queryables and the liveliness token are undeclared, then the session
 
 Bad input never stops a service (runtime.accounting): a payload that does not decode is counted
 as malformed; whatever a handler, a timer, a spawned task, a queryable or the teardown raises is
-counted as an error and logged; the service goes on. runtime/README.md shows a whole service.
+counted as an error and logged once per kind of problem; the service goes on. runtime/README.md shows a whole service.
 """
 
 from __future__ import annotations
@@ -367,6 +367,7 @@ class Service:
         counts = {f: getattr(health, f) for f in _STOP_COUNTS}
         recovered, missed = self.recovery()
         stopped = {"service": self.name, **counts, "recovered": recovered, "missed": missed}
+        stopped["not_logged"] = self.account.once.repeats  # problems of a shape logged before
         event(self.log, logging.INFO, "stopped", **stopped)
         if self._owns_bus and self._bus is not None:
             self._bus.close()
