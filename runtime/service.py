@@ -12,7 +12,8 @@ publishers, queryables and the liveliness token are undeclared, then the session
 
 Bad input never stops a service (runtime.accounting): a payload that does not decode is counted
 as malformed; whatever a handler, a timer, a spawned task, a queryable or the teardown raises is
-counted as an error and logged once per kind of problem; the service goes on. runtime/README.md shows a whole service.
+counted as an error and logged once per kind of problem; the service goes on.
+runtime/README.md shows a whole service.
 """
 
 from __future__ import annotations
