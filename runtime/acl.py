@@ -39,9 +39,9 @@ from typing import Any
 from beyond_self.core.errors import InputError, unknown
 from beyond_self.schemas.keys import ALIVE, ASK, HEALTH, PREFIX, PROGRESS, STREAMS
 
-# queryable name -> key suffix after beyond/<robot>/; "progress": a player answering restarted
-# services with their predecessor's last Progress (runtime/pacing.py)
-QUERYABLES: dict[str, str] = {"ask": ASK, "progress": f"{PROGRESS}/*"}
+# queryable name -> key suffix after beyond/<robot>/ (besides every service's own health and
+# Progress, answered by each service for itself)
+QUERYABLES: dict[str, str] = {"ask": ASK}
 TOOLS_ROLE = "tools"
 SIDE_MONITORS: dict[str, tuple[str, ...]] = {  # side identity -> its monitors' liveliness names
     "robot": ("monitor-robot",),
@@ -176,11 +176,12 @@ def access_control(
     own: dict[str, list[str]] = {}
     for d in declarations:
         health = [_key(f"{HEALTH}/{d.name}")]
+        progress = [_key(f"{PROGRESS}/{d.name}")]  # its own Progress, answered to players
         # every service reports its own Progress and may read and ask everyone's (pacing,
         # resuming): how far each stream is handled, never any data
         outputs = _stream_keys(d.publishes) + health + [_key(f"{PROGRESS}/{d.name}")]
         inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*")]
-        serves = [_key(QUERYABLES[q]) for q in d.serves] + health
+        serves = [_key(QUERYABLES[q]) for q in d.serves] + health + progress
         own[d.name] = rules.role(
             d.name,
             [
@@ -234,13 +235,16 @@ def check_declared(name: str, cls: type, kind: str, key: str, robot_root: str) -
     """Refuse (InputError) a key service `name` of class `cls` did not declare for `kind`
     ("subscribe", "publish", "serve"): the rules are generated from the declarations, so a
     service must not use what it did not declare. A class that declares nothing is not checked
-    (it has no place on a secure bus). Progress may be read by all; a health queryable served by
-    all."""
+    (it has no place on a secure bus). Progress may be read by all; its own health and Progress
+    queryables served by all."""
     if all(getattr(cls, a, None) is None for a in ("subscribes", "publishes", "serves")):
         return
     if kind == "subscribe" and key.startswith(f"{robot_root}/{PROGRESS}/"):
         return
-    if kind == "serve" and key == f"{robot_root}/{HEALTH}/{name}":
+    if kind == "serve" and key in (
+        f"{robot_root}/{HEALTH}/{name}",
+        f"{robot_root}/{PROGRESS}/{name}",
+    ):
         return
     allowed = declared_keys(declaration_of(name, cls), robot_root)[kind]
     if key not in allowed:

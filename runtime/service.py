@@ -32,14 +32,14 @@ from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.config import BusConfig, load_config
 from beyond_self.runtime.delivery import RELIABLE, STATUS, Delivery
 from beyond_self.runtime.log import event
-from beyond_self.runtime.progress import ProgressReport, resume
+from beyond_self.runtime.progress import ProgressReport
 from beyond_self.runtime.publisher import Publisher
 from beyond_self.runtime.queries import PlainQueryHandler, QueryHandler
 from beyond_self.runtime.subscription import Handler, Received, Subscription, consume
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
 from beyond_self.schemas.keys import check_name
-from beyond_self.schemas.messages import ServiceHealth
+from beyond_self.schemas.messages import Progress, ServiceHealth
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
@@ -261,9 +261,20 @@ class Service:
         carry their own sequence numbers may report those instead: they survive a restart)."""
         return {s.key: s.received for s, _ in self._subscriptions}
 
+    def published_counts(self) -> dict[str, int]:
+        """Messages published per output key, as reported in `Progress` (a service whose
+        outputs carry their own running count may report that instead: it survives a
+        restart)."""
+        return {p.key: p.sent for p in self._publishers}
+
+    def progress_report(self) -> Progress:
+        """How far each paced input is handled, and what was received and published
+        (runtime.progress)."""
+        stamps = {p.key: p.last_stamp for p in self._publishers}
+        return self._progress.report(self.published_counts(), self.received_counts(), stamps)
+
     def publish_progress(self) -> None:
-        """Report how far each paced input is handled (runtime.progress)."""
-        self._progress.publish(self._publishers, self.received_counts())
+        self._progress.publish(self.progress_report())
 
     def recovery(self) -> tuple[int, int]:
         """(recovered, missed): messages of recovering subscriptions that came from publisher
@@ -324,8 +335,6 @@ class Service:
         undeclare_token: Callable[[], None] | None = None
         try:
             await self.setup()
-            if self._progress.paced:
-                await resume(self.bus, self.name, self._publishers, self.log)
             for sub, handler in self._subscriptions:
                 self.spawn(self._consume(sub, handler), sub.key)
             health_key = self.bus.keys.health(self.name)
@@ -335,7 +344,13 @@ class Service:
 
             self.queryable(health_key, None, answer_health)
             if self._progress.paced:
-                self._progress.open(self.bus)
+                progress_key = self.bus.keys.progress(self.name)
+
+                async def answer_progress(_key: str, _request: None) -> Progress:
+                    return self.progress_report()
+
+                self.queryable(progress_key, None, answer_progress)
+                self._progress.open(self.bus, self.progress_report())
             self.spawn(self._report_periodically(), "health")
             undeclare_token = self.bus.declare_token(self.bus.keys.alive(self.name))
             self.started.set()

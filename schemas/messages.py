@@ -382,9 +382,14 @@ class StreamEnd(Message, frozen=True):
     Version 2: `last_stamps` gives, per sensor stream name (schemas.keys.STREAMS), the stamp of
     the last message published on it (a stream never published is absent). A consumer knows its
     input is complete once it has handled the message with that stamp, whatever order the end
-    marker and the data arrive in."""
+    marker and the data arrive in.
 
-    VERSION: ClassVar[int] = 2
+    Version 3: `damage` says in one line what the source could not play (a damaged recording:
+    unreadable chunks, a truncated end, frames that do not decode or go back in time; "" when
+    nothing was lost), the line `beyond inspect` and `beyond analyse` print for the same file,
+    so `beyond up` can say it and exit 2 as they do."""
+
+    VERSION: ClassVar[int] = 3
 
     source: Name
     messages: Count
@@ -392,6 +397,7 @@ class StreamEnd(Message, frozen=True):
     last_stamps: Annotated[dict[Name, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = (
         msgspec.field(default_factory=dict)
     )
+    damage: Text = ""
 
 
 class Progress(Message, frozen=True):

@@ -50,6 +50,7 @@ from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.config import BusConfig
 from beyond_self.runtime.process import exit_process
+from beyond_self.runtime.recording import require_mcap
 from beyond_self.schemas.keys import check_name
 from beyond_self.services.deployment import Deployment, Ending
 from beyond_self.services.options import load_options
@@ -117,7 +118,11 @@ def run(args: argparse.Namespace) -> int:
         config = config.with_(mode="client")
     if config.secure is not None and config.identity is None:  # the monitor is the side's
         config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
-    status = asyncio.run(up(args, local_group(config)))
+    try:
+        status = asyncio.run(up(args, local_group(config)))
+    except InputError as exc:  # bad input (a damaged recording...): one line, as every command
+        print(f"beyond up: error: {exc}", file=sys.stderr)
+        status = 2
     # every service is stopped and the session closed: leave before the interpreter's teardown,
     # which aborted `up` now and then (SIGABRT) after a run that had succeeded
     exit_process(status)
@@ -262,6 +267,10 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     if failed := side.unclean():
         lines.emit(f"services that did not stop cleanly: {failed}")
         return 1
+    end = pipeline.stream_end
+    if ending.ok and end is not None and end.damage:
+        # the readable part was played and described above; what was lost, as analyse says it
+        raise InputError(end.damage)
     return 0 if ending.ok else 1
 
 
@@ -296,8 +305,7 @@ async def watch(
 
 def _source(args: argparse.Namespace) -> dict[str, str]:
     if args.recording is not None:
-        if not args.recording.is_file():
-            raise InputError(f"recording {args.recording} does not exist")
+        require_mcap(args.recording)  # refused here, on one line, before anything starts
         return {"recording": str(args.recording)}
     if args.log is not None:
         return {"log": str(args.log)}
