@@ -358,7 +358,12 @@ class Description(Message, frozen=True):
 
 
 class ServiceHealth(Message, frozen=True):
-    """Periodic self-report of a service."""
+    """Periodic self-report of a service.
+
+    Version 2: `restarts`, how many times its supervisor (`beyond up`, a Deployment) restarted
+    the service after it died before this instance (0: the first)."""
+
+    VERSION: ClassVar[int] = 2
 
     service: Name
     uptime_s: Seconds
@@ -374,6 +379,7 @@ class ServiceHealth(Message, frozen=True):
     outputs: Annotated[list[Text], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
         default_factory=list
     )
+    restarts: Count = 0
 
 
 class StreamEnd(Message, frozen=True):
@@ -414,6 +420,40 @@ class Progress(Message, frozen=True):
     # stamp of the last message published per output key: a restarted instance of the service
     # does not publish again what its predecessor already did
     published_stamps: PerKey = msgspec.field(default_factory=dict)
+
+
+LEDGER_RANGES = 4096  # (segment, first, last) ranges per key and kind in a Ledger
+Range = tuple[Id, Count, Count]
+
+
+class Ledger(Message, frozen=True):
+    """What one service has handled, by identity (schemas.identity), and where its next
+    instance starts: how a restarted service neither stalls nor repeats (runtime.ledger).
+
+    `handled`: input key -> kind -> (segment id, first, last) ranges of the frames handled (a
+    per-gesture kind: (segment id, 0, 0)); the most recent ones, a bounded number. A producer
+    that restarts does not send again what every consumer of its key has handled; a service
+    whose handling is a side effect (speech) takes its predecessor's and does not act twice.
+    `resume`: numbers the service's next instance resumes from (the gesture streamer's
+    checkpoint: a skeleton stamp from which its state can be rebuilt, and its counts there).
+    Every service publishes its own on `ledger/<service>` when it changes, keeps the last one
+    of every other service of its robot, and answers for all of them on query, so a service's
+    record outlives the service."""
+
+    service: Name
+    handled: Annotated[
+        dict[
+            Text,
+            Annotated[
+                dict[Name, Annotated[list[Range], msgspec.Meta(max_length=LEDGER_RANGES)]],
+                msgspec.Meta(max_length=VARIABLES_MAX),
+            ],
+        ],
+        msgspec.Meta(max_length=VARIABLES_MAX),
+    ] = msgspec.field(default_factory=dict)
+    resume: Annotated[dict[Name, Count], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
+        default_factory=dict
+    )
 
 
 class AffordanceQuery(Message, frozen=True):
@@ -457,6 +497,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     ServiceHealth,
     StreamEnd,
     Progress,
+    Ledger,
     AffordanceQuery,
     AffordanceAnswer,
 )
