@@ -29,12 +29,15 @@ from __future__ import annotations
 
 import bisect
 import contextlib
+import logging
+import time
 from collections.abc import Callable, Coroutine, Iterable, Mapping
 from typing import Any
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.delivery import STATUS
+from beyond_self.runtime.log import event
 from beyond_self.runtime.publisher import Publisher
 from beyond_self.runtime.subscription import consume
 from beyond_self.schemas.base import Header, Message
@@ -146,12 +149,23 @@ class LedgerBook:
         takers = [h for n, h in self.handled.items() if n != producer and key in h.keys]
         return bool(takers) and all(h.has(key, ident) for h in takers)
 
+    def done(self, key: str, kind: str, producer: str) -> set[int]:
+        """Segments whose `kind` on `key` every service (but `producer`) taking it has handled
+        (none when nobody takes it)."""
+        takers = [h for n, h in self.handled.items() if n != producer and key in h.keys]
+        if not takers:
+            return set()
+        return set.intersection(*(h.segments(key, kind) for h in takers))
+
     def taken(self, key: str, producer: str) -> bool:
         """Some service (but `producer`) takes `key`: its identities are worth checking."""
         return any(key in h.keys for n, h in self.handled.items() if n != producer)
 
 
-ASK_TIMEOUT_S = 2.0  # asking the others for the ledgers at start
+# asking the others for the ledgers at start: answered at once by idle services, but a service
+# busy on a loaded machine may take seconds, and its answer is what keeps a sentence from being
+# said twice (the query ends as soon as every service has answered)
+ASK_TIMEOUT_S = 10.0
 
 
 class Keeper:
@@ -168,12 +182,17 @@ class Keeper:
         self._pub: Publisher[Ledger] | None = None
         self._dirty = False
 
-    async def ask(self, bus: Bus) -> None:
+    async def ask(self, bus: Bus, log: logging.Logger) -> None:
         """What the others know (their ledgers, and the copies they kept of everyone's, this
         service's predecessor's among them): called before the service opens its streams."""
-        with contextlib.suppress(InputError, TimeoutError):
-            for reply in await bus.query(bus.keys.ledger(), Ledger, timeout=ASK_TIMEOUT_S):
+        began = time.monotonic()
+        with contextlib.suppress(InputError, TimeoutError):  # a malformed one: no ledgers
+            replies = await bus.query(bus.keys.ledger(), Ledger, timeout=ASK_TIMEOUT_S, every=True)
+            for reply in replies:
                 self.book.heard(reply.message)
+        if self.name in self.book.handled:
+            took = round(time.monotonic() - began, 3)
+            event(log, logging.INFO, "resuming after a previous instance", asked_s=took)
 
     def predecessor(self) -> dict[str, int]:
         """The numbers the previous instance of this service left to resume from ({} if none)."""
@@ -250,6 +269,11 @@ class Keeper:
             self.publish()
         else:
             self._dirty = True
+
+    def done_downstream(self, key: str, kind: str) -> set[int]:
+        """Segments whose `kind` every consumer of this service's `key` has handled: a
+        restarted service need not work on them again."""
+        return self.book.done(key, kind, self.name)
 
     def suppressed(self, key: str, message: Message) -> bool:
         """Every consumer of `key` has handled `message` already: do not send it again."""

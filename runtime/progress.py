@@ -50,7 +50,7 @@ class ProgressReport:
     ) -> Progress:
         """The Progress now: handled stamps, and the counts the caller gives."""
         return Progress(
-            header=self._header(Progress, max(self.handled.values(), default=0)),
+            header=self._header(Progress, max(0, *self.handled.values())),
             service=self.name,
             handled=dict(self.handled),
             published=dict(published),

@@ -337,7 +337,7 @@ class Service:
         installed = process.install_signals(self.stop) if install_signals else []
         undeclare_token: Callable[[], None] | None = None
         try:
-            await self.ledgers.ask(self.bus)  # before setup: a restarted service resumes
+            await self.ledgers.ask(self.bus, self.log)  # before setup: a restarted one resumes
             await self.setup()
             self.ledgers.adopt(self._once)
             self.spawn(self.ledgers.open(self.bus, self.report_error), "ledger")

@@ -45,7 +45,7 @@ import numpy as np
 from beyond_self.cognition.gestures.logs import read_hand_log
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.accounting import bounded
-from beyond_self.runtime.delivery import CAMERA, EVENTS
+from beyond_self.runtime.delivery import CAMERA, EVENTS, SKELETON
 from beyond_self.runtime.images import message_from_image
 from beyond_self.runtime.log import event
 from beyond_self.runtime.pacing import DEFAULT_WINDOW_S, Pacer
@@ -118,9 +118,9 @@ class SensorIngest(Service):
 
     async def setup(self) -> None:
         keys = self.bus.keys
-        self.skeleton = self.publisher(keys.skeleton, SkeletonFrame)
-        # camera frames are cached (never leaving the robot): an object segmenter restarted
-        # mid-gesture gets back the frames of the gesture it was analysing
+        # sensor frames are cached (they never leave the robot): a gesture streamer or an
+        # object segmenter restarted mid-gesture gets back the frames it needs
+        self.skeleton = self.publisher(keys.skeleton, SkeletonFrame, SKELETON)
         self.camera = self.publisher(keys.camera, CameraFrame, CAMERA)
         self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame, CAMERA)
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)

@@ -137,6 +137,14 @@ class FusionJoin(Generic[R]):
             g.effects = (self.known(object_labels), self.known(effect_labels))
         return self._flush()
 
+    def done(self, segment_ids: set[int]) -> list[Output[R]]:
+        """These gestures were completed elsewhere (by a previous instance, whose outcome every
+        consumer has): whatever comes about them is a repeat, and they hold nothing back."""
+        for segment_id in segment_ids:
+            self.gestures.pop(segment_id, None)
+            self.finished.add(segment_id)
+        return self._flush()
+
     def skeleton_at(self, stamp: int) -> list[Output[R]]:
         return self._advance(stamp)
 
