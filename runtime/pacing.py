@@ -85,8 +85,7 @@ class Pacer:
             log.warning("progress on %s not understood: %s", key, exc)
 
         self._task = asyncio.get_running_loop().create_task(consume(sub, self.heard, failed))
-        for name in self.names:
-            await self.learn(name)
+        await asyncio.gather(*(self.learn(name) for name in self.names))
         self._unwatch = self.bus.watch_tokens(self.bus.keys.alive("*"), self._token)
 
     def _token(self, key: str, present: bool) -> None:
@@ -208,7 +207,11 @@ class Pacer:
             began = began or loop.time()
             self._moved.clear()
             try:
-                await asyncio.wait_for(self._moved.wait(), _CHECK_ALIVE_S)
+                # asyncio.timeout, not wait_for: Python 3.11's wait_for can swallow the
+                # cancellation that stops the service when the wait ends at the same moment,
+                # and the source then played on past its SIGTERM until it was killed
+                async with asyncio.timeout(_CHECK_ALIVE_S):
+                    await self._moved.wait()
             except TimeoutError:
                 for name in behind:
                     if await self.bus.live_tokens(self.bus.keys.alive(name)):

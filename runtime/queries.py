@@ -119,7 +119,8 @@ async def query(
         kwargs["payload"] = encode(payload)
         kwargs["encoding"] = zenoh.Encoding(wire_encoding(type(payload)))
     session.get(selector, zenoh.handlers.Callback(inbox.push, finished), **kwargs)
-    await asyncio.wait_for(done, timeout + 1.0)
+    async with asyncio.timeout(timeout + 1.0):  # not wait_for: see runtime.pacing
+        await done
     replies: list[Received[M]] = []
     while len(inbox):
         reply = await inbox.get(0)

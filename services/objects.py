@@ -70,6 +70,8 @@ class ObjectSegmenter(Service):
             ClusterModel.load(self.clusters_path), **self.watch_options
         )
         keys = self.bus.keys
+        # restarted: the gestures whose effects every consumer has are not measured again
+        self.watch.done(self.ledgers.done_downstream(keys.effects, "effects"))
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
         self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,7 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.images import image_from_message
 from beyond_self.runtime.recording import read_recording, require_mcap
 from beyond_self.runtime.recording_damage import Losses
-from beyond_self.runtime.replay import recorded_cues
+from beyond_self.runtime.replay import Cue, recorded_cues
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
 from beyond_self.schemas.keys import split_key
 from beyond_self.services.options import check_options, load_options
@@ -49,7 +49,12 @@ def _inputs(
     decode or does not move forward in time is dropped and counted in `losses`
     (runtime.recording_damage), the same frames every command drops."""
     tally = losses if losses is not None else Losses(str(path))
-    for cue in recorded_cues(read_recording(path, losses=tally), None, tally):
+    return inputs_of(recorded_cues(read_recording(path, losses=tally), None, tally), hand, torso)
+
+
+def inputs_of(cues: Iterable[Cue], hand: str, torso: str) -> Iterator[SkeletonInput | CameraInput]:
+    """The pipeline's inputs in cues (a recording's, or a looped one's)."""
+    for cue in cues:
         split = split_key(cue.key)
         if split is None or cue.message is None:
             continue

@@ -151,6 +151,7 @@ class ObjectWatch(Generic[R]):
         self.camera_done = False
         self.skeleton_time = -1
         self.windows: dict[int, _Window[R]] = {}
+        self.told: deque[int] = deque(maxlen=4096)  # gestures told elsewhere (`done`)
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -175,8 +176,8 @@ class ObjectWatch(Generic[R]):
         return outputs
 
     def started(self, segment_id: int, start_stamp: int, ref: R) -> list[Output[R]]:
-        if segment_id in self.windows:
-            return []  # a repeat (recovered from a cache): already under way
+        if segment_id in self.windows or segment_id in self.told:
+            return []  # a repeat (recovered from a cache): already under way, or told
         if len(self.windows) >= self.max_open:
             raise InputError(
                 f"gesture {segment_id} refused: {len(self.windows)} gestures already under way "
@@ -204,6 +205,8 @@ class ObjectWatch(Generic[R]):
             raise InputError(
                 f"gesture {segment_id} ends at {end_stamp}, before its start {start_stamp}"
             )
+        if segment_id in self.told:
+            return []
         window = self.windows.get(segment_id)
         if window is None:  # its start was never seen: open the window from the buffer
             self.started(segment_id, start_stamp, ref)
@@ -211,6 +214,14 @@ class ObjectWatch(Generic[R]):
         if window.end is None:
             window.end = (end_stamp, frame, ref)
         self._skeleton_at(end_stamp)
+        return self._decide()
+
+    def done(self, segment_ids: set[int]) -> list[Output[R]]:
+        """These gestures were told elsewhere (by a previous instance, whose results every
+        consumer has): what comes about them is a repeat, not measured again."""
+        for segment_id in sorted(segment_ids):
+            self.windows.pop(segment_id, None)
+            self.told.append(segment_id)
         return self._decide()
 
     def cancelled(self, segment_id: int) -> list[Output[R]]:
