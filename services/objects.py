@@ -70,8 +70,10 @@ class ObjectSegmenter(Service):
             ClusterModel.load(self.clusters_path), **self.watch_options
         )
         keys = self.bus.keys
-        # restarted: the gestures whose effects every consumer has are not measured again
+        # restarted: the gestures whose effects every consumer has are not measured again, and
+        # the camera history before the predecessor's restart point is not gone over again
         self.watch.done(self.ledgers.done_downstream(keys.effects, "effects"))
+        self.resume_from = self.ledgers.predecessor().get("camera", -1)
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
         self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)
@@ -100,8 +102,11 @@ class ObjectSegmenter(Service):
             self.emit(self.watch.gestures_complete(complete))
 
     def on_camera(self, msg: CameraMessage) -> None:
+        if msg.header.stamp < self.resume_from:
+            return  # before the predecessor's restart point: nobody needs it again
         image = image_from_message(msg)
         self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image, msg.header))
+        self.ledgers.checkpoint({"camera": max(0, self.watch.restart_point)})
 
     def received_counts(self) -> dict[str, int]:
         # gesture events carry their own index: the last one here says what has arrived, also

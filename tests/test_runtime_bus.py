@@ -86,7 +86,7 @@ async def test_malformed_payloads_are_counted_and_skipped(buses) -> None:
 async def test_query_reply_and_liveliness(buses) -> None:
     a, b = buses
     health = s.ServiceHealth(
-        header=s.Header(version=1, source="q", seq=0, stamp=1),
+        header=s.Header(version=s.ServiceHealth.VERSION, source="q", seq=0, stamp=1),
         service="q",
         uptime_s=0.0,
         messages_in=1,

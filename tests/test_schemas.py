@@ -100,7 +100,7 @@ def examples() -> list[s.Message]:
             evidence=s.Evidence(hard={"Shape": "sphere"}, soft={"Action": {"tap": 1.0}}),
         ),
         s.ServiceHealth(
-            header=H,
+            header=_h(s.ServiceHealth),
             service="x",
             uptime_s=1.0,
             messages_in=1,
@@ -108,6 +108,7 @@ def examples() -> list[s.Message]:
             dropped=0,
             malformed=3,
             errors=0,
+            restarts=2,
         ),
         s.StreamEnd(
             header=_h(s.StreamEnd),
@@ -115,6 +116,13 @@ def examples() -> list[s.Message]:
             messages=12,
             dropped=1,
             last_stamps={"skeleton": 5, "camera": 4},
+            damage="demo.mcap is damaged: truncated at byte 9 of 10 (ends inside a record)",
+        ),
+        s.Ledger(
+            header=H,
+            service="describer",
+            handled={"beyond/robot/language/words": {"words": [(1, 0, 0), (2, 0, 0)]}},
+            resume={"stamp": 5, "segments": 2, "events": 4},
         ),
         s.Progress(
             header=H,

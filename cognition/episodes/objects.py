@@ -216,6 +216,24 @@ class ObjectWatch(Generic[R]):
         self._skeleton_at(end_stamp)
         return self._decide()
 
+    @property
+    def restart_point(self) -> int:
+        """A camera stamp from which a fresh watch, fed the frames from it on (and the gesture
+        events and progress again), makes the outputs this one makes from now on: no frame
+        before it is kept, in an open window or the last evicted one that showed an object (a
+        later gesture's start looks back to it), and every frame after it is handled or still
+        to come. -1: from the first frame. A restarted object segmenter starts there rather
+        than going over all the camera history a cache gives back (services/objects.py)."""
+        if self.complete_until < 0:
+            return -1
+        points = [self.complete_until - self.onset_ns - self.lead_ns, self.watermark + 1]
+        points += [w.lo for w in self.windows.values()]
+        if self.buffer:
+            points.append(self.buffer[0].stamp)
+        if self._last_evicted is not None:
+            points.append(self._last_evicted[0])
+        return min(points)
+
     def done(self, segment_ids: set[int]) -> list[Output[R]]:
         """These gestures were told elsewhere (by a previous instance, whose results every
         consumer has): what comes about them is a repeat, not measured again."""
