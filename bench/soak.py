@@ -44,16 +44,10 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 import beyond_self.schemas as s  # noqa: E402
-from beyond_self.cognition.bn import learn_network, synthetic_dataset  # noqa: E402
-from beyond_self.cognition.episodes.offline import analyse_stream  # noqa: E402
-from beyond_self.cognition.gestures.default_models import default_models  # noqa: E402
-from beyond_self.cognition.vision.clusters import ClusterModel  # noqa: E402
-from beyond_self.commands.analyse import inputs_of  # noqa: E402
+from beyond_self.commands.analyse import default_run, looped_inputs  # noqa: E402
 from beyond_self.monitor import PipelineMonitor  # noqa: E402
 from beyond_self.runtime.config import BusConfig  # noqa: E402
 from beyond_self.runtime.delivery import FRAMES  # noqa: E402
-from beyond_self.runtime.recording import inspect_recording, read_recording  # noqa: E402
-from beyond_self.runtime.replay import looped, recorded_cues  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402
 
 RECORDINGS = REPO / "recordings"
@@ -84,22 +78,7 @@ def blocks(lines: list[str]) -> dict[int, list[str]]:
 def expected_blocks(recording: Path, passes: int = 3) -> list[list[str]]:
     """The gesture blocks of one pass of `recording`, after checking offline that a looped
     recording repeats them pass after pass (what the soak compares every gesture with)."""
-    info = inspect_recording(recording)
-    assert info.start is not None and info.end is not None
-    made = 0
-
-    def one_pass() -> Any:
-        nonlocal made
-        made += 1
-        return recorded_cues(read_recording(recording)) if made <= passes else iter(())
-
-    cues = looped(one_pass, loop=True, span=(info.start, info.end))
-    run = analyse_stream(
-        inputs_of(cues, "right_hand", "torso"),
-        gesture_models=default_models(),
-        clusters=ClusterModel.load(),
-        network=learn_network(synthetic_dataset()),
-    )
+    run = default_run(looped_inputs(recording, passes))
     by_gesture = blocks(run.lines)
     per_pass = len(by_gesture) // passes
     assert per_pass > 0 and len(by_gesture) == per_pass * passes, sorted(by_gesture)

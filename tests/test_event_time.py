@@ -32,12 +32,8 @@ import pytest
 from busutil_net import private_config
 
 import beyond_self.schemas as s
-from beyond_self.cognition.bn import learn_network, synthetic_dataset
-from beyond_self.cognition.episodes.offline import analyse_stream
 from beyond_self.cognition.episodes.report import GestureLines
-from beyond_self.cognition.gestures.default_models import default_models
-from beyond_self.cognition.vision.clusters import ClusterModel
-from beyond_self.commands.analyse import _inputs, inputs_of
+from beyond_self.commands.analyse import _inputs, default_run, looped_inputs
 from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime.delivery import FRAMES
 from beyond_self.services.deployment import Deployment
@@ -71,13 +67,7 @@ def busy_machine() -> Iterator[None]:
 
 
 def offline_lines(name: str) -> list[str]:
-    run = analyse_stream(
-        _inputs(RECORDINGS / name, "right_hand", "torso"),
-        gesture_models=default_models(),
-        clusters=ClusterModel.load(),
-        network=learn_network(synthetic_dataset()),
-    )
-    return run.lines
+    return default_run(_inputs(RECORDINGS / name, "right_hand", "torso")).lines
 
 
 async def run_pipeline(
@@ -134,28 +124,8 @@ KILL_RECORDING = "touch-box.mcap"  # the shortest: one gesture a pass
 
 
 def looped_lines(name: str, passes: int) -> list[str]:
-    """`beyond analyse` over the recording looped as the ingest loops it (runtime.replay)."""
-    from beyond_self.runtime.recording import inspect_recording, read_recording
-    from beyond_self.runtime.replay import looped, recorded_cues
-
-    path = RECORDINGS / name
-    info = inspect_recording(path)
-    assert info.start is not None and info.end is not None
-    made = 0
-
-    def one_pass() -> Iterator[Any]:
-        nonlocal made
-        made += 1
-        return recorded_cues(read_recording(path)) if made <= passes else iter(())
-
-    cues = looped(one_pass, loop=True, span=(info.start, info.end))
-    run = analyse_stream(
-        inputs_of(cues, "right_hand", "torso"),
-        gesture_models=default_models(),
-        clusters=ClusterModel.load(),
-        network=learn_network(synthetic_dataset()),
-    )
-    return run.lines
+    """`beyond analyse` over the recording looped as the ingest loops it."""
+    return default_run(looped_inputs(RECORDINGS / name, passes)).lines
 
 
 def of_gestures(lines: list[str], last: int) -> list[str]:

@@ -19,15 +19,20 @@ from pathlib import Path
 from typing import Any
 
 from beyond_self.cognition.bn import learn_network, load_model, synthetic_dataset
-from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
+from beyond_self.cognition.episodes.offline import (
+    CameraInput,
+    OfflineRun,
+    SkeletonInput,
+    analyse_stream,
+)
 from beyond_self.cognition.gestures import load_models
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.images import image_from_message
-from beyond_self.runtime.recording import read_recording, require_mcap
+from beyond_self.runtime.recording import inspect_recording, read_recording, require_mcap
 from beyond_self.runtime.recording_damage import Losses
-from beyond_self.runtime.replay import Cue, recorded_cues
+from beyond_self.runtime.replay import Cue, looped, recorded_cues
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
 from beyond_self.schemas.keys import split_key
 from beyond_self.services.options import check_options, load_options
@@ -72,6 +77,35 @@ def inputs_of(cues: Iterable[Cue], hand: str, torso: str) -> Iterator[SkeletonIn
             )
         elif isinstance(msg, CameraFrame | CompressedCameraFrame):
             yield CameraInput(msg.header.stamp, msg.header.seq, image_from_message(msg))
+
+
+def looped_inputs(
+    path: Path, passes: int, hand: str = "right_hand", torso: str = "torso"
+) -> Iterator[SkeletonInput | CameraInput]:
+    """The inputs of `passes` passes of a recording, each restamped after the last, as the
+    ingest plays it with `loop: true` (runtime.replay.looped): what `up` over a looped source
+    must tell."""
+    info = inspect_recording(path)
+    if info.start is None or info.end is None:
+        return iter(())
+    made = 0
+
+    def one_pass() -> Iterator[Cue]:
+        nonlocal made
+        made += 1
+        return recorded_cues(read_recording(path)) if made <= passes else iter(())
+
+    return inputs_of(looped(one_pass, loop=True, span=(info.start, info.end)), hand, torso)
+
+
+def default_run(inputs: Iterable[SkeletonInput | CameraInput]) -> OfflineRun:
+    """The offline analysis with the default models (no --config): what `up` prints."""
+    return analyse_stream(
+        inputs,
+        gesture_models=default_models(),
+        clusters=ClusterModel.load(),
+        network=learn_network(synthetic_dataset()),
+    )
 
 
 def _options(config: str | None) -> dict[str, dict[str, Any]]:
