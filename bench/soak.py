@@ -110,8 +110,12 @@ async def soak(
     out: Path | None = None,
     port: int | None = None,
     say: Any = print,
+    at_least: tuple[int, int] = (0, 0),
+    give_up_s: float = 300.0,
 ) -> dict[str, Any]:
-    """Run the soak; its figures (and what it checked) as a dict."""
+    """Run the soak; its figures (and what it checked) as a dict. `at_least`: (gestures
+    described, services killed) the run goes on for, past `duration_s` if need be (a short run
+    on a loaded machine), for at most `give_up_s`."""
     expected = expected_blocks(recording)
     out = out or Path(tempfile.mkdtemp(prefix="soak-"))
     lines: list[str] = []
@@ -127,8 +131,12 @@ async def soak(
         },
         watcher="monitor",
         clock="recording",
-        env={"BEYOND_LOG_FORMAT": "text", "BEYOND_LOG_LEVEL": "WARNING"},
+        env={
+            "BEYOND_LOG_FORMAT": "text",
+            "BEYOND_LOG_LEVEL": os.environ.get("SOAK_LOG", "WARNING"),
+        },
         on_restart=lambda name, what: told.append(f"{name}: {what}"),
+        log=lambda name, line: print(f"[{name}] {line}", file=sys.stderr, flush=True),
     )
     bus = await pipeline.open()
     monitor = PipelineMonitor(bus, lines.append)
@@ -150,12 +158,22 @@ async def soak(
         await pipeline.start()
         began = loop.time()
         next_kill, next_sample = began + kill_every_s, began
-        while loop.time() - began < duration_s:
+        want_described, want_kills = at_least
+
+        def going() -> bool:
+            elapsed = loop.time() - began
+            short = len(described) < want_described or len(kills) < want_kills
+            return elapsed < duration_s or (short and elapsed < give_up_s)
+
+        while going():
             now = loop.time()
             if now >= next_sample:
                 pids = [p.process.pid for p in pipeline.processes if p.running]
                 memory.append((now - began, sum(map(rss_mb, [os.getpid(), *pids]))))
                 next_sample += SAMPLE_S
+                ended = sum(1 for g in monitor.report.gestures.values() if g.end_frame)
+                say(f"  {now - began:6.1f} s: {ended} gestures ended, {len(described)} "
+                    f"described, {len(kills)} kills, {memory[-1][1]:.0f} MB")  # fmt: skip
             if now >= next_kill:
                 name = order[len(kills) % len(order)]
                 victim = next(p for p in pipeline.processes if p.name == name)
@@ -171,7 +189,8 @@ async def soak(
             ended = [n for n, g in monitor.report.gestures.items() if g.end_frame is not None]
             log = out / "speech.log"
             said = log.read_text().count("\n") if log.exists() else 0
-            if all(described.get(n) for n in ended) and said >= len(described):
+            alive = all(p.running for p in pipeline.processes)  # no restart still under way
+            if alive and all(described.get(n) for n in ended) and said >= len(described):
                 break
             await asyncio.sleep(0.2)
     finally:
@@ -204,6 +223,7 @@ async def soak(
         "kills": len(kills),
         "restarts": {n: r.count for n, r in pipeline.restarts.items()},
         "clean_stop": set(codes.values()) <= {0},
+        "exit_codes": codes,
         "rss_first_fifth_mb": round(statistics.median(m for _, m in memory[:fifth]), 1)
         if memory
         else 0.0,

@@ -32,6 +32,8 @@ from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
 
+SEGMENT_KINDS = ("start", "end", "cancel")
+
 
 class GestureStreamer(Service):
     name = "gestures"
@@ -54,6 +56,7 @@ class GestureStreamer(Service):
         self.torso_joint = torso_joint
         self.buffer_frames = buffer_frames
         self.end_at: int | None = None  # last skeleton stamp of the source, once it has ended
+        self.checkpoint: tuple[int, int] | None = None  # the tracker's, last told
         self.events = 0
         self.finished = False
 
@@ -98,6 +101,10 @@ class GestureStreamer(Service):
         if self.finished or stamp < self.resume_from:
             return  # before the checkpoint: the predecessor's, already told
         if self.tracker.last_stamp is None and stamp > self.resume_from >= 0:
+            # the frames since the checkpoint are gone (the source was restarted too): number
+            # on after every gesture a consumer has, and say that one under way may be cut
+            seen = self.ledgers.seen_downstream(self.bus.keys.gesture_segment, SEGMENT_KINDS)
+            self.tracker.segment_id = max(self.tracker.segment_id, seen)
             self.report_error(
                 "resume",
                 InputError(
@@ -106,10 +113,15 @@ class GestureStreamer(Service):
                 ),
             )
         x = self.features(frame)
+        events = self.events
         self.emit(self.tracker.push(stamp, frame.frame, x, frame.header))
-        if self.tracker.checkpoint is not None:
-            at, segments = self.tracker.checkpoint
-            self.ledgers.checkpoint({"stamp": at, "segments": segments, "events": self.events})
+        checkpoint = self.tracker.checkpoint
+        if checkpoint is not None and checkpoint != self.checkpoint:
+            # a checkpoint moves only on a frame with no event (or is the first frame): the
+            # events counted before this frame are those before the checkpoint's
+            self.checkpoint = checkpoint
+            at, segments = checkpoint
+            self.ledgers.checkpoint({"stamp": at, "segments": segments, "events": events})
         if self.end_at is not None and stamp >= self.end_at:
             self.finish()
 
