@@ -103,7 +103,7 @@ def slope_per_min(samples: list[tuple[float, float]]) -> float:
 async def soak(
     *,
     duration_s: float,
-    kill_every_s: float,
+    kill_every_s: float | None,
     rate: float,
     recording: Path,
     seed: int = 0,
@@ -113,9 +113,11 @@ async def soak(
     at_least: tuple[int, int] = (0, 0),
     give_up_s: float = 300.0,
 ) -> dict[str, Any]:
-    """Run the soak; its figures (and what it checked) as a dict. `at_least`: (gestures
-    described, services killed) the run goes on for, past `duration_s` if need be (a short run
-    on a loaded machine), for at most `give_up_s`."""
+    """Run the soak; its figures (and what it checked) as a dict. `kill_every_s` None: a kill
+    each time a gesture was described since the last one and every service is back (the
+    suite's short run: as many kills however loaded the machine). `at_least`: (gestures
+    described, services killed) the run goes on for, past `duration_s` if need be, for at most
+    `give_up_s`."""
     expected = expected_blocks(recording)
     out = out or Path(tempfile.mkdtemp(prefix="soak-"))
     lines: list[str] = []
@@ -157,7 +159,8 @@ async def soak(
     try:
         await pipeline.start()
         began = loop.time()
-        next_kill, next_sample = began + kill_every_s, began
+        next_kill, next_sample = began + (kill_every_s or 0.0), began
+        described_at_kill = 0
         want_described, want_kills = at_least
 
         def going() -> bool:
@@ -174,13 +177,19 @@ async def soak(
                 ended = sum(1 for g in monitor.report.gestures.values() if g.end_frame)
                 say(f"  {now - began:6.1f} s: {ended} gestures ended, {len(described)} "
                     f"described, {len(kills)} kills, {memory[-1][1]:.0f} MB")  # fmt: skip
-            if now >= next_kill:
+            if kill_every_s is not None:
+                due = now >= next_kill
+            else:  # one kill per gesture described, everything alive again since the last
+                alive = all(p.running for p in pipeline.processes)
+                due = alive and len(described) > described_at_kill
+            if due:
                 name = order[len(kills) % len(order)]
                 victim = next(p for p in pipeline.processes if p.name == name)
                 if victim.running:
                     victim.process.kill()
                     kills.append(name)
-                next_kill += kill_every_s
+                    described_at_kill = len(described)
+                next_kill += kill_every_s or 0.0
             assert not pipeline.exited(), (pipeline.exited(), told)
             await asyncio.sleep(0.2)
         # drain: every gesture that ended is described, and said
@@ -223,7 +232,11 @@ async def soak(
         "kills": len(kills),
         "restarts": {n: r.count for n, r in pipeline.restarts.items()},
         "clean_stop": set(codes.values()) <= {0},
-        "exit_codes": codes,
+        "unclean": {
+            p.name: [codes[p.name], *list(p.lines)[-3:]]
+            for p in pipeline.processes
+            if codes.get(p.name)
+        },
         "rss_first_fifth_mb": round(statistics.median(m for _, m in memory[:fifth]), 1)
         if memory
         else 0.0,
