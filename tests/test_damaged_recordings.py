@@ -38,7 +38,9 @@ def rewritten(src: Path, dst: Path, change: Change) -> Path:
         writer.start(profile="", library="test")
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}
-        for i, (schema, channel, msg) in enumerate(make_reader(f).iter_messages()):
+        for i, (schema, channel, msg) in enumerate(
+            make_reader(f).iter_messages(log_time_order=False)
+        ):
             assert schema is not None
             if schema.id not in schemas:
                 schemas[schema.id] = writer.register_schema(
@@ -109,7 +111,7 @@ def family(folder: Path) -> dict[str, Path]:
         out[name].write_bytes(content)
     for name, change in (
         ("nan-joint", skeleton_at(60, nan_joint)),
-        ("backward-stamp", skeleton_at(60, backwards)),
+        ("backward-stamp", skeleton_at(100, backwards)),  # 3.3 s in: sent back to 0.3 s
         ("repeated-stamp", skeleton_at(60, repeated)),
     ):
         out[name] = rewritten(SOURCE, folder / f"{name}.mcap", change)
@@ -171,8 +173,9 @@ async def test_inspect_analyse_and_up_agree_on_every_damaged_recording(
         analysed = gesture_lines(by_command["analyse"][1])
         assert gesture_lines(by_command["up"][1]) == analysed, name  # same gestures told
         table.append(f"{name}: exit 2, {len(analysed)} gesture lines: {line}")
-    playable = ("nan-joint", "backward-stamp", "repeated-stamp", "chunk-flipped")
-    for name in playable:  # one bad frame or chunk costs only itself: the gesture is told
+    for name in ("nan-joint", "backward-stamp", "repeated-stamp"):
+        # one bad frame costs only itself: the gesture is told (a flipped chunk of this short
+        # recording holds its gesture; test_a_damaged_chunk_costs_only_itself reads past one)
         assert any(line.endswith('"') for line in gesture_lines(results[name]["up"][1])), name
     show("damaged recordings:\n" + "\n".join(table))
 
