@@ -6,9 +6,11 @@ refuses at run time any key it did not declare, so these rules and the code cann
 From them, `access_control()` builds the block of a Zenoh router's configuration:
 
 - default deny; a subject is a certificate's common name (runtime/keystore.py);
-- a service may put only on its outputs (and its own health), declare subscribers only on its
-  inputs and receive only those, serve only its queryables (and its health), declare only its
-  own liveliness token, and watch the others' (ingest waits for its consumers). It hears of
+- a service may put only on its outputs (and its own health, Progress and Ledger), declare
+  subscribers only on its inputs (and everyone's Progress and Ledger) and receive only those,
+  serve only its queryables (and its health, its Progress and the ledgers, which every service
+  answers for: runtime.ledger), declare only its own liveliness token, and watch the others'
+  (ingest waits for its consumers). It hears of
   every subscription and query, wildcards included: a client publishes only what it knows
   someone subscribes to, so a reader of `beyond/robot/**` must be announced to every publisher;
   hearing of an interest reveals no data, and the put and reply rules are unchanged;
@@ -37,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from beyond_self.core.errors import InputError, unknown
-from beyond_self.schemas.keys import ALIVE, ASK, HEALTH, PREFIX, PROGRESS, STREAMS
+from beyond_self.schemas.keys import ALIVE, ASK, HEALTH, LEDGER, PREFIX, PROGRESS, STREAMS
 
 # queryable name -> key suffix after beyond/<robot>/ (besides every service's own health and
 # Progress, answered by each service for itself)
@@ -177,11 +179,12 @@ def access_control(
     for d in declarations:
         health = [_key(f"{HEALTH}/{d.name}")]
         progress = [_key(f"{PROGRESS}/{d.name}")]  # its own Progress, answered to players
-        # every service reports its own Progress and may read and ask everyone's (pacing,
-        # resuming): how far each stream is handled, never any data
-        outputs = _stream_keys(d.publishes) + health + [_key(f"{PROGRESS}/{d.name}")]
-        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*")]
-        serves = [_key(QUERYABLES[q]) for q in d.serves] + health + progress
+        ledgers = [_key(f"{LEDGER}/*")]  # everyone's ledger, kept and answered for by all
+        # every service reports its own Progress and Ledger and may read and ask everyone's
+        # (pacing, resuming, exactly once): what each has handled, never any data
+        outputs = [*_stream_keys(d.publishes), *health, *progress, _key(f"{LEDGER}/{d.name}")]
+        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*"), *ledgers]
+        serves = [_key(QUERYABLES[q]) for q in d.serves] + health + progress + ledgers
         own[d.name] = rules.role(
             d.name,
             [

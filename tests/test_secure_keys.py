@@ -83,7 +83,12 @@ def test_rules_follow_the_declarations() -> None:
     assert "beyond/*/language/description" in describer_puts
     assert not any("sensors" in k or "affordance" in k for k in describer_puts)
     assert by_id["describer-in-ingress"]["key_exprs"] == sorted(
-        ["beyond/*/language/words", "beyond/*/language/words/@adv/**", "beyond/*/progress/*"]
+        [
+            "beyond/*/language/words",
+            "beyond/*/language/words/@adv/**",
+            "beyond/*/progress/*",
+            "beyond/*/ledger/*",  # everyone's ledger, kept by every service (runtime.ledger)
+        ]
     )
     assert "beyond/*/affordance/ask" in by_id["reasoner-serve-ingress"]["key_exprs"]
     tools = [r for r in rules["rules"] if r["id"].startswith("tools-")]
