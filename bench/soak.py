@@ -89,6 +89,14 @@ def expected_blocks(recording: Path, passes: int = 3) -> list[list[str]]:
     return first
 
 
+def ended_ids(monitor: PipelineMonitor, lines: list[str]) -> set[int]:
+    """Gestures that ended: printed ones (the report forgets old ones on a long run) and those
+    still waiting for their description."""
+    printed = {n for n, block in blocks(lines).items() if any("ended at" in t for t in block)}
+    waiting = {n for n, g in monitor.report.gestures.items() if g.end_frame is not None}
+    return printed | waiting
+
+
 def slope_per_min(samples: list[tuple[float, float]]) -> float:
     """Least-squares slope of (seconds, MB) samples, in MB per minute."""
     if len(samples) < 2:
@@ -174,7 +182,7 @@ async def soak(
                 pids = [p.process.pid for p in pipeline.processes if p.running]
                 memory.append((now - began, sum(map(rss_mb, [os.getpid(), *pids]))))
                 next_sample += SAMPLE_S
-                ended = sum(1 for g in monitor.report.gestures.values() if g.end_frame)
+                ended = len(ended_ids(monitor, lines))
                 say(f"  {now - began:6.1f} s: {ended} gestures ended, {len(described)} "
                     f"described, {len(kills)} kills, {memory[-1][1]:.0f} MB")  # fmt: skip
             if kill_every_s is not None:
@@ -195,7 +203,7 @@ async def soak(
         # drain: every gesture that ended is described, and said
         deadline = loop.time() + 120
         while loop.time() < deadline:
-            ended = [n for n, g in monitor.report.gestures.items() if g.end_frame is not None]
+            ended = sorted(ended_ids(monitor, lines))
             log = out / "speech.log"
             said = log.read_text().count("\n") if log.exists() else 0
             alive = all(p.running for p in pipeline.processes)  # no restart still under way
@@ -207,7 +215,7 @@ async def soak(
         capturing.cancel()
         codes = await pipeline.stop()
     elapsed = loop.time() - began
-    ended = sorted(n for n, g in monitor.report.gestures.items() if g.end_frame is not None)
+    ended = sorted(ended_ids(monitor, lines))
     log = out / "speech.log"
     spoken: dict[int, int] = {}
     for line in log.read_text().splitlines() if log.exists() else []:

@@ -135,6 +135,7 @@ class Deployment:
         self._final: set[str] = set()  # ended for good: not restarted
         self._pending: dict[str, asyncio.Task[None]] = {}  # restarts waiting out their delay
         self._supervisor: asyncio.Task[None] | None = None
+        self._closing = asyncio.Event()
 
     # -- starting --------------------------------------------------------------------------
 
@@ -245,9 +246,15 @@ class Deployment:
             await asyncio.sleep(POLL_S / 2)
 
     async def _restart(self, name: str, delay: float) -> None:
+        """Start `name` again after `delay`, unless the deployment stops meanwhile. Never
+        cancelled while it launches: a process spawned but not yet in `processes` would be
+        left running when everything stops."""
         try:
-            await asyncio.sleep(delay)
-            await self.launch(name)
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(delay):
+                    await self._closing.wait()
+            if not self._closing.is_set():
+                await self.launch(name)
         finally:
             self._pending.pop(name, None)
 
@@ -285,12 +292,13 @@ class Deployment:
         token, the services (SIGTERM, then SIGKILL if hung), what was attached, the router last,
         then the session. Returns (and keeps in `codes`) every process's exit code."""
         try:
-            for task in [self._supervisor, *self._pending.values()]:
-                if task is not None:  # nothing is started again while everything stops
-                    task.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, Exception):
-                        await task
-            self._supervisor = None
+            self._closing.set()  # nothing is started again while everything stops
+            if self._supervisor is not None:
+                self._supervisor.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await self._supervisor
+                self._supervisor = None
+            await asyncio.gather(*self._pending.values(), return_exceptions=True)
             if self.health_watch is not None:
                 await self.health_watch.stop()
             if self._token is not None:
