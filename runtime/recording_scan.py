@@ -213,6 +213,10 @@ class Walk:
         if opcode not in _KNOWN:
             return f"unknown record type {opcode}"
         head = pos + _HEAD.size
+        if head <= self.size:
+            (length,) = struct.unpack_from("<Q", self.data, pos + 1)
+            if length > 4 * 2**30:  # more than a writer makes (mcap's own limit): damage
+                return f"a record of {length} bytes, past any limit, runs past the end"
         if opcode == Opcode.CHUNK and head + _CHUNK_HEAD.size <= self.size:
             start, end, *_ = _CHUNK_HEAD.unpack_from(self.data, head)
             if start <= end:
