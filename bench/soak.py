@@ -253,6 +253,8 @@ async def soak(
         else 0.0,
         "rss_max_mb": round(max((m for _, m in memory), default=0.0), 1),
         "rss_slope_mb_per_min": round(slope_per_min(memory), 2),
+        # past the first half, once the publishers' caches and the bounded records have filled
+        "rss_slope_second_half_mb_per_min": round(slope_per_min(memory[len(memory) // 2 :]), 2),
         "samples": len(memory),
     }
     say(f"soak: {figures['duration_s']} s at rate {figures['rate']} over {recording.name}")
@@ -264,7 +266,8 @@ async def soak(
     say(f"  resident memory (all processes): first fifth {figures['rss_first_fifth_mb']} MB, "
         f"last fifth {figures['rss_last_fifth_mb']} MB (reference: the first fifth), max "
         f"{figures['rss_max_mb']} MB, slope {figures['rss_slope_mb_per_min']} MB/min over "
-        f"{figures['samples']} samples")  # fmt: skip
+        f"{figures['samples']} samples ({figures['rss_slope_second_half_mb_per_min']} MB/min over "
+        "the second half)")  # fmt: skip
     return figures
 
 
