@@ -1,5 +1,6 @@
-"""The live terminal view of `beyond up`: service health, the action posterior as bars, the
-effect prediction and the last description, redrawn as messages arrive (rich)."""
+"""The live terminal view of `beyond up`: service health (with how many times each service was
+restarted after dying), the action posterior as bars, the effect prediction and the last
+description, redrawn as messages arrive (rich)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,10 @@ def _bar(p: float) -> str:
 
 def render(monitor: PipelineMonitor, expected: list[str]) -> RenderableType:
     health = Table(title="services", expand=True)
-    columns = ("service", "in", "out", "dropped", "skipped", "malformed", "errors", "last error")
+    columns = (
+        "service", "in", "out", "dropped", "skipped", "malformed", "errors", "restarts",
+        "last error",
+    )  # fmt: skip
     for col in columns:
         health.add_column(col, justify="left" if col in ("service", "last error") else "right")
     for name in expected:
@@ -29,7 +33,7 @@ def render(monitor: PipelineMonitor, expected: list[str]) -> RenderableType:
             continue
         health.add_row(
             name, str(h.messages_in), str(h.messages_out), str(h.dropped), str(h.skipped),
-            str(h.malformed), str(h.errors), h.last_error[:40],
+            str(h.malformed), str(h.errors), str(h.restarts), h.last_error[:40],
         )  # fmt: skip
     parts: list[RenderableType] = [health]
     post = monitor.posterior

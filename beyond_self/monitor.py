@@ -19,6 +19,7 @@ from typing import Any
 from beyond_self.cognition.episodes import GestureReport
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.delivery import FRAMES, RELIABLE
+from beyond_self.runtime.ledger import Handled
 from beyond_self.runtime.subscription import Received, consume
 from beyond_self.schemas import (
     ActionPosterior,
@@ -31,6 +32,7 @@ from beyond_self.schemas import (
     ServiceHealth,
     StreamEnd,
 )
+from beyond_self.schemas.identity import identify
 
 log = logging.getLogger("beyond.monitor")
 
@@ -55,6 +57,8 @@ class PipelineMonitor:
         self.changed = asyncio.Event()
         self.last_message = time.monotonic()
         self.moving = False  # a service has handled a sensor message, or published
+        self.handled = Handled()
+        self.duplicates = 0  # results received again (and not shown again)
         self._tasks: list[asyncio.Task[None]] = []
 
     def start(self) -> None:
@@ -74,9 +78,19 @@ class PipelineMonitor:
             # derived streams may cross a link (robot <-> workstation): recover what it loses
             delivery = RELIABLE if cls in (ServiceHealth, Progress) else FRAMES
             sub = self.bus.subscribe(key, cls, delivery)
-            self._tasks.append(
-                loop.create_task(consume(sub, handler, self._failed, after=self._seen))
-            )
+            work = consume(sub, handler, self._failed, before=self._seen, accept=self._fresh)
+            self._tasks.append(loop.create_task(work))
+
+    def _fresh(self, received: Received[Any]) -> bool:
+        """Each result once (runtime.ledger): a restarted service's repeats, or a cache's after
+        a cut link, would otherwise change the lines (a belief from an earlier frame again)."""
+        ident = identify(received.key, received.message)
+        if ident is None:
+            return True
+        if self.handled.add(received.key, ident):
+            return True
+        self.duplicates += 1
+        return False
 
     def _seen(self, received: Received[Any]) -> None:
         if not isinstance(received.message, ServiceHealth | Progress):

@@ -1,21 +1,30 @@
 """What went wrong in a service, counted and logged once: bad input never stops a service.
 
 A payload that does not decode is counted as malformed; an exception of a handler, a timer, a
-task, a queryable or the teardown is counted as an error. Each distinct (key, reason) is logged
-once (a flood of one bad message must not become a flood of log lines), every reason is cut to
-one bounded line (a hostile payload's error, a 5,000-joint frame's list of joint names, must not
-become a 95 KB log line that a reader chokes on), and the last one is kept for health reports.
+task, a queryable or the teardown is counted as an error. Each distinct problem is logged once
+per key (a flood of one bad message must not become a flood of log lines), every reason is cut
+to one bounded line (a hostile payload's error, a 5,000-joint frame's list of joint names, must
+not become a 95 KB log line that a reader chokes on), and the last one is kept for health
+reports.
+
+"Distinct" means what went wrong, not which message it happened to: reasons are told apart by
+their wording with every number taken out (`shape`), so "frame 363 stamped 1546... is not after
+the previous frame" and the same complaint about frame 364 are one problem, logged once, however
+many frames a restart or a damaged stream repeats it for (one restart used to log 366 lines).
+The ones not logged are counted (`repeats`) and their total is logged when the service stops.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.log import event
 
 REASON_MAX = 500  # characters of a logged reason (and of ServiceHealth.last_error)
 _MAX_REMEMBERED_REASONS = 1000
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
 def bounded(text: str, limit: int = REASON_MAX) -> str:
@@ -26,6 +35,30 @@ def bounded(text: str, limit: int = REASON_MAX) -> str:
     return f"{text[: limit - 30]}... ({len(text)} characters)"
 
 
+def shape(reason: str) -> str:
+    """`reason` with every number replaced by '#': what went wrong, whichever message it was."""
+    return _NUMBER.sub("#", reason)
+
+
+class LogOnce:
+    """Says whether a (key, reason) is the first of its shape: the one rule by which services
+    and the recorder decide what to log. Remembers at most _MAX_REMEMBERED_REASONS shapes
+    (beyond that, new ones are logged every time rather than remembered without bound)."""
+
+    def __init__(self) -> None:
+        self._seen: set[tuple[str, str]] = set()
+        self.repeats = 0  # occurrences not logged because one of the same shape was
+
+    def first(self, key: str, reason: str) -> bool:
+        item = (key, shape(reason))
+        if item in self._seen:
+            self.repeats += 1
+            return False
+        if len(self._seen) < _MAX_REMEMBERED_REASONS:
+            self._seen.add(item)
+        return True
+
+
 class ErrorAccount:
     def __init__(self, log: logging.Logger, service: str) -> None:
         self.log = log
@@ -33,20 +66,13 @@ class ErrorAccount:
         self.errors = 0
         self.malformed_other = 0  # malformed input outside the subscriptions (a query)
         self.last_error = ""
-        self._seen: set[tuple[str, str]] = set()
-
-    def _first_time(self, key: str, reason: str) -> bool:
-        if (key, reason) in self._seen:
-            return False
-        if len(self._seen) < _MAX_REMEMBERED_REASONS:
-            self._seen.add((key, reason))
-        return True
+        self.once = LogOnce()
 
     def malformed(self, key: str, error: Exception) -> None:
         """A payload on `key` that does not decode (counted by its subscription)."""
         key, reason = bounded(key, 200), bounded(str(error))
         self.last_error = reason
-        if self._first_time(key, reason):
+        if self.once.first(key, reason):
             event(self.log, logging.WARNING, "malformed payload skipped", key=key, reason=reason)
 
     def error(self, key: str, exc: BaseException) -> None:
@@ -56,7 +82,7 @@ class ErrorAccount:
         self.last_error = bounded(f"{type(exc).__name__}: {exc}")
         if isinstance(exc, InputError):
             reason = bounded(str(exc))
-            if self._first_time(key, reason):
+            if self.once.first(key, reason):
                 event(self.log, logging.WARNING, "bad input skipped", key=key, reason=reason)
         else:
             self.log.error(

@@ -6,9 +6,11 @@ refuses at run time any key it did not declare, so these rules and the code cann
 From them, `access_control()` builds the block of a Zenoh router's configuration:
 
 - default deny; a subject is a certificate's common name (runtime/keystore.py);
-- a service may put only on its outputs (and its own health), declare subscribers only on its
-  inputs and receive only those, serve only its queryables (and its health), declare only its
-  own liveliness token, and watch the others' (ingest waits for its consumers). It hears of
+- a service may put only on its outputs (and its own health, Progress and Ledger), declare
+  subscribers only on its inputs (and everyone's Progress and Ledger) and receive only those,
+  serve only its queryables (and its health, its Progress and the ledgers, which every service
+  answers for: runtime.ledger), declare only its own liveliness token, and watch the others'
+  (ingest waits for its consumers). It hears of
   every subscription and query, wildcards included: a client publishes only what it knows
   someone subscribes to, so a reader of `beyond/robot/**` must be announced to every publisher;
   hearing of an interest reveals no data, and the put and reply rules are unchanged;
@@ -37,11 +39,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from beyond_self.core.errors import InputError, unknown
-from beyond_self.schemas.keys import ALIVE, ASK, HEALTH, PREFIX, PROGRESS, STREAMS
+from beyond_self.schemas.keys import ALIVE, ASK, HEALTH, LEDGER, PREFIX, PROGRESS, STREAMS
 
-# queryable name -> key suffix after beyond/<robot>/; "progress": a player answering restarted
-# services with their predecessor's last Progress (runtime/pacing.py)
-QUERYABLES: dict[str, str] = {"ask": ASK, "progress": f"{PROGRESS}/*"}
+# queryable name -> key suffix after beyond/<robot>/ (besides every service's own health and
+# Progress, answered by each service for itself)
+QUERYABLES: dict[str, str] = {"ask": ASK}
 TOOLS_ROLE = "tools"
 SIDE_MONITORS: dict[str, tuple[str, ...]] = {  # side identity -> its monitors' liveliness names
     "robot": ("monitor-robot",),
@@ -176,12 +178,15 @@ def access_control(
     own: dict[str, list[str]] = {}
     for d in declarations:
         health = [_key(f"{HEALTH}/{d.name}")]
-        # every service reports its own Progress and may read and ask everyone's (pacing,
-        # resuming): how far each stream is handled, never any data; and every service may
-        # follow a replay's clock (runtime.clock)
-        outputs = _stream_keys(d.publishes) + health + [_key(f"{PROGRESS}/{d.name}")]
-        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*"), _key(STREAMS["clock"][0])]
-        serves = [_key(QUERYABLES[q]) for q in d.serves] + health
+        progress = [_key(f"{PROGRESS}/{d.name}")]  # its own Progress, answered to players
+        ledgers = [_key(f"{LEDGER}/*")]  # everyone's ledger, kept and answered for by all
+        # every service reports its own Progress and Ledger and may read and ask everyone's
+        # (pacing, resuming, exactly once): what each has handled, never any data; and every
+        # service may follow a replay's clock (runtime.clock)
+        outputs = [*_stream_keys(d.publishes), *health, *progress, _key(f"{LEDGER}/{d.name}")]
+        clock = _key(STREAMS["clock"][0])
+        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*"), *ledgers, clock]
+        serves = [_key(QUERYABLES[q]) for q in d.serves] + health + progress + ledgers
         own[d.name] = rules.role(
             d.name,
             [
@@ -235,15 +240,18 @@ def check_declared(name: str, cls: type, kind: str, key: str, robot_root: str) -
     """Refuse (InputError) a key service `name` of class `cls` did not declare for `kind`
     ("subscribe", "publish", "serve"): the rules are generated from the declarations, so a
     service must not use what it did not declare. A class that declares nothing is not checked
-    (it has no place on a secure bus). Progress and the stream clock may be read by all; a
-    health queryable served by all."""
+    (it has no place on a secure bus). Progress and the stream clock may be read by all; its own
+    health and Progress queryables served by all."""
     if all(getattr(cls, a, None) is None for a in ("subscribes", "publishes", "serves")):
         return
     if kind == "subscribe" and (
         key.startswith(f"{robot_root}/{PROGRESS}/") or key == f"{robot_root}/{STREAMS['clock'][0]}"
     ):
         return
-    if kind == "serve" and key == f"{robot_root}/{HEALTH}/{name}":
+    if kind == "serve" and key in (
+        f"{robot_root}/{HEALTH}/{name}",
+        f"{robot_root}/{PROGRESS}/{name}",
+    ):
         return
     allowed = declared_keys(declaration_of(name, cls), robot_root)[kind]
     if key not in allowed:

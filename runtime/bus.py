@@ -168,10 +168,20 @@ class Bus:
         return close
 
     async def query(
-        self, selector: str, cls: type[M], *, payload: Message | None = None, timeout: float = 2.0
+        self,
+        selector: str,
+        cls: type[M],
+        *,
+        payload: Message | None = None,
+        timeout: float = 2.0,
+        every: bool = False,
     ) -> list[Received[M]]:
-        """Ask every matching queryable; their well-formed replies (malformed ones raise)."""
-        return await queries.query(self.session, selector, cls, payload=payload, timeout=timeout)
+        """Ask every matching queryable; their well-formed replies (malformed ones raise).
+        `every`: all replies, also several on one key, and those of the queryables that did
+        answer when another did not (an error or a timeout is skipped, not raised)."""
+        return await queries.query(
+            self.session, selector, cls, payload=payload, timeout=timeout, every=every
+        )
 
     # --- liveliness ----------------------------------------------------------------------
 

@@ -19,19 +19,23 @@ every stream bounds that skew to the window.
 
 This decides only *when* the player sends, never what anyone outputs. A consumer whose
 liveliness token goes away (it crashed, or was killed) is waited for up to `restart_wait_s`,
-so one that is restarted finds the stream where it left it; it gets the frames it missed from
-the publishers' caches, and asks this pacer (a queryable on `progress/*`, answered with the last
-`Progress` each service sent) what its predecessor already published, so it does not publish
-that again (runtime.service.Service.resume). One that does not come back is no longer waited
-for: a player must not hang on a dead service. Both are wall-clock decisions, because they are
-about the machine, not the data.
+so one that is restarted finds the stream where it left it: it gets back what it needs from the
+publishers' caches and reports its progress afresh, and the waiting is on it, the consumer
+alive now, never on what its predecessor had left unhandled. One that does not come back is no
+longer waited for: a player must not hang on a dead service (one that comes back later is
+waited for again). Both are wall-clock decisions, because they are about the machine, not the
+data.
+
+A restarted player goes on where its consumers are: `handled_by_all` says, per key, the last
+stamp every consumer has handled (each answers for its own `Progress` on query).
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from beyond_self.runtime.bus import Bus
@@ -64,41 +68,85 @@ class Pacer:
         self.received: dict[str, dict[str, int]] = {}  # service -> key -> messages received
         self.waited_s = 0.0
         self.restart_wait_s = restart_wait_s
-        self.last: dict[str, Progress] = {}  # last Progress of each service
         self._gone_since: dict[str, float] = {}
+        self._gone: set[str] = set()  # consumers whose token went and has not come back
+        self.floor: dict[str, dict[str, int]] = {}  # consumer -> key -> last sent when it rejoined
+        self._unwatch: Callable[[], None] | None = None
+        self._relearn: asyncio.Task[None] | None = None
         self._moved = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
 
     async def start(self) -> None:
-        """Subscribe to progress, then learn what each (alive) consumer takes."""
+        """Subscribe to progress, then learn what each (alive) consumer takes and how far it
+        has got (its health and its Progress, asked)."""
         sub = self.bus.subscribe(self.bus.keys.progress(), Progress)
-
-        def on_progress(msg: Progress) -> None:
-            self.last[msg.service] = msg
-            mine = self.handled.setdefault(msg.service, {})
-            for key, stamp in msg.handled.items():
-                mine[key] = max(mine.get(key, -1), stamp)
-            self.published[msg.service] = dict(msg.published)
-            self.received[msg.service] = dict(msg.received)
-            self._moved.set()
 
         def failed(key: str, exc: Exception) -> None:
             log.warning("progress on %s not understood: %s", key, exc)
 
-        self._task = asyncio.get_running_loop().create_task(consume(sub, on_progress, failed))
+        self._task = asyncio.get_running_loop().create_task(consume(sub, self.heard, failed))
+        await asyncio.gather(*(self.learn(name) for name in self.names))
+        self._unwatch = self.bus.watch_tokens(self.bus.keys.alive("*"), self._token)
 
-        async def answer(key: str, _request: None) -> Progress | None:
-            return self.last.get(key.rsplit("/", 1)[-1])
+    def _token(self, key: str, present: bool) -> None:
+        """A consumer's liveliness token came or went: one that comes back after going is a
+        new instance, waited for from now on (`rejoined`)."""
+        name = key.rsplit("/", 1)[-1]
+        if name not in self.names:
+            return
+        if not present:
+            self._gone.add(name)
+        elif name in self._gone:
+            self._gone.discard(name)
+            self.rejoined(name)
 
-        self._close_queryable = self.bus.queryable(self.bus.keys.progress("*"), None, answer)
-        for name in self.names:
-            for reply in await self._health(name):
-                health = reply.message
-                taken = set(health.inputs) & self.keys
-                if taken:
-                    self.takes[name] = taken
-                if self.bus.keys.progress(name) in health.outputs:
-                    self.handled.setdefault(name, {})  # it reports: wait for it from now
+    def rejoined(self, name: str) -> None:
+        """Consumer `name` was replaced: what its predecessor handled no longer says anything
+        about it, and what was sent before it came back is waited for only as far as it gets
+        it back (a publisher's cache): the player waits on the instance alive now, for what is
+        sent from now on. Where a dead one's handling stopped is not a place anyone will pass
+        again (a restarted gesture streamer without history used to stall the source there)."""
+        self._gone_since.pop(name, None)
+        if name in self.handled:
+            self.handled[name] = {}
+        self.received.pop(name, None)
+        self.floor[name] = dict(self.sent)
+        if name not in self.takes:  # it was given up on: learn it again
+            self._relearn = asyncio.get_running_loop().create_task(self.learn(name))
+        self._moved.set()
+
+    async def learn(self, name: str) -> None:
+        """What consumer `name` takes (its health) and how far it has got (its Progress)."""
+        for reply in await self._health(name):
+            health = reply.message
+            taken = set(health.inputs) & self.keys
+            if taken:
+                self.takes[name] = taken
+            if self.bus.keys.progress(name) in health.outputs:
+                self.handled.setdefault(name, {})  # it reports: wait for it from now
+                with contextlib.suppress(Exception):  # then its next report says it
+                    for got in await self.bus.query(self.bus.keys.progress(name), Progress):
+                        self.heard(got.message)
+
+    def heard(self, msg: Progress) -> None:
+        mine = self.handled.setdefault(msg.service, {})
+        for key, stamp in msg.handled.items():
+            mine[key] = max(mine.get(key, -1), stamp)
+        self.published[msg.service] = dict(msg.published)
+        self.received[msg.service] = dict(msg.received)
+        self._moved.set()
+
+    def handled_by_all(self) -> dict[str, int]:
+        """Per paced key, the last stamp every consumer taking it has handled (-1: none yet):
+        where a restarted player goes on."""
+        done: dict[str, int] = {}
+        for name, taken in self.takes.items():
+            handled = self.handled.get(name)
+            if handled is None:
+                continue
+            for key in taken:
+                done[key] = min(done.get(key, handled.get(key, -1)), handled.get(key, -1))
+        return done
 
     async def _health(self, name: str) -> list[Any]:
         """The health reply of a consumer, asked again while it times out: on a busy machine
@@ -119,7 +167,10 @@ class Pacer:
     def stop(self) -> None:
         if self._task is not None:
             self._task.cancel()
-            self._close_queryable()
+        if self._unwatch is not None:
+            self._unwatch()
+        if self._relearn is not None:
+            self._relearn.cancel()
 
     def _behind(self, stamp: int) -> list[str]:
         published: dict[str, int] = {}
@@ -136,9 +187,13 @@ class Pacer:
             if name in behind or name not in self.handled:
                 continue
             handled = self.handled.get(name, {})
+            floor = self.floor.get(name, {})
             for key in taken:
                 last = self.sent.get(key)
-                if last is not None and handled.get(key, -1) < min(stamp - self.window_ns, last):
+                if last is None:
+                    continue
+                needed = min(stamp - self.window_ns, last)
+                if needed > floor.get(key, -1) and handled.get(key, -1) < needed:
                     behind.append(name)
                     break
         return behind
@@ -152,7 +207,11 @@ class Pacer:
             began = began or loop.time()
             self._moved.clear()
             try:
-                await asyncio.wait_for(self._moved.wait(), _CHECK_ALIVE_S)
+                # asyncio.timeout, not wait_for: Python 3.11's wait_for can swallow the
+                # cancellation that stops the service when the wait ends at the same moment,
+                # and the source then played on past its SIGTERM until it was killed
+                async with asyncio.timeout(_CHECK_ALIVE_S):
+                    await self._moved.wait()
             except TimeoutError:
                 for name in behind:
                     if await self.bus.live_tokens(self.bus.keys.alive(name)):

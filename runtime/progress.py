@@ -1,25 +1,20 @@
-"""How far a service has got: the `Progress` it publishes for players, and resuming after a
-restart.
+"""How far a service has got: the `Progress` it publishes for players.
 
-A service's `paced` inputs (sensor streams) are the ones a player paces itself on
-(runtime.pacing): after the handler of each message, so everything an input caused has been
-published before its progress says so, the service reports the stamp of the last message it
-handled per paced key, how many messages each subscription received and each publisher sent,
-and the last stamp each publisher sent. A report is stamped by the service's clock (the stream's
-on a replay, runtime.clock), like its health. A restarted instance asks the player for its
-predecessor's last report and does not publish again what was already published.
+A service's `paced` inputs (sensor streams) are the ones a player paces itself on (runtime.pacing):
+after the handler of each message, so everything an input caused has been published before its
+progress says so, the service reports the stamp of the last message it handled per paced key, how
+many messages each subscription received and each publisher sent, and the last stamp each publisher
+sent. A report is stamped by the service's clock (the stream's on a replay, runtime.clock), like
+its health. It also answers for it on query (`progress/<name>`), so a player that starts, or starts
+again after a crash, learns at once where every consumer is.
 """
 
 from __future__ import annotations
 
-import logging
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping
 
-from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.delivery import STATUS
-from beyond_self.runtime.log import event
 from beyond_self.runtime.publisher import Publisher
 from beyond_self.schemas.base import Header
 from beyond_self.schemas.messages import Progress
@@ -37,46 +32,33 @@ class ProgressReport:
         self.paced.add(key)
         self.handled.setdefault(key, -1)
 
-    def open(self, bus: Bus) -> None:
+    def open(self, bus: Bus, first: Progress) -> None:
         """Start reporting: never blocking (a subscriber across a dead link, a remote monitor,
         must not stall the pipeline); a dropped report is repaired by the next, or by the
         periodic one beside health."""
         self._pub = bus.publisher(bus.keys.progress(self.name), Progress, STATUS)
-        self._pub.put(
-            Progress(header=self._header(Progress), service=self.name, handled=self.handled)
-        )
+        self._pub.put(first)
 
     def handled_up_to(self, key: str, stamp: int) -> None:
         if key in self.paced:
             self.handled[key] = max(self.handled.get(key, -1), stamp)
 
-    def publish(self, publishers: Sequence[Publisher[Any]], received: dict[str, int]) -> None:
-        if self._pub is None:
-            return
-        self._pub.put(
-            Progress(
-                header=self._header(Progress),
-                service=self.name,
-                handled=self.handled,
-                published={p.key: p.sent for p in publishers},
-                received=received,
-                published_stamps={p.key: p.last_stamp for p in publishers},
-            )
+    def report(
+        self,
+        published: Mapping[str, int],
+        received: Mapping[str, int],
+        published_stamps: Mapping[str, int],
+    ) -> Progress:
+        """The Progress now: handled stamps, and the counts the caller gives."""
+        return Progress(
+            header=self._header(Progress),
+            service=self.name,
+            handled=dict(self.handled),
+            published=dict(published),
+            received=dict(received),
+            published_stamps=dict(published_stamps),
         )
 
-
-async def resume(
-    bus: Bus, name: str, publishers: Sequence[Publisher[Any]], log: logging.Logger
-) -> None:
-    """Suppress in `publishers` what a previous instance of `name` already published: the
-    player keeps the last `Progress` of every service it paces (runtime.pacing), which says up
-    to which stamp each output key was published. No player, no answer: nothing to skip."""
-    try:
-        replies = await bus.query(bus.keys.progress(name), Progress, timeout=2.0)
-    except (InputError, TimeoutError):
-        return
-    done = {k: v for r in replies for k, v in r.message.published_stamps.items()}
-    for pub in publishers:
-        pub.skip_until = max(pub.skip_until, done.get(pub.key, -1))
-    if any(v >= 0 for v in done.values()):
-        event(log, logging.INFO, "resuming after a previous instance", **done)
+    def publish(self, progress: Progress) -> None:
+        if self._pub is not None:
+            self._pub.put(progress)

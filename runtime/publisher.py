@@ -5,9 +5,9 @@ With `delivery.cache`, the publisher is a zenoh-ext advanced publisher that keep
 detection), sends a sporadic heartbeat with the last number, and declares itself with a
 liveliness token (publisher detection). Without, it is a plain Zenoh publisher.
 
-A restarted service must not publish again what its predecessor already did (its inputs come
-back from caches): `skip_until` holds the last stamp published before, and `put` suppresses
-messages stamped at or before it (runtime.progress sets it).
+A restarted service need not publish again what its consumers already have (it re-derives its
+outputs from inputs that come back from caches): with `suppress` set (the Service base sets it,
+runtime.ledger), `put` skips, and counts, a message every consumer of the key has handled.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
+from collections.abc import Callable
 from typing import Generic, TypeVar
 
 import zenoh
@@ -73,7 +74,7 @@ class Publisher(Generic[M]):
         self.delivery = delivery
         self.sent = 0
         self.last_stamp = -1  # of the last message sent
-        self.skip_until = -1  # messages stamped at or before this are not sent (a restart)
+        self.suppress: Callable[[str, Message], bool] | None = None  # consumers have it already
         self.suppressed = 0
         self._owner = threading.get_ident()
         # One buffer reused for every put (Zenoh copies it before `put` returns): no fresh block
@@ -86,11 +87,10 @@ class Publisher(Generic[M]):
     def put(self, message: M) -> None:
         if type(message) is not self.cls:
             raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
-        stamp = message.header.stamp
-        if stamp <= self.skip_until:
-            self.suppressed += 1  # a previous instance of this service already published it
+        if self.suppress is not None and self.suppress(self.key, message):
+            self.suppressed += 1  # handled by every consumer, sent by a previous instance
             return
-        self.last_stamp = stamp
+        self.last_stamp = message.header.stamp
         if self._reuse and threading.get_ident() == self._owner:
             buffer = self._buffer
             encode_into(message, buffer)

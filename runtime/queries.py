@@ -94,8 +94,11 @@ async def query(
     *,
     payload: Message | None = None,
     timeout: float = 2.0,
+    every: bool = False,
 ) -> list[Received[M]]:
-    """Ask every matching queryable; their well-formed replies (malformed ones raise)."""
+    """Ask every matching queryable; their well-formed replies (malformed ones raise). With
+    `every`, replies on one key are not consolidated into the latest, and an error reply (a
+    queryable that failed, a timeout) is skipped rather than raised."""
     loop = asyncio.get_running_loop()
     inbox: Inbox[zenoh.Reply] = Inbox(loop, 4096)
     done = loop.create_future()
@@ -109,16 +112,22 @@ async def query(
             loop.call_soon_threadsafe(resolve)
 
     kwargs: dict[str, Any] = {"timeout": timeout}
+    if every:
+        kwargs["consolidation"] = zenoh.ConsolidationMode.NONE
+        kwargs["target"] = zenoh.QueryTarget.ALL
     if payload is not None:
         kwargs["payload"] = encode(payload)
         kwargs["encoding"] = zenoh.Encoding(wire_encoding(type(payload)))
     session.get(selector, zenoh.handlers.Callback(inbox.push, finished), **kwargs)
-    await asyncio.wait_for(done, timeout + 1.0)
+    async with asyncio.timeout(timeout + 1.0):  # not wait_for: see runtime.pacing
+        await done
     replies: list[Received[M]] = []
     while len(inbox):
         reply = await inbox.get(0)
         sample = reply.ok
         if sample is None:
+            if every:
+                continue
             err = reply.err
             detail = err.payload.to_string() if err is not None else "?"
             raise InputError(f"query {selector} answered with an error: {detail}")

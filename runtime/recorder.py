@@ -7,6 +7,7 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
+from beyond_self.runtime.accounting import LogOnce
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.log import event
 from beyond_self.runtime.recording_writer import DEFAULT_CHUNK_SIZE, RecordingWriter
@@ -38,14 +39,14 @@ async def record(
     foxglove_views: bool = False,
 ) -> RecordStats:
     """Write every sample on `keys` to `path` until `stop` is set, `duration` s passed or `count`
-    messages are written. Malformed samples on our keys are logged once per (key, reason),
+    messages are written. Malformed samples on our keys are logged once per problem and key,
     counted and skipped. `ready` is set once the subscribers are declared. `foxglove_views`:
     also write the Foxglove views (RecordingWriter)."""
     loop = asyncio.get_running_loop()
     stop = stop or asyncio.Event()
     deadline = None if duration is None else loop.time() + duration
     stats = RecordStats()
-    seen: set[tuple[str, str]] = set()
+    once = LogOnce()
     sub = bus.subscribe_raw(keys, maxsize=65536)
     writer = RecordingWriter(
         path,
@@ -82,8 +83,7 @@ async def record(
                 stats.messages += 1
             except SchemaError as exc:
                 stats.malformed += 1
-                if (sample.key, str(exc)) not in seen:
-                    seen.add((sample.key, str(exc)))
+                if once.first(sample.key, str(exc)):
                     event(
                         log,
                         logging.WARNING,

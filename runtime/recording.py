@@ -1,25 +1,25 @@
-"""Reading MCAP recordings (also truncated or damaged ones: what is readable, then one line
-saying where it breaks) and inspecting them; the format is runtime.recording_format's, the
-writer runtime.recording_writer."""
+"""Reading MCAP recordings and inspecting them; the format is runtime.recording_format's, the
+writer runtime.recording_writer. Damaged files are read past their damage
+(runtime.recording_scan), and what could not be played is said in one line
+(runtime.recording_damage): the one policy of every command that reads a recording."""
 
 from __future__ import annotations
 
 import heapq
-import io
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.records import Channel, Chunk, Footer, Metadata, Schema
+from mcap.records import Channel, Metadata, Schema, Statistics
 from mcap.records import Header as McapHeader
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.mcap_chunk import chunk_records
+from beyond_self.runtime.recording_damage import Losses
 from beyond_self.runtime.recording_format import JSON, META_FORM, META_TYPE, META_VIEW
+from beyond_self.runtime.recording_scan import Walk, mapped
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import (
     RECORDING_JSON_FORM,
@@ -75,31 +75,40 @@ class RecordingInfo:
     end: int | None = None
     complete: bool = False  # summary and footer present (the writer finished)
     readable_bytes: int = 0  # bytes up to the end of the last record read intact
-    error: str = ""
     library: str = ""
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    losses: Losses = field(default_factory=lambda: Losses(""))
 
     @property
     def duration_s(self) -> float:
         return 0.0 if self.start is None or self.end is None else (self.end - self.start) / 1e9
 
+    @property
+    def error(self) -> str:
+        """The damage in one line ("" for an intact file)."""
+        return self.losses.line() if self.losses.any else ""
+
     def damage(self) -> str:
-        """One line saying what is wrong and what is readable."""
-        return (
-            f"{self.path} is truncated or corrupt at byte {self.readable_bytes} of {self.size} "
-            f"({self.error}); readable: {self.messages} messages in {self.chunks} complete "
-            f"chunks, {self.duration_s:.3f} s"
-        )
+        """One line saying what was lost and what is readable (runtime.recording_damage)."""
+        return self.losses.line()
 
 
 class _Scanner:
-    """Sequential pass over an MCAP file that stops at the first damaged record."""
+    """One pass over an MCAP file, past damaged chunks (runtime.recording_scan), keeping the
+    schemas and channels it meets and counting what it reads."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, losses: Losses | None = None) -> None:
         self.path = Path(path)
         if not self.path.is_file():
             raise InputError(f"recording {self.path} does not exist")
-        self.info = RecordingInfo(path=str(self.path), size=self.path.stat().st_size)
+        size = self.path.stat().st_size
+        self.info = RecordingInfo(path=str(self.path), size=size)
+        if losses is not None:
+            losses.path, losses.size = str(self.path), size
+            self.info.losses = losses
+        else:
+            self.info.losses = Losses(str(self.path), size)
+        self.counts: dict[int, ChannelInfo] = {}
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.types: dict[int, type[Message] | None] = {}
@@ -108,40 +117,44 @@ class _Scanner:
 
     def messages(self) -> Iterator[tuple[Channel, McapMessage]]:
         info = self.info
-        with open(self.path, "rb") as raw:
-            f = io.BufferedReader(raw, buffer_size=1 << 20)
-            reader = StreamReader(f, emit_chunks=True, validate_crcs=True)
-            try:
-                for record in reader.records:
-                    if isinstance(record, Chunk):
-                        inner = chunk_records(record)
-                        info.chunks += 1
-                        info.readable_bytes = f.tell()
-                        for rec in inner:
-                            yield from self._handle(rec)
-                        continue
-                    yield from self._handle(record)
-                    info.readable_bytes = f.tell()
-                    if isinstance(record, Footer):
-                        info.complete = True
-            except Exception as exc:  # any damage: stop, keep what was read
-                info.error = _describe(exc, f.tell(), info.size)
-                info.complete = False
-        if info.complete:
-            info.readable_bytes = info.size
+        with mapped(self.path) as data:
+            walk = Walk(data, info.losses)
+            require_magic(self.path, data)
+            walk.read_summary()
+            for record in walk.summary:
+                yield from self._handle(record)
+            for record in walk.records():
+                yield from self._handle(record)
+            info.chunks = walk.chunks
+            info.complete = walk.complete
+            info.readable_bytes = walk.readable
 
     def _handle(self, record: Any) -> Iterator[tuple[Channel, McapMessage]]:
         info = self.info
         if isinstance(record, McapMessage):
             channel = self.channels.get(record.channel_id)
-            if channel is None:
-                raise InputError(f"message on unknown channel {record.channel_id}")
-            # counted here, so every reader's damage report says what it read (not 0)
             t = record.publish_time
+            info.losses.read += 1
+            if info.losses.first_stamp is None:
+                info.losses.first_stamp = t
+            if channel is None:
+                info.losses.drop(
+                    "on a channel no readable record defines",
+                    f"channel {record.channel_id} at {info.losses.at(t)}",
+                )
+                return
+            # counted here, so every reader's damage report says what it read (not 0)
             info.messages += 1
             info.start = t if info.start is None else min(info.start, t)
             info.end = t if info.end is None else max(info.end, t)
+            ci = self.counts[channel.id]
+            ci.count += 1
+            ci.first_stamp = t if ci.first_stamp is None else min(ci.first_stamp, t)
+            ci.last_stamp = t if ci.last_stamp is None else max(ci.last_stamp, t)
             yield channel, record
+        elif isinstance(record, Statistics):
+            if record.message_count and info.losses.first_stamp is None:
+                info.losses.first_stamp = record.message_start_time
         elif isinstance(record, Schema):
             self.schemas[record.id] = record
         elif isinstance(record, Channel):
@@ -157,36 +170,42 @@ class _Scanner:
                     self.views.add(record.id)
                 form = record.metadata.get(META_FORM, "1")
                 self.forms[record.id] = int(form) if form.isdigit() else -1
-                info.channels.append(
-                    ChannelInfo(
-                        topic=record.topic,
-                        message_encoding=record.message_encoding,
-                        schema_name=schema.name if schema else "",
-                        schema_encoding=schema.encoding if schema else "",
-                    )
+                counts = ChannelInfo(
+                    topic=record.topic,
+                    message_encoding=record.message_encoding,
+                    schema_name=schema.name if schema else "",
+                    schema_encoding=schema.encoding if schema else "",
                 )
+                same = [c for c in info.channels if (c.topic, c.message_encoding) == (
+                    counts.topic, counts.message_encoding)]  # fmt: skip
+                if same:  # one topic in one encoding is one channel to a reader
+                    counts = same[0]
+                else:
+                    info.channels.append(counts)
+                self.counts[record.id] = counts
         elif isinstance(record, McapHeader):
             info.library = record.library
         elif isinstance(record, Metadata):
             info.metadata[record.name] = dict(record.metadata)
 
 
-def _describe(exc: Exception, at: int, size: int) -> str:
-    name = type(exc).__name__
-    text = " ".join(str(exc).split())
-    if at >= size:
-        return f"ends inside a record ({name}{': ' + text if text else ''})"
-    return f"{name}{': ' + text if text else ''}"
+def require_magic(path: Path, head: bytes | Any) -> None:
+    """InputError unless `head` (a file's first bytes) starts an MCAP recording: the one line
+    every command says about an empty file or one that is no recording."""
+    if len(head) == 0:
+        raise InputError(f"{path} is empty; valid: an MCAP recording")
+    if head[: len(MCAP0_MAGIC)] != MCAP0_MAGIC:
+        raise InputError(f"{path} is not an MCAP recording (it does not start with the MCAP magic)")
 
 
 def require_mcap(path: str | Path) -> Path:
-    """`path` is a readable MCAP file with a readable message (or undamaged and empty), else an
+    """`path` is an MCAP file with a readable message (or undamaged and empty), else an
     InputError.
 
     A cheap check (it reads up to the first message) before a command joins the bus or starts
-    its work: a file that is no recording, or damaged before its first message, is refused
-    first, on one line, rather than after a warning that 0 messages are readable (damage later
-    in the file is reported by the readers, with what they read)."""
+    its work: a file that is no recording, or has nothing readable, is refused first, on one
+    line (damage after the first readable message is reported by the readers, with what they
+    read)."""
     p = Path(path)
     try:
         with open(p, "rb") as f:
@@ -197,32 +216,22 @@ def require_mcap(path: str | Path) -> Path:
         raise InputError(f"recording {p} is a folder; valid: an MCAP file") from None
     except OSError as exc:
         raise InputError(f"cannot read recording {p}: {exc.strerror}") from None
-    if head != MCAP0_MAGIC:
-        raise InputError(f"{p} is not an MCAP recording (it does not start with the MCAP magic)")
+    require_magic(p, head)
     scanner = _Scanner(p)
-    for _ in scanner.messages():  # stops at the first message: a chunk read at most
+    for _ in scanner.messages():  # stops at the first message: a chunk or two read at most
         return p
-    if scanner.info.error:
+    if scanner.info.losses.any:
         raise InputError(f"nothing readable: {scanner.info.damage()}")
     return p
 
 
 def inspect_recording(path: str | Path) -> RecordingInfo:
-    """Channels, schemas, counts and time range; never raises for damage (see `.error`)."""
+    """Channels, schemas, counts and time range, and what is lost (`.losses`): every message
+    is read and decoded, so a message that would be dropped when played is counted here too.
+    Never raises for damage (see `.error`); InputError for a file that is no recording."""
     scanner = _Scanner(path)
-    by_id: dict[int, ChannelInfo] = {}
-    for channel, msg in scanner.messages():
-        ci = by_id.get(channel.id)
-        if ci is None:
-            ci = by_id[channel.id] = next(
-                c
-                for c in scanner.info.channels
-                if c.topic == channel.topic and c.message_encoding == channel.message_encoding
-            )
-        ci.count += 1
-        t = msg.publish_time
-        ci.first_stamp = t if ci.first_stamp is None else min(ci.first_stamp, t)
-        ci.last_stamp = t if ci.last_stamp is None else max(ci.last_stamp, t)
+    for _ in decoded(_sorted(scanner, views=True), scanner.info.losses):
+        pass
     return scanner.info
 
 
@@ -243,38 +252,31 @@ def _matcher(patterns: Iterable[str] | None) -> Callable[[str], bool]:
     return match
 
 
-def read_recording(
-    path: str | Path,
-    *,
-    topics: Iterable[str] | None = None,
-    start: float | None = None,
-    end: float | None = None,
-    reorder_window: float = 2.0,
-    on_damage: Callable[[RecordingInfo], None] | None = None,
+NOT_AFTER = "stamp not after the previous one on its key"
+UNDECODABLE = "does not decode, or a value out of range"
+
+
+def _sorted(
+    scanner: _Scanner, *, reorder_window: float = 2.0, views: bool = False
 ) -> Iterator[RecordedMessage]:
-    """Messages in stamp (publish_time) order. `topics`: key expressions to keep; `start`/`end`:
-    seconds from the first stamp of the recording. Files are read in one sequential pass;
-    out-of-order stamps are sorted within `reorder_window` s of receive time. A damaged file
-    yields what is readable, then calls `on_damage(info)` (default: raise InputError)."""
-    scanner = _Scanner(path)
-    keep = _matcher(topics)
+    """Every readable message in publish_time order (sorted within `reorder_window` s of log
+    time), a message whose publish_time is not after the previous one on its key dropped and
+    counted (runtime.recording_damage: what no consumer could take)."""
+    losses = scanner.info.losses
     window = int(reorder_window * 1e9)
     heap: list[tuple[int, int, RecordedMessage]] = []
-    t0: int | None = None
+    last: dict[str, int] = {}
 
-    def admit(item: RecordedMessage) -> bool:
-        nonlocal t0
-        if t0 is None:
-            t0 = item.publish_time
-        rel = (item.publish_time - t0) / 1e9
-        if start is not None and rel < start:
+    def in_order(item: RecordedMessage) -> bool:
+        previous = last.get(item.key)
+        if previous is not None and item.publish_time <= previous:
+            losses.drop(NOT_AFTER, f"{item.key} at {losses.at(item.publish_time)}")
             return False
-        if end is not None and rel > end:
-            return False
-        return keep(item.key)
+        last[item.key] = item.publish_time
+        return True
 
     for counter, (channel, msg) in enumerate(scanner.messages()):
-        if channel.id in scanner.views:
+        if channel.id in scanner.views and not views:
             continue  # derived for viewers; the messages it came from are replayed
         item = RecordedMessage(
             key=channel.topic,
@@ -288,13 +290,74 @@ def read_recording(
         heapq.heappush(heap, (item.publish_time, counter, item))
         while heap and heap[0][0] <= msg.log_time - window:
             ready = heapq.heappop(heap)[2]
-            if admit(ready):
+            if in_order(ready):
                 yield ready
     while heap:
         ready = heapq.heappop(heap)[2]
-        if admit(ready):
+        if in_order(ready):
             yield ready
-    if scanner.info.error:
+
+
+def decoded(
+    items: Iterable[RecordedMessage], losses: Losses
+) -> Iterator[tuple[RecordedMessage, Message | None]]:
+    """Each item with its decoded message (None: a sample not ours, kept raw). One that does
+    not decode, or holds a value out of its bounds (a NaN joint), or whose header stamp is not
+    after the previous one on its key, is dropped and counted in `losses`: one bad frame is
+    not the end of the source."""
+    last: dict[str, int] = {}
+    for item in items:
+        if item.cls is None:
+            yield item, None
+            continue
+        try:
+            message = item.message()
+        except InputError as exc:
+            losses.drop(UNDECODABLE, f"{item.key} at {losses.at(item.publish_time)}: {exc}")
+            continue
+        stamp, previous = message.header.stamp, last.get(item.key)
+        if previous is not None and stamp <= previous:
+            losses.drop(NOT_AFTER, f"{item.key} at {losses.at(item.publish_time)}")
+            continue
+        last[item.key] = stamp
+        yield item, message
+
+
+def read_recording(
+    path: str | Path,
+    *,
+    topics: Iterable[str] | None = None,
+    start: float | None = None,
+    end: float | None = None,
+    reorder_window: float = 2.0,
+    on_damage: Callable[[RecordingInfo], None] | None = None,
+    losses: Losses | None = None,
+) -> Iterator[RecordedMessage]:
+    """Messages in stamp (publish_time) order. `topics`: key expressions to keep; `start`/`end`:
+    seconds from the first stamp of the recording. Files are read in one sequential pass;
+    out-of-order stamps are sorted within `reorder_window` s of log time. A damaged file yields
+    everything readable (runtime.recording_scan), then calls `on_damage(info)` (default: raise
+    InputError with the one line). With `losses`, what was lost is tallied there instead and
+    left to the caller to report (after `decoded` has added what it drops)."""
+    scanner = _Scanner(path, losses)
+    keep = _matcher(topics)
+    t0: int | None = None
+
+    def admit(item: RecordedMessage) -> bool:
+        nonlocal t0
+        if t0 is None:
+            t0 = item.publish_time
+        rel = (item.publish_time - t0) / 1e9
+        if start is not None and rel < start:
+            return False
+        if end is not None and rel > end:
+            return False
+        return keep(item.key)
+
+    for item in _sorted(scanner, reorder_window=reorder_window):
+        if admit(item):
+            yield item
+    if losses is None and scanner.info.losses.any:
         if on_damage is None:
             raise InputError(scanner.info.damage())
         on_damage(scanner.info)

@@ -24,21 +24,25 @@ import logging
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+import msgspec
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.clock import ClockTicks
 from beyond_self.runtime.delivery import STATUS
 from beyond_self.runtime.pacing import Pacer
-from beyond_self.runtime.recording import RecordedMessage, RecordingInfo, read_recording
+from beyond_self.runtime.recording import RecordedMessage, decoded, read_recording
+from beyond_self.runtime.recording_damage import Losses
 from beyond_self.runtime.replay_control import ReplayControl, check_rate
 from beyond_self.schemas.base import Header, Message
-from beyond_self.schemas.codec import encode_into, wire_encoding
+from beyond_self.schemas.codec import encode_into, shift_stamps, wire_encoding
 from beyond_self.schemas.keys import STREAMS, Keys, split_key, with_robot
-from beyond_self.schemas.messages import StreamClock
+from beyond_self.schemas.messages import StreamClock, Time
 
 log = logging.getLogger("beyond.replay")
+M = TypeVar("M", bound=Message)
 YIELD_EVERY = 32  # messages sent without sleeping before the event loop gets a turn
 
 
@@ -76,21 +80,75 @@ class Cue:
             return self.recorded.message()  # raises, naming the channel
         raise InputError(f"cue on {self.key} carries no message")
 
+    def shifted(self, offset: int) -> Cue:
+        """This cue `offset` ns later, its message restamped (a sample not ours is sent as
+        recorded: only its time moves)."""
+        if offset == 0:
+            return self
+        message = None if self.message is None else restamped(self.message, offset)
+        return Cue(self.at + offset, self.key, self.stamp + offset, message, self.recorded)
+
+
+def restamped(message: M, offset: int) -> M:
+    """`message` moved `offset` ns later: every stamp it holds (schemas.codec.shift_stamps) and
+    a camera frame's `timestamp` (which must equal its header stamp)."""
+    moved = shift_stamps(message, offset)
+    if isinstance(getattr(moved, "timestamp", None), Time):
+        return msgspec.structs.replace(moved, timestamp=Time.from_ns(moved.header.stamp))
+    return moved
+
 
 def recorded_cues(
-    items: Iterable[RecordedMessage], rename: Callable[[str], str | None] | None = None
+    items: Iterable[RecordedMessage],
+    rename: Callable[[str], str | None] | None = None,
+    losses: Losses | None = None,
 ) -> Iterator[Cue]:
     """Cues for recorded messages, ours decoded once (the stamp to pace on and the message to
-    send come from the same decoding). rename: the key to send a recorded key on, None to skip."""
-    for item in items:
+    send come from the same decoding). rename: the key to send a recorded key on, None to skip.
+    A message that does not decode, or whose stamp does not move forward on its key, is
+    dropped and counted in `losses` (runtime.recording.decoded): it is not the end of the
+    source."""
+    for item, message in decoded(items, losses if losses is not None else Losses("")):
         key = item.key if rename is None else rename(item.key)
         if key is None:
             continue
-        if item.cls is None:
-            yield Cue(item.publish_time, key, item.publish_time, None, item)
-        else:
-            message = item.message()
-            yield Cue(item.publish_time, key, message.header.stamp, message, item)
+        stamp = item.publish_time if message is None else message.header.stamp
+        yield Cue(item.publish_time, key, stamp, message, item)
+
+
+LOOP_GAP_S = 1.0  # between one pass of a looped source and the next
+
+
+def looped(
+    passes: Callable[[], Iterable[Cue]],
+    *,
+    loop: bool,
+    span: tuple[int, int] | None = None,
+    resume_at: int | None = None,
+) -> Iterator[Cue]:
+    """The cues of one pass (`passes()` makes them), or with `loop` pass after pass for ever,
+    each restamped `span` (first and last stamp of a pass) plus LOOP_GAP_S later than the one
+    before: stamps keep increasing, so consumers take every pass (the same stamps again would
+    be refused as going backwards) and a looped source plays for ever. `resume_at`: start with
+    the pass that holds this (restamped) stamp, where a restarted source's consumers are."""
+    period = None if span is None else span[1] - span[0] + round(LOOP_GAP_S * 1e9)
+    index = 0
+    if loop and resume_at is not None and span is not None and period:
+        index = max(0, (resume_at - span[0]) // period)
+    while True:
+        sent = 0
+        first = last = None
+        for cue in passes():
+            first = cue.at if first is None else first
+            last = cue.at
+            yield cue.shifted(index * period) if period else cue
+            sent += 1
+        if not loop or sent == 0:
+            return
+        if period is None:  # a source whose span was not known before its first pass
+            assert first is not None and last is not None
+            period = last - first + round(LOOP_GAP_S * 1e9)
+        index += 1
 
 
 class Player:
@@ -182,10 +240,10 @@ async def replay(
 ) -> ReplayStats:
     """Publish `path` on `bus` as recorded (`beyond replay`). rate: 2.0 = twice as fast, None =
     as fast as possible. robot: publish under this robot name instead of the recorded one. With
-    `loop`, repeat until `stop` is set (or forever). pace_for: services (by name) never to
-    outrun. remap: renames each key as published (runtime.replay_control); control: pause/step
-    (the schedule shifts by the time held). A damaged file replays its readable part and says
-    where it breaks in `damaged`."""
+    `loop`, repeat, each pass restamped after the last (`looped`), until `stop` is set (or
+    forever). pace_for: services (by name) never to outrun. remap: renames each key as
+    published (runtime.replay_control); control: pause/step (the schedule shifts by the time
+    held). A damaged file replays what is readable and says what was lost in `damaged`."""
     check_rate(rate)
     if start is not None and end is not None and end < start:
         raise InputError(f"--end {end} is before --start {start}")
@@ -205,16 +263,18 @@ async def replay(
         clocks.replaying(key)
         return key
 
+    from beyond_self.runtime.recording import inspect_recording
+
+    info = inspect_recording(path)
     pacer: Pacer | None = None
     if pace_for:
-        from beyond_self.runtime.recording import inspect_recording
-
-        pacer = Pacer(bus, pace_for, [rename(c.topic) for c in inspect_recording(path).channels])
+        pacer = Pacer(bus, pace_for, [rename(c.topic) for c in info.channels])
         await pacer.start()
     player = Player(rate=rate, pacer=pacer, control=control, stop=stop, ticks=clocks.ticks)
     stats = player.stats
     publishers: dict[tuple[str, str], Any] = {}
     buffer = bytearray()
+    losses = Losses(str(path))
 
     def send(cue: Cue) -> None:
         item = cue.recorded
@@ -234,23 +294,27 @@ async def replay(
         if on_message is not None:
             on_message(item)
 
-    def damaged(info: RecordingInfo) -> None:
-        if not stats.damaged:
-            stats.damaged = info.damage()
-            log.warning("replaying the readable part: %s", stats.damaged)
+    passes = 0
 
+    def one_pass() -> Iterator[Cue]:
+        nonlocal passes
+        passes += 1  # every pass finds the same damage: the first one says it
+        tally = losses if passes == 1 else Losses(str(path))
+        items = read_recording(path, topics=topic_list, start=start, end=end, losses=tally)
+        return recorded_cues(items, replayed, tally)
+
+    span = None if info.start is None or info.end is None else (info.start, info.end)
     try:
-        while True:
-            items = read_recording(path, topics=topic_list, start=start, end=end, on_damage=damaged)
-            sent = await player.play(recorded_cues(items, replayed), send)
-            if not loop or player.stopped or sent == 0:
-                break
+        await player.play(looped(one_pass, loop=loop, span=span), send)
+        stats.passes, stats.span_s = passes, info.duration_s
     finally:
         if pacer is not None:
             pacer.stop()
         for pub in publishers.values():
             pub.undeclare()
         clocks.close()
+    if losses.any:
+        stats.damaged = losses.line()
     return stats
 
 

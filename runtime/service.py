@@ -12,7 +12,8 @@ publishers, queryables and the liveliness token are undeclared, then the session
 
 Bad input never stops a service (runtime.accounting): a payload that does not decode is counted
 as malformed; whatever a handler, a timer, a spawned task, a queryable or the teardown raises is
-counted as an error and logged; the service goes on. runtime/README.md shows a whole service.
+counted as an error and logged once per kind of problem; the service goes on.
+runtime/README.md shows a whole service.
 """
 
 from __future__ import annotations
@@ -30,21 +31,21 @@ from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.config import BusConfig, load_config
 from beyond_self.runtime.delivery import RELIABLE, STATUS, Delivery
+from beyond_self.runtime.ledger import Keeper
 from beyond_self.runtime.log import event
-from beyond_self.runtime.progress import ProgressReport, resume
+from beyond_self.runtime.progress import ProgressReport
 from beyond_self.runtime.publisher import Publisher
 from beyond_self.runtime.queries import PlainQueryHandler, QueryHandler
+from beyond_self.runtime.self_report import health_of, log_recovery, recovery_of, stop_counts
 from beyond_self.runtime.subscription import Handler, Received, Subscription, consume
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
+from beyond_self.schemas.identity import TYPES as IDENTIFIED
 from beyond_self.schemas.keys import check_name
-from beyond_self.schemas.messages import ServiceHealth, StreamClock
+from beyond_self.schemas.messages import Progress, ServiceHealth, StreamClock
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
-
-
-_STOP_COUNTS = ("messages_in", "messages_out", "malformed", "dropped", "errors")  # logged at stop
 
 
 class Service:
@@ -81,12 +82,15 @@ class Service:
         self._subscriptions: list[tuple[Subscription[Any], Handler[Any]]] = []
         self._publishers: list[Publisher[Any]] = []
         self._progress = ProgressReport(self.name, self.header)
+        self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.ledger)
+        self._once: set[str] = set()  # keys whose handling is not repeated after a restart
+        self.stale = 0  # sensor messages not after the last one handled on their key
         self._recovery_reported: tuple[int, int] = (0, 0)
         self._tasks: set[asyncio.Task[Any]] = set()
         self._timers: set[asyncio.TimerHandle] = set()
         self._seq = 0
         self._health_seq = 0
-        self._started_at = time.monotonic()
+        self.started_at = time.monotonic()
 
     # --- for subclasses --------------------------------------------------------------------
 
@@ -95,6 +99,18 @@ class Service:
 
     async def teardown(self) -> None:
         """Release anything `setup` acquired beyond subscriptions and publishers."""
+
+    @property
+    def subscriptions(self) -> list[Subscription[Any]]:
+        return [s for s, _ in self._subscriptions]
+
+    @property
+    def publishers(self) -> list[Publisher[Any]]:
+        return list(self._publishers)
+
+    @property
+    def paced_keys(self) -> set[str]:
+        return set(self._progress.paced)
 
     @property
     def bus(self) -> Bus:
@@ -110,13 +126,22 @@ class Service:
         delivery: Delivery = RELIABLE,
         *,
         paced: bool = False,
+        once: bool = False,
     ) -> Subscription[M]:
         """Call `handler(message)` for every well-formed `cls` message on `key`, received as
-        `delivery` says (runtime.delivery). With `paced` (sensor inputs), the stamp of every
-        message handled is published as `Progress`, so a player never outruns this service."""
+        `delivery` says (runtime.delivery), each identity once (runtime.ledger). With `paced`
+        (sensor inputs), the stamp of every message handled is published as `Progress`, so a
+        player never outruns this service, and a message not after the last one handled on
+        `key` (a restarted source repeats what was handled) is skipped and counted. With
+        `once` (a handler whose effect is not to be repeated: a sentence said), a restarted
+        instance does not handle again what its predecessor handled."""
         self._check_declared("subscribe", key)
         sub = self.bus.subscribe(key, cls, delivery, on_malformed=self.account.malformed)
         self._subscriptions.append((sub, handler))
+        if cls in IDENTIFIED:
+            self.ledgers.handled.declare(key)
+        if once:
+            self._once.add(key)
         if paced:
             self._progress.pace(key)
         if self.started.is_set():
@@ -127,6 +152,8 @@ class Service:
         """A publisher of `cls` messages on `key`, sending as `delivery` says."""
         self._check_declared("publish", key)
         pub = self.bus.publisher(key, cls, delivery)
+        if cls in IDENTIFIED:
+            pub.suppress = self.ledgers.suppressed
         self._publishers.append(pub)
         return pub
 
@@ -230,58 +257,58 @@ class Service:
         """This service's `ServiceHealth`: what it received, sent, dropped, could not read."""
         seq = self._health_seq
         self._health_seq += 1
-        subs = [s for s, _ in self._subscriptions]
-        keys = self.bus.keys
-        return ServiceHealth(
-            header=Header(
-                version=ServiceHealth.VERSION,
-                source=self.name,
-                seq=seq,
-                stamp=self.clock.now_ns(),
-                correlation=f"{self.name}/health/{seq}",
-            ),
-            service=self.name,
-            uptime_s=round(time.monotonic() - self._started_at, 3),
-            messages_in=sum(s.received for s in subs),
-            messages_out=sum(p.sent for p in self._publishers),
-            dropped=sum(s.dropped for s in subs),
-            malformed=sum(s.malformed for s in subs) + self.account.malformed_other,
-            errors=self.account.errors,
-            last_error=self.account.last_error,
-            inputs=sorted({s.key for s in subs}),
-            outputs=sorted(
-                {p.key for p in self._publishers}
-                | ({keys.progress(self.name)} if self._progress.paced else set())
-            ),
-        )
+        return health_of(self, seq)
 
     def received_counts(self) -> dict[str, int]:
         """Messages received per input key, as reported in `Progress` (a service whose inputs
         carry their own sequence numbers may report those instead: they survive a restart)."""
         return {s.key: s.received for s, _ in self._subscriptions}
 
+    def published_counts(self) -> dict[str, int]:
+        """Messages published per output key, as reported in `Progress` (a service whose
+        outputs carry their own running count may report that instead: it survives a
+        restart)."""
+        return {p.key: p.sent for p in self._publishers}
+
+    def progress_report(self) -> Progress:
+        """How far each paced input is handled, and what was received and published
+        (runtime.progress)."""
+        stamps = {p.key: p.last_stamp for p in self._publishers}
+        return self._progress.report(self.published_counts(), self.received_counts(), stamps)
+
     def publish_progress(self) -> None:
-        """Report how far each paced input is handled (runtime.progress)."""
-        self._progress.publish(self._publishers, self.received_counts())
+        self._progress.publish(self.progress_report())
 
     def recovery(self) -> tuple[int, int]:
         """(recovered, missed): messages of recovering subscriptions that came from publisher
         caches after a link failure or a late start, and those no cache held any more."""
-        subs = [s for s, _ in self._subscriptions]
-        return sum(s.recovered for s in subs), sum(s.missed for s in subs)
+        return recovery_of(self.subscriptions)
 
     async def _consume(self, sub: Subscription[Any], handler: Handler[Any]) -> None:
+        ledgers, progress = self.ledgers, self._progress
+        paced, identified = sub.key in progress.paced, sub.cls in IDENTIFIED
+        handled = progress.handled
+
         def observe(received: Received[Any]) -> None:
             self.clock.observe(received.message.header.stamp)
 
-        def progressed(received: Received[Any]) -> None:
-            self._progress.handled_up_to(sub.key, received.message.header.stamp)
-            self.publish_progress()
+        def fresh(received: Received[Any]) -> bool:
+            if identified and ledgers.duplicate(received.key, received.message) is not None:
+                return False
+            if paced and received.message.header.stamp <= handled.get(sub.key, -1):
+                self.stale += 1
+                return False
+            return True
 
-        paced = bool(self._progress.paced)
-        await consume(
-            sub, handler, self.report_error, before=observe, after=progressed if paced else None
-        )
+        def done(received: Received[Any]) -> None:
+            if identified:
+                ledgers.record(received.key, received.message)
+            if paced:
+                progress.handled_up_to(sub.key, received.message.header.stamp)
+            if progress.paced:
+                self.publish_progress()
+
+        await consume(sub, handler, self.report_error, before=observe, after=done, accept=fresh)
 
     def _follow_clock(self) -> None:
         """On a replay, follow the player's stream clock (runtime.clock), so that health and
@@ -303,21 +330,9 @@ class Service:
             pub.put(self.health_report())
             if self._progress.paced:
                 self.publish_progress()
-            self._log_recovery()
+            self.ledgers.tick()
+            self._recovery_reported = log_recovery(self, self._recovery_reported)
             await asyncio.sleep(self.health_period)
-
-    def _log_recovery(self) -> None:
-        now = self.recovery()
-        if now != self._recovery_reported:
-            self._recovery_reported = now
-            event(
-                self.log,
-                logging.INFO,
-                "recovered messages from publisher caches",
-                service=self.name,
-                recovered=now[0],
-                missed=now[1],
-            )
 
     # --- lifecycle ------------------------------------------------------------------------
 
@@ -336,9 +351,10 @@ class Service:
         installed = process.install_signals(self.stop) if install_signals else []
         undeclare_token: Callable[[], None] | None = None
         try:
+            await self.ledgers.ask(self.bus, self.log)  # before setup: a restarted one resumes
             await self.setup()
-            if self._progress.paced:
-                await resume(self.bus, self.name, self._publishers, self.log)
+            self.ledgers.adopt(self._once)
+            self.spawn(self.ledgers.open(self.bus, self.report_error), "ledger")
             for sub, handler in self._subscriptions:
                 self.spawn(self._consume(sub, handler), sub.key)
             if self.clock.is_recording:
@@ -350,7 +366,13 @@ class Service:
 
             self.queryable(health_key, None, answer_health)
             if self._progress.paced:
-                self._progress.open(self.bus)
+                progress_key = self.bus.keys.progress(self.name)
+
+                async def answer_progress(_key: str, _request: None) -> Progress:
+                    return self.progress_report()
+
+                self.queryable(progress_key, None, answer_progress)
+                self._progress.open(self.bus, self.progress_report())
             self.spawn(self._report_periodically(), "health")
             undeclare_token = self.bus.declare_token(self.bus.keys.alive(self.name))
             self.started.set()
@@ -379,10 +401,7 @@ class Service:
             await self.teardown()
         except Exception as exc:
             self.report_error("teardown", exc)
-        health = self.health_report()
-        counts = {f: getattr(health, f) for f in _STOP_COUNTS}
-        recovered, missed = self.recovery()
-        stopped = {"service": self.name, **counts, "recovered": recovered, "missed": missed}
+        stopped = stop_counts(self, self.health_report())
         event(self.log, logging.INFO, "stopped", **stopped)
         if self._owns_bus and self._bus is not None:
             self._bus.close()

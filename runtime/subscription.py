@@ -274,14 +274,18 @@ async def consume(
     *,
     before: Callable[[Received[M]], None] | None = None,
     after: Callable[[Received[M]], None] | None = None,
+    accept: Callable[[Received[M]], bool] | None = None,
 ) -> None:
     """Call `handler(message)` (awaited if it returns an awaitable) for every message of `sub`
     until it closes: the one handler loop of services, players and views. What the handler
     raises goes to `on_error(key, exc)` and the loop goes on: one bad message must not stop a
-    stream. `before`/`after` see every message, also one whose handler failed."""
+    stream. `before`/`after` see every message, also one whose handler failed; a message
+    `accept` refuses (handled already) is seen by `before` only."""
     async for received in sub:
         if before is not None:
             before(received)
+        if accept is not None and not accept(received):
+            continue
         try:
             result = handler(received.message)
             if inspect.isawaitable(result):

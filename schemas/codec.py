@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import msgspec
 
@@ -277,6 +277,29 @@ def stamp_paths(cls: type[Message]) -> list[str]:
 
     found = [p.removeprefix(".") for p in paths(stamp_plan(cls), "")]
     return sorted(found, key=lambda p: not p.startswith("header."))  # header.stamp first
+
+
+def shift_stamps(message: M, offset: int) -> M:
+    """`message` with every stamp it holds (header.stamp and every field typed `base.Stamp`,
+    wherever it is) `offset` ns later; a "none yet" stamp (-1) stays none. How a looped replay
+    moves a pass later without missing a stamp nested in a dict or a list."""
+    if offset == 0:
+        return message
+    return cast(M, _shift(message, stamp_plan(type(message)), offset))
+
+
+def _shift(value: Any, plan: Plan, offset: int) -> Any:
+    if value is None:
+        return None
+    if isinstance(plan, str):
+        return value + offset if value >= 0 else value
+    if isinstance(plan, dict):
+        changes = {name: _shift(getattr(value, name), sub, offset) for name, sub in plan.items()}
+        return msgspec.structs.replace(value, **changes)
+    kind, sub = plan
+    if kind == "values":
+        return {k: _shift(v, sub, offset) for k, v in value.items()}
+    return type(value)(_shift(v, sub, offset) for v in value)
 
 
 def _to_form(value: Any, plan: Plan) -> Any:

@@ -39,6 +39,7 @@ ASK = "affordance/ask"  # queryable of the reasoner: AffordanceQuery in, Afforda
 HEALTH = "health"  # beyond/<robot>/health/<service>: ServiceHealth (published and queryable)
 ALIVE = "alive"  # beyond/<robot>/alive/<service>: liveliness tokens
 PROGRESS = "progress"  # beyond/<robot>/progress/<service>: Progress (sensor inputs handled)
+LEDGER = "ledger"  # beyond/<robot>/ledger/<service>: Ledger (identities handled; queryable)
 
 
 def check_name(kind: str, name: str) -> str:
@@ -139,6 +140,10 @@ class Keys:
         """Progress key of one service, or of all with the default "*"."""
         return f"{self.root}/{PROGRESS}/{_service_chunk(service)}"
 
+    def ledger(self, service: str = "*") -> str:
+        """Ledger key of one service, or of all with the default "*"."""
+        return f"{self.root}/{LEDGER}/{_service_chunk(service)}"
+
     def alive(self, service: str = "*") -> str:
         """Liveliness token key of one service, or of all with the default "*"."""
         return f"{self.root}/{ALIVE}/{_service_chunk(service)}"
@@ -169,6 +174,8 @@ def type_for_key(key: str) -> type[Message] | None:
         return m.ServiceHealth
     if suffix.startswith(f"{PROGRESS}/") and suffix.count("/") == 1:
         return m.Progress
+    if suffix.startswith(f"{LEDGER}/") and suffix.count("/") == 1:
+        return m.Ledger
     return None
 
 

@@ -380,7 +380,9 @@ class ServiceHealth(Message, frozen=True):
     """Periodic self-report of a service.
 
     Version 2: `skipped` counts inputs whose per-frame work was skipped to keep up with a live
-    source (camera frames the object segmenter did not describe; never per-gesture work)."""
+    source (camera frames the object segmenter did not describe; never per-gesture work);
+    `restarts`, how many times its supervisor (`beyond up`, a Deployment) restarted
+    the service after it died before this instance (0: the first)."""
 
     VERSION: ClassVar[int] = 2
 
@@ -399,6 +401,7 @@ class ServiceHealth(Message, frozen=True):
         default_factory=list
     )
     skipped: Count = 0
+    restarts: Count = 0
 
 
 class StreamEnd(Message, frozen=True):
@@ -407,9 +410,14 @@ class StreamEnd(Message, frozen=True):
     Version 2: `last_stamps` gives, per sensor stream name (schemas.keys.STREAMS), the stamp of
     the last message published on it (a stream never published is absent). A consumer knows its
     input is complete once it has handled the message with that stamp, whatever order the end
-    marker and the data arrive in."""
+    marker and the data arrive in.
 
-    VERSION: ClassVar[int] = 2
+    Version 3: `damage` says in one line what the source could not play (a damaged recording:
+    unreadable chunks, a truncated end, frames that do not decode or go back in time; "" when
+    nothing was lost), the line `beyond inspect` and `beyond analyse` print for the same file,
+    so `beyond up` can say it and exit 2 as they do."""
+
+    VERSION: ClassVar[int] = 3
 
     source: Name
     messages: Count
@@ -417,6 +425,7 @@ class StreamEnd(Message, frozen=True):
     last_stamps: Annotated[dict[Name, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = (
         msgspec.field(default_factory=dict)
     )
+    damage: Text = ""
 
 
 class Progress(Message, frozen=True):
@@ -440,6 +449,45 @@ class StreamClock(Message, frozen=True):
     player (the ingest service, `beyond replay`) as it plays. Services on the recording's clock
     (`BEYOND_CLOCK=recording`) stamp their health and progress with it, so every message of a
     replay is on one clock; while the player is paused the clock stands still."""
+
+
+LEDGER_RANGES = 4096  # (segment, first, last) ranges per key and kind in a Ledger
+Range = tuple[Id, Count, Count]
+
+
+class Ledger(Message, frozen=True):
+    """What one service has handled, by identity (schemas.identity), and where its next
+    instance starts: how a restarted service neither stalls nor repeats (runtime.ledger).
+
+    `handled`: input key -> kind -> (segment id, first, last) ranges of the frames handled (a
+    per-gesture kind: (segment id, 0, 0)); the most recent ones, a bounded number. A producer
+    that restarts does not send again what every consumer of its key has handled; a service
+    whose handling is a side effect (speech) takes its predecessor's and does not act twice.
+    `resume`, `resume_stamps`: the counts and stamps the service's next instance resumes from
+    (the gesture streamer's checkpoint: a skeleton stamp from which its state can be rebuilt,
+    and its counts there; the object segmenter's camera restart point). Stamps apart: they
+    exceed 2^53, and the JSON form writes them as times.
+    Every service publishes its own on `ledger/<service>` when it changes, keeps the last one
+    of every other service of its robot, and answers for all of them on query, so a service's
+    record outlives the service."""
+
+    service: Name
+    handled: Annotated[
+        dict[
+            Text,
+            Annotated[
+                dict[Name, Annotated[list[Range], msgspec.Meta(max_length=LEDGER_RANGES)]],
+                msgspec.Meta(max_length=VARIABLES_MAX),
+            ],
+        ],
+        msgspec.Meta(max_length=VARIABLES_MAX),
+    ] = msgspec.field(default_factory=dict)
+    resume: Annotated[dict[Name, Count], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
+        default_factory=dict
+    )
+    resume_stamps: Annotated[dict[Name, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = (
+        msgspec.field(default_factory=dict)
+    )
 
 
 class AffordanceQuery(Message, frozen=True):
@@ -484,6 +532,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     StreamEnd,
     Progress,
     StreamClock,
+    Ledger,
     AffordanceQuery,
     AffordanceAnswer,
 )

@@ -14,6 +14,10 @@ token is declared as the first service is launched, after whatever the caller su
 started once the others are alive (why: `start`), and waits itself for every consumer (its
 `wait_for`, remote ones included) before it publishes.
 
+A service that dies is started again (services.supervision: like systemd's
+`Restart=on-failure`, with backoff and a limit per minute, then it gives up and says so); the
+restarted service resumes where its predecessor's outputs stopped (runtime.ledger).
+
 It lives in `services/` beside the launcher and the registry it builds on: it runs services and
 prints nothing (what to show is the caller's: `beyond up`'s terminal views are in `beyond/`).
 """
@@ -30,16 +34,19 @@ from typing import TYPE_CHECKING, Any, Literal
 from beyond_self.core.errors import InputError, unknown
 from beyond_self.runtime import process
 from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.launcher import (
     HealthWatch,
     LogSink,
     ServiceProcess,
+    kill_group,
     service_env,
     start_service,
     stop_services,
 )
 from beyond_self.services.options import check_options
 from beyond_self.services.registry import service_class
+from beyond_self.services.supervision import RestartPolicy, Restarts, how_it_ended
 
 if TYPE_CHECKING:
     from beyond_self.runtime.bus import Bus
@@ -48,6 +55,7 @@ SOURCE = "ingest"  # the service that publishes sensor streams, started last
 ALIVE_TIMEOUT_S = 60.0  # a process neither alive nor exited after this long: start() fails
 POLL_S = 0.25  # how often wait() looks at the processes and the caller's `done`
 CLOCKS = ("wall", "recording")
+DEFAULT_RESTART = RestartPolicy()
 
 
 @dataclass(frozen=True)
@@ -75,7 +83,9 @@ class Deployment:
     every line a process prints. With `on_stuck`, a health watch asks every process for its
     health and reports there, then stops, one that no longer answers (without it nothing is
     stopped behind the caller's back: a benchmark on a loaded machine is slow, not stuck).
-    `stop_on_signals`: SIGINT/SIGTERM end `wait` (as Ctrl-C ends `beyond up`)."""
+    `stop_on_signals`: SIGINT/SIGTERM end `wait` (as Ctrl-C ends `beyond up`). `restart`: a
+    service that dies is started again as the policy says (services.supervision; None: never),
+    and `on_restart(name, what)` is told each restart and each time the policy gives up."""
 
     def __init__(
         self,
@@ -91,6 +101,8 @@ class Deployment:
         log: LogSink | None = None,
         on_stuck: Callable[[str, str], None] | None = None,
         stop_on_signals: bool = False,
+        restart: RestartPolicy | None = DEFAULT_RESTART,
+        on_restart: Callable[[str, str], None] | None = None,
     ) -> None:
         if clock not in CLOCKS:
             raise unknown("clock", clock, CLOCKS)
@@ -116,6 +128,14 @@ class Deployment:
         self._token: Callable[[], None] | None = None
         self._closers: list[Callable[[], Awaitable[object]]] = []
         self._signals: list[signal.Signals] = []
+        self.restart = restart
+        self.on_restart = on_restart
+        self.restarts: dict[str, Restarts] = {}  # per service, once it has died
+        self._judged: dict[str, ServiceProcess] = {}  # the last dead process of each, decided
+        self._final: set[str] = set()  # ended for good: not restarted
+        self._pending: dict[str, asyncio.Task[None]] = {}  # restarts waiting out their delay
+        self._supervisor: asyncio.Task[None] | None = None
+        self._closing = asyncio.Event()
 
     # -- starting --------------------------------------------------------------------------
 
@@ -172,11 +192,18 @@ class Deployment:
         old = next((i for i, sp in enumerate(self.processes) if sp.name == name), None)
         if old is not None and self.processes[old].running:
             raise InputError(f"service {name} is already running in this deployment")
-        sp = await start_service(name, self.env, options=self.options[name], sink=self.log)
+        restarts = self.restarts.get(name)
+        env = self.env if restarts is None else {**self.env, RESTARTS_ENV: str(restarts.count)}
+        sp = await start_service(name, env, options=self.options[name], sink=self.log)
         if old is None:
             self.processes.append(sp)
         else:
             self.processes[old] = sp
+        self._final.discard(name)
+        if self.health_watch is not None:
+            self.health_watch.misses.pop(name, None)  # a new process: its own record
+        if self.restart is not None and self._supervisor is None:
+            self._supervisor = asyncio.get_running_loop().create_task(self._supervise())
         return sp
 
     def attach(self, close: Callable[[], Awaitable[object]]) -> None:
@@ -187,9 +214,53 @@ class Deployment:
     # -- watching --------------------------------------------------------------------------
 
     def exited(self) -> list[str]:
-        """Names of the processes (router included) that are no longer running."""
-        router = [self.router] if self.router is not None else []
-        return [sp.name for sp in self.processes + router if not sp.running]
+        """Names of the processes (router included) that are no longer running and will not be
+        started again (the restart policy gave up on them, or they stopped as they meant to)."""
+        router = [self.router] if self.router is not None and not self.router.running else []
+        if self.restart is None:
+            return [sp.name for sp in self.processes + router if not sp.running]
+        return [sp.name for sp in router] + [n for n in self.services if n in self._final]
+
+    async def _supervise(self) -> None:
+        """Start again, as the restart policy says, every service that dies."""
+        assert self.restart is not None
+        loop = asyncio.get_running_loop()
+        while True:
+            for sp in list(self.processes):
+                if sp.running or self._judged.get(sp.name) is sp or sp.name in self._pending:
+                    continue
+                self._judged[sp.name] = sp
+                kill_group(sp)  # what it started (a synthesizer) dies with it
+                code = sp.process.returncode
+                assert code is not None
+                restarts = self.restarts.setdefault(sp.name, Restarts(self.restart))
+                delay = restarts.decide(code, sp.stuck, loop.time())
+                if delay is None:
+                    self._final.add(sp.name)
+                    if restarts.gave_up:
+                        self._tell(sp.name, restarts.gave_up)
+                    continue
+                why = "stuck" if sp.stuck else how_it_ended(code)
+                self._tell(sp.name, f"{why}; restart {restarts.count} in {delay:g} s")
+                self._pending[sp.name] = loop.create_task(self._restart(sp.name, delay))
+            await asyncio.sleep(POLL_S / 2)
+
+    async def _restart(self, name: str, delay: float) -> None:
+        """Start `name` again after `delay`, unless the deployment stops meanwhile. Never
+        cancelled while it launches: a process spawned but not yet in `processes` would be
+        left running when everything stops."""
+        try:
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(delay):
+                    await self._closing.wait()
+            if not self._closing.is_set():
+                await self.launch(name)
+        finally:
+            self._pending.pop(name, None)
+
+    def _tell(self, name: str, what: str) -> None:
+        if self.on_restart is not None:
+            self.on_restart(name, what)
 
     def request_stop(self) -> None:
         """End `wait` as a signal would."""
@@ -221,6 +292,13 @@ class Deployment:
         token, the services (SIGTERM, then SIGKILL if hung), what was attached, the router last,
         then the session. Returns (and keeps in `codes`) every process's exit code."""
         try:
+            self._closing.set()  # nothing is started again while everything stops
+            if self._supervisor is not None:
+                self._supervisor.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await self._supervisor
+                self._supervisor = None
+            await asyncio.gather(*self._pending.values(), return_exceptions=True)
             if self.health_watch is not None:
                 await self.health_watch.stop()
             if self._token is not None:

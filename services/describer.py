@@ -31,7 +31,8 @@ class DescriptionGenerator(Service):
     async def setup(self) -> None:
         keys = self.bus.keys
         self.out = self.publisher(keys.description, Description, EVENTS)
-        self.subscribe(keys.words, WordProbabilities, self.on_words, EVENTS)
+        # once: a restarted describer does not describe again what its predecessor described
+        self.subscribe(keys.words, WordProbabilities, self.on_words, EVENTS, once=True)
 
     def on_words(self, msg: WordProbabilities) -> None:
         if not msg.final and not self.unfolding:

@@ -6,10 +6,18 @@ its calls and its events into messages (each derived from the skeleton frame it 
 stamp and sequence). The end of the source (`StreamEnd`) ends or cancels a gesture still under
 way once the last skeleton frame it announces has been handled, so the last gesture of a
 recording is answered whatever order the end marker and the frames arrive in.
+
+Crash-only: the tracker's checkpoint (a skeleton stamp from which its state can be rebuilt
+exactly, with the segments and events counted there) goes into this service's ledger
+(runtime.ledger), which the other services keep. A restarted streamer takes it, gets the
+skeleton frames since back from the ingest's cache (`SKELETON` delivery), rebuilds the state
+its predecessor had, and continues its numbering; what its consumers already have is not sent
+again.
 """
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any, cast
 
@@ -19,9 +27,12 @@ from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTrac
 from beyond_self.cognition.gestures import GestureModels, extract_features, load_models
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.delivery import EVENTS, FRAMES
+from beyond_self.runtime.delivery import EVENTS, FRAMES, SKELETON
+from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
+
+SEGMENT_KINDS = ("start", "end", "cancel")
 
 
 class GestureStreamer(Service):
@@ -45,6 +56,7 @@ class GestureStreamer(Service):
         self.torso_joint = torso_joint
         self.buffer_frames = buffer_frames
         self.end_at: int | None = None  # last skeleton stamp of the source, once it has ended
+        self.checkpoint: tuple[int, int] | None = None  # the tracker's, last told
         self.events = 0
         self.finished = False
 
@@ -52,14 +64,22 @@ class GestureStreamer(Service):
         self.gesture_models: GestureModels = (
             load_models(Path(self.models_path)) if self.models_path else default_models()
         )
+        # a restarted streamer rebuilds its predecessor's state from the checkpoint it left
+        resume = self.ledgers.predecessor()
+        self.resume_from = resume.get("stamp", -1)
+        self.events = resume.get("events", 0)
         self.tracker: GestureTracker[Header] = GestureTracker(
-            self.gesture_models, buffer_frames=self.buffer_frames
+            self.gesture_models,
+            buffer_frames=self.buffer_frames,
+            first_segment_id=resume.get("segments", 0),
         )
+        if self.resume_from >= 0:
+            event(self.log, logging.INFO, "resuming from a checkpoint", **resume)
         self.actions = list(self.gesture_models.actions)
         keys = self.bus.keys
         self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, FRAMES)
         self.segments = self.publisher(keys.gesture_segment, GestureSegment, EVENTS)
-        self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame, paced=True)
+        self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame, SKELETON, paced=True)
         self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
 
     def features(self, frame: SkeletonFrame) -> np.ndarray:
@@ -77,12 +97,38 @@ class GestureStreamer(Service):
         )
 
     def on_frame(self, frame: SkeletonFrame) -> None:
-        if self.finished:
-            return
+        stamp = frame.header.stamp
+        if self.finished or stamp < self.resume_from:
+            return  # before the checkpoint: the predecessor's, already told
+        if self.tracker.last_stamp is None and stamp > self.resume_from >= 0:
+            # the frames since the checkpoint are gone (the source was restarted too): number
+            # on after every gesture a consumer has, and say that one under way may be cut
+            seen = self.ledgers.seen_downstream(self.bus.keys.gesture_segment, SEGMENT_KINDS)
+            self.tracker.segment_id = max(self.tracker.segment_id, seen)
+            self.report_error(
+                "resume",
+                InputError(
+                    f"the skeleton cache starts at {stamp}, after the checkpoint "
+                    f"{self.resume_from}: a gesture under way may be cut"
+                ),
+            )
         x = self.features(frame)
-        self.emit(self.tracker.push(frame.header.stamp, frame.frame, x, frame.header))
-        if self.end_at is not None and frame.header.stamp >= self.end_at:
+        events = self.events
+        self.emit(self.tracker.push(stamp, frame.frame, x, frame.header))
+        checkpoint = self.tracker.checkpoint
+        if checkpoint is not None and checkpoint != self.checkpoint:
+            # a checkpoint moves only on a frame with no event (or is the first frame): the
+            # events counted before this frame are those before the checkpoint's
+            self.checkpoint = checkpoint
+            at, segments = checkpoint
+            self.ledgers.checkpoint({"stamp": at}, {"segments": segments, "events": events})
+        if self.end_at is not None and stamp >= self.end_at:
             self.finish()
+
+    def published_counts(self) -> dict[str, int]:
+        # events carry their running count (event_seq), which a restarted streamer continues:
+        # consumers compare it with what they received
+        return {**super().published_counts(), self.bus.keys.gesture_segment: self.events}
 
     def on_stream_end(self, msg: StreamEnd) -> None:
         last = msg.last_stamps.get("skeleton")

@@ -12,11 +12,20 @@ source plug-in.
   (x, y, z)})` or `("camera", rgb_uint8_array)` items; ingest stamps them with the clock and
   numbers them. A bounded queue sits between the plug-in and the bus: when the bus cannot keep up
   the oldest item is dropped and counted, never silently.
-When the source is exhausted a `StreamEnd` message says how many messages were published and
-the last stamp of each stream, so consumers know when they have seen everything. A recording or a
-log is played on its own clock: ingest publishes the stream's time (`StreamClock`, ROS's /clock,
-runtime.clock) as it plays, which the services of a replay stamp their health and progress with,
-and stamps its own health and the end marker with it too; a live source is on the wall clock.
+When the source is exhausted a `StreamEnd` message says how many messages were published and the
+last stamp of each stream, so consumers know when they have seen everything, and what a damaged
+recording lost, in the one line every command says (runtime.recording_damage: every intact chunk is
+played, a frame that does not decode or goes back in time is dropped and counted, not the end of
+the source). A recording or a log is played on its own clock: ingest publishes the stream's time
+(`StreamClock`, ROS's /clock, runtime.clock) as it plays, which the services of a replay stamp
+their health and progress with, and stamps its own health and the end marker with it too; a live
+source is on the wall clock. With `loop`, a recording or log plays pass after pass for ever, each
+pass restamped after the one before (runtime.replay.looped): consumers refuse stamps that go back,
+so replaying the same stamps again would have them refuse every later pass.
+
+Crash-only: a restarted ingest asks its consumers how far they have handled each stream
+(runtime.pacing) and goes on from there, in the same pass of a loop; it does not start the
+recording over.
 
 Replays never outrun their consumers: the services this ingest waits for report how far they
 have handled each sensor stream, and publishing waits while the slowest is more than
@@ -38,19 +47,22 @@ import numpy as np
 
 from beyond_self.cognition.gestures.logs import read_hand_log
 from beyond_self.core.errors import InputError
+from beyond_self.runtime.accounting import bounded
 from beyond_self.runtime.clock import Clock, ClockTicks
-from beyond_self.runtime.delivery import CAMERA, EVENTS, STATUS
+from beyond_self.runtime.delivery import CAMERA, EVENTS, SKELETON, STATUS
 from beyond_self.runtime.images import message_from_image
 from beyond_self.runtime.log import event
 from beyond_self.runtime.pacing import DEFAULT_WINDOW_S, Pacer
 from beyond_self.runtime.publisher import Publisher
-from beyond_self.runtime.recording import read_recording
-from beyond_self.runtime.replay import Cue, Player, recorded_cues
+from beyond_self.runtime.recording import inspect_recording, read_recording, require_mcap
+from beyond_self.runtime.recording_damage import Losses
+from beyond_self.runtime.replay import Cue, Player, looped, recorded_cues
 from beyond_self.runtime.replay_control import rate_option
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     CameraFrame,
     CompressedCameraFrame,
+    Header,
     Joint,
     SkeletonFrame,
     StreamClock,
@@ -63,7 +75,7 @@ class SensorIngest(Service):
     name = "ingest"
     subscribes = ()
     publishes = ("skeleton", "camera", "camera_compressed", "stream_end", "clock")
-    serves = ("progress",)  # the pacer answers restarted consumers
+    serves = ()
 
     def __init__(
         self,
@@ -104,15 +116,18 @@ class SensorIngest(Service):
             raise InputError(f"window_s {window_s} must be a positive number of seconds")
         self.window_s = window_s
         self.last_stamps: dict[str, int] = {}
+        self.losses = Losses(str(recording or log or plugin))
+        self.resume: dict[str, int] = {}
+        self.failure = ""
         self.published = 0
         self.dropped_items = 0
         self.finished = asyncio.Event()
 
     async def setup(self) -> None:
         keys = self.bus.keys
-        self.skeleton = self.publisher(keys.skeleton, SkeletonFrame)
-        # camera frames are cached (never leaving the robot): an object segmenter restarted
-        # mid-gesture gets back the frames of the gesture it was analysing
+        # sensor frames are cached (they never leave the robot): a gesture streamer or an
+        # object segmenter restarted mid-gesture gets back the frames it needs
+        self.skeleton = self.publisher(keys.skeleton, SkeletonFrame, SKELETON)
         self.camera = self.publisher(keys.camera, CameraFrame, CAMERA)
         self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame, CAMERA)
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
@@ -137,45 +152,72 @@ class SensorIngest(Service):
             window_s=self.window_s,
         )
         await self.pacer.start()
+        # where the consumers are: a restarted source goes on from there, not from the start
+        self.resume = self.pacer.handled_by_all()
         ticks = ClockTicks(self._tick) if self.plugin is None else None  # live: the wall's
         self.player = Player(rate=self.rate, pacer=self.pacer, ticks=ticks)
         if self.start_delay_s:
             await asyncio.sleep(self.start_delay_s)
         try:
-            while True:
-                if self.recording:
-                    await self._play_recording(Path(self.recording))
-                elif self.log_path:
-                    await self._play_log(Path(self.log_path))
-                else:
+            if self.recording:
+                await self._play_recording(Path(self.recording))
+            elif self.log_path:
+                await self._play_log(Path(self.log_path))
+            else:
+                while True:  # a live source is not restamped: it has its own clock
                     await self._play_plugin(str(self.plugin))
-                if not self.loop:
-                    break
-        except InputError as exc:
+                    if not self.loop:
+                        break
+        except InputError as exc:  # nothing playable (a file that is no recording...)
             self.report_error("source", exc)
+            self.failure = str(exc)
         finally:
             self.pacer.stop()
+        damage = self.failure or (self.losses.line() if self.losses.any else "")
         end = StreamEnd(
             header=self.header(StreamEnd),
-            source=str(self.recording or self.log_path or self.plugin),
+            source=bounded(str(self.recording or self.log_path or self.plugin), 256),
             messages=self.published,
             dropped=self.dropped_items,
             last_stamps=dict(self.last_stamps),
+            damage=bounded(damage, 4000),
         )
         self.end.put(end)
         self.finished.set()
         event(
             self.log,
-            logging.INFO,
+            logging.WARNING if damage else logging.INFO,
             "source finished",
             messages=self.published,
             dropped=self.dropped_items,
+            lost=self.losses.lost if damage else 0,  # the line itself is in StreamEnd.damage
             held_back_s=round(self.pacer.waited_s, 3),
         )
 
     def _sent(self, stream: str, stamp: int) -> None:
         self.published += 1
         self.last_stamps[stream] = stamp
+
+    async def _play_cues(
+        self,
+        passes: Callable[[], Iterator[Cue]],
+        span: tuple[int, int] | None,
+        send: Callable[[Cue], None],
+        stream_of: dict[str, str],
+    ) -> None:
+        """Play `passes` (looped, restamped, if `loop`), from where the consumers are: a cue
+        they have all handled already (a restarted source) is not sent again, only noted."""
+        resume = self.resume
+        start = min(resume.values(), default=None)
+
+        def fresh(cue: Cue) -> bool:
+            if cue.stamp > resume.get(cue.key, -1):
+                return True
+            self.last_stamps[stream_of[cue.key]] = cue.stamp
+            return False
+
+        cues = looped(passes, loop=self.loop, span=span, resume_at=start)
+        await self.player.play(filter(fresh, cues), send)
 
     async def _play_recording(self, path: Path) -> None:
         keys = self.bus.keys
@@ -194,7 +236,18 @@ class SensorIngest(Service):
             pub.put(cue.ours())
             self._sent(stream, cue.stamp)
 
-        await self.player.play(recorded_cues(read_recording(path), rename), send)
+        require_mcap(path)
+        info = inspect_recording(path)
+        passes = 0
+
+        def one_pass() -> Iterator[Cue]:
+            nonlocal passes
+            passes += 1  # every pass finds the same damage: the first one tallies it
+            tally = self.losses if passes == 1 else Losses(str(path))
+            return recorded_cues(read_recording(path, losses=tally), rename, tally)
+
+        span = None if info.start is None or info.end is None else (info.start, info.end)
+        await self._play_cues(one_pass, span, send, {k: v[0] for k, v in streams.items()})
 
     async def _play_log(self, path: Path) -> None:
         log = read_hand_log(path)
@@ -204,11 +257,14 @@ class SensorIngest(Service):
         def cues() -> Iterator[Cue]:
             for i, (xyz, stamp) in enumerate(zip(log.xyz * self.scale, stamps, strict=True)):
                 joint = Joint(position=(float(xyz[0]), float(xyz[1]), float(xyz[2])))
-                frame = SkeletonFrame(
-                    header=self.header(SkeletonFrame, int(stamp)),
-                    frame=i + 1,
-                    joints={self.hand_joint: joint},
+                header = Header(  # numbered by the log, so a restarted ingest numbers the same
+                    version=SkeletonFrame.VERSION,
+                    source=self.name,
+                    seq=i,
+                    stamp=int(stamp),
+                    correlation=f"{self.name}/{i}",
                 )
+                frame = SkeletonFrame(header=header, frame=i + 1, joints={self.hand_joint: joint})
                 yield Cue(int(stamp), key, int(stamp), frame)
 
         def send(cue: Cue) -> None:
@@ -217,7 +273,8 @@ class SensorIngest(Service):
             self.skeleton.put(frame)
             self._sent("skeleton", cue.stamp)
 
-        await self.player.play(cues(), send)
+        span = (int(stamps[0]), int(stamps[-1])) if len(stamps) else None
+        await self._play_cues(cues, span, send, {key: "skeleton"})
 
     async def _play_plugin(self, spec: str) -> None:
         source = load_plugin(spec)()

@@ -134,6 +134,13 @@ async def read_lines(stream: asyncio.StreamReader, on_line: Callable[[str], None
         emit(pending, dropped)
 
 
+def kill_group(sp: ServiceProcess) -> None:
+    """SIGKILL what is left of a dead service's process group (it was started in a session of
+    its own): a child it started, a speech synthesizer, must not outlive it."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(sp.process.pid, signal.SIGKILL)
+
+
 async def stop_stuck(sp: ServiceProcess, grace: float = 2.0) -> int:
     """Stop a service that no longer answers: SIGTERM (and SIGCONT, should it be stopped), then
     SIGKILL after `grace` s, since a blocked event loop may never run its signal handler."""

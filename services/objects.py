@@ -108,6 +108,10 @@ class ObjectSegmenter(Service):
         niceness = LIVE_NICENESS if self.skip_frames else 0
         self.describer = FrameDescriber(self.clusters_path, niceness)
         keys = self.bus.keys
+        # restarted: the gestures whose effects every consumer has are not measured again, and
+        # the camera history before the predecessor's restart point is not gone over again
+        self.watch.done(self.ledgers.done_downstream(keys.effects, "effects"))
+        self.resume_from = self.ledgers.predecessor().get("camera", -1)
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
         self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)
@@ -154,8 +158,11 @@ class ObjectSegmenter(Service):
             if not any(sub.pending for sub in self.events):
                 break
             await asyncio.sleep(0)
+        if msg.header.stamp < self.resume_from:
+            return  # before the predecessor's restart point: nobody needs it again
         image = image_from_message(msg)
         self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image))
+        self.ledgers.checkpoint({"camera": max(0, self.watch.restart_point)})
         if not self.skip_frames:
             await self._describe(msg, image)  # before the frame counts as handled: paced
             return

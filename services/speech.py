@@ -4,12 +4,15 @@ The synthesizer is espeak-ng through its command line: each sentence is written 
 `out_dir` (named by robot time stamp and gesture) and listed in `speech.log` next to it; with
 `play` on it is also spoken aloud. Without espeak-ng the service says so once and prints the
 sentences instead. To drop in another synthesizer, subclass and override `synthesize` (see the
-README's recipe): everything else — subscription, health, malformed input — is inherited.
+README's recipe): everything else — subscription, health, malformed input, saying each sentence
+once — is inherited. Once: a restarted speech service takes its predecessor's record of what was
+said (runtime.ledger) and does not say it again.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -48,7 +51,10 @@ class SpeechSynthesizer(Service):
         self.out_dir.mkdir(parents=True, exist_ok=True)
         if self.espeak is None:
             event(self.log, logging.WARNING, "espeak-ng not found: printing descriptions instead")
-        self.subscribe(self.bus.keys.description, Description, self.on_description, EVENTS)
+        # once: a restarted speech service does not say again what its predecessor said
+        self.subscribe(
+            self.bus.keys.description, Description, self.on_description, EVENTS, once=True
+        )
 
     def on_description(self, msg: Description) -> None:
         if not msg.final or not msg.sentences:
@@ -67,8 +73,12 @@ class SpeechSynthesizer(Service):
         """Say `text` into `wav`; False when no synthesizer is installed."""
         if self.espeak is None:
             return False
-        cmd = [self.espeak, "-v", self.voice, "-s", str(self.wpm), "-w", str(wav), text]
+        # written aside and renamed: a synthesizer orphaned by a killed service, still writing
+        # the same sentence, never leaves a torn file
+        part = wav.with_name(f"{wav.name}.{os.getpid()}.part")
+        cmd = [self.espeak, "-v", self.voice, "-s", str(self.wpm), "-w", str(part), text]
         subprocess.run(cmd, check=True, capture_output=True, timeout=30)
+        part.replace(wav)
         if self.play:
             subprocess.run([self.espeak, "-v", self.voice, "-s", str(self.wpm), text], timeout=30)
         return True

@@ -108,8 +108,14 @@ def show(request: pytest.FixtureRequest) -> Callable[[str], None]:
     return add
 
 
-# mostly waiting on pip or on a paced replay: they run beside the rest, after the container test
-LONG_FILES = ("test_event_time.py", "test_package.py")
+# mostly waiting on pip or on a paced replay, or on services starting again after a kill: they
+# run beside the rest, after the container test
+LONG_FILES = (
+    "test_event_time.py",
+    "test_package.py",
+    "test_damaged_recordings.py",
+    "test_soak.py",
+)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

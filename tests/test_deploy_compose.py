@@ -6,7 +6,8 @@ or Dockerfile (or a file it copies) that is missing, a command the `beyond` CLI 
 config file a command or variable names that is not where the mounts put it (or does not load),
 an undeclared network or volume, a service in the wrong profile or depending on one that is not
 started with it, an unknown BEYOND_* variable, a router endpoint nobody serves, service options
-the service does not have. The mutation tests below show each check fails when it should.
+the service does not have, a restart policy other than `beyond up`'s (on failure, a bounded
+number of times). The mutation tests below show each check fails when it should.
 """
 
 from __future__ import annotations
@@ -77,6 +78,7 @@ class Checker:
     # -- one service -----------------------------------------------------------------------
 
     def check_service(self, name: str, s: dict[str, Any]) -> None:
+        self.check_restart(name, s)
         entrypoint = self.check_image(name, s)
         mounts = self.check_volumes(name, s)
         self.check_networks(name, s)
@@ -127,6 +129,17 @@ class Checker:
             last = err.getvalue().strip().splitlines()[-1:] or ["refused"]
             self.bad(name, f"beyond {' '.join(argv)}: {last[0]}")
             return None
+
+    def check_restart(self, name: str, s: dict[str, Any]) -> None:
+        """Restarted when it dies, as `beyond up` restarts its services: on failure only (a
+        service that exits 0 meant to stop), with a bounded number of tries (the engine doubles
+        its delay from 100 ms between them), never for ever."""
+        policy = str(s.get("restart", "no"))
+        kind, _, tries = policy.partition(":")
+        if kind != "on-failure":
+            self.bad(name, f"restart: {policy!r} (valid: on-failure:N, as beyond up restarts)")
+        elif not tries.isdigit() or not 1 <= int(tries) <= 10:
+            self.bad(name, f"restart: {policy!r} retries without bound (valid: on-failure:1..10)")
 
     def check_image(self, name: str, s: dict[str, Any]) -> list[str] | None:
         """The image's entrypoint (from the Dockerfile when built here); None if unknown."""
@@ -479,6 +492,12 @@ NO_YAML = "/etc/beyond/no.yaml"
         (_set("volumes", {}), "'speech' is not declared"),
         (_set("services.gestures.command", None), "gestures: no command"),
         (_set("extras", {}), "unknown top-level key 'extras'"),
+        (
+            _set("services.reasoner.restart", "unless-stopped"),
+            "reasoner: restart: 'unless-stopped'",
+        ),
+        (_set("services.speech.restart", "on-failure"), "speech: restart: 'on-failure' retries"),
+        (_set("services.ingest.restart", _DELETE), "ingest: restart: 'no'"),
     ],
 )
 def test_the_checker_reports_each_kind_of_problem(change: Any, expected: str | None) -> None:

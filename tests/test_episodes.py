@@ -300,3 +300,25 @@ def test_tracker_cancels_a_gesture_the_source_cut_short() -> None:
     assert isinstance(out[-1], Cancelled | Ended)
     assert any(isinstance(e, Started) for e in out)
     assert len(cameras) > 0
+
+
+def test_a_long_run_keeps_a_bounded_record_of_the_gestures_it_told() -> None:
+    """The lines of a soak's thousands of gestures: each printed once, the record of old ones
+    forgotten (issue 21: resident memory flat)."""
+    from beyond_self.cognition.episodes.fusion import Recent
+    from beyond_self.cognition.episodes.report import KEPT
+
+    report = GestureReport()
+    printed = 0
+    for n in range(1, 2 * KEPT + 50):
+        report.started(n, 10)
+        report.ended(n, 20)
+        report.recognised(n, {"tap": 1.0}, {})
+        report.described(n, "the robot tapped the ball")
+        printed += len(report.release())
+    assert printed == (2 * KEPT + 49) * 4  # started, ended, recognised, described
+    assert len(report.gestures) == KEPT
+    recent = Recent(size=3)
+    for n in range(10):
+        recent.add(n)
+    assert [n in recent for n in (6, 7, 8, 9)] == [False, True, True, True]

@@ -19,6 +19,7 @@ from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
 from beyond_self.cognition.paths import DEMO_RECORDING
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.delivery import EVENTS
 from beyond_self.runtime.recording import inspect_recording, read_recording
 from beyond_self.runtime.replay import Player, recorded_cues
 from beyond_self.services.deployment import Deployment
@@ -61,34 +62,70 @@ def test_up_describes_every_gesture_with_the_right_verb_and_twice_the_same(tmp_p
     assert [line.split("\t")[-1] for line in spoken] == [s for _, s in described] * 3
 
 
-async def test_a_killed_service_restarts_and_is_picked_up() -> None:
+async def said(log: Path, lines: int, timeout: float = 30.0) -> None:
+    """Until the speech service has logged `lines` sentences."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while not (log.exists() and log.read_text().count("\n") >= lines):
+        assert loop.time() < deadline, f"{log} holds fewer than {lines} sentences"
+        await asyncio.sleep(0.05)
+
+
+async def restarted(bus: Bus, name: str, timeout: float = 60.0) -> None:
+    """Until service `name` answers health as restarted once (its health shows it)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while loop.time() < deadline:
+        replies = await bus.query(bus.keys.health(name), s.ServiceHealth, timeout=2, every=True)
+        if any(r.message.restarts == 1 for r in replies):
+            return
+        await asyncio.sleep(0.05)
+    raise AssertionError(f"{name} did not come back within {timeout} s")
+
+
+async def test_a_killed_service_is_restarted_and_repeats_nothing(tmp_path: Path) -> None:
+    """The deployment restarts a describer killed with SIGKILL once its sentence was said. The
+    new one says in its health that it was restarted, gets back from the publisher's cache the
+    words it had described, and does not describe them again (its predecessor's record, kept by
+    the speech service, says it did; and the speech service, its consumer, has the sentence).
+    Each sentence said once, too."""
     env = {"BEYOND_LOG_FORMAT": "text", "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
     words = {w: 0.5 for w in DEFAULT_GRAMMAR.vocabulary}
     words.update({"he": 0.99, "taps": 0.99, "the": 0.99, "box": 0.99, "and": 0.99, "slides": 0.99})
-    pipeline = Deployment(private_config(), ["describer"], env=env)
+    told: list[tuple[str, str]] = []
+    pipeline = Deployment(
+        private_config(),
+        ["speech", "describer"],
+        options={"speech": {"out_dir": str(tmp_path)}},
+        env=env,
+        on_restart=lambda name, what: told.append((name, what)),
+    )
     bus = await pipeline.open()
     out = bus.subscribe(bus.keys.description, s.Description)
-    pub = bus.publisher(bus.keys.words, s.WordProbabilities)
-    first = await pipeline.launch("describer")
+    pub = bus.publisher(bus.keys.words, s.WordProbabilities, EVENTS)  # cached, as the reasoner's
+    await pipeline.start()
+    first = next(p for p in pipeline.processes if p.name == "describer")
     try:
         for round_ in range(2):
-            await bus.wait_alive(bus.keys.alive("describer"), timeout=30)
-            await pub.wait_matching(timeout=30)
-            header = s.Header(version=1, source="test", seq=round_, stamp=round_)
+            header = s.Header(version=1, source="test", seq=round_, stamp=round_ + 1)
             pub.put(s.WordProbabilities(header=header, segment_id=round_, words=words))
-            got = (await out.recv(timeout=20)).message
+            got = (await out.recv(timeout=30)).message  # a repeat of round 0 would come first
             assert got.segment_id == round_
             assert got.sentences[0].text == "he taps the box and the box slides"
-            if round_ == 0:  # kill it hard, and start a new one: the bus picks it up
+            if round_ == 0:  # once said, kill it hard: the deployment starts a new one
+                await said(tmp_path / "speech.log", 1)
                 first.process.send_signal(signal.SIGKILL)
                 await first.process.wait()
-                await bus.wait_gone(bus.keys.alive("describer"), timeout=30)
-                await pipeline.launch("describer")
+                await restarted(bus, "describer")
+        await said(tmp_path / "speech.log", 2)
     finally:
         codes = await pipeline.stop()
     assert first.process.returncode == -signal.SIGKILL
-    assert codes == {"describer": 0}  # the new process, stopped cleanly
-    await asyncio.sleep(0)
+    assert told == [("describer", "killed by SIGKILL; restart 1 in 0.1 s")]
+    assert pipeline.restarts["describer"].count == 1
+    assert codes == {"speech": 0, "describer": 0}  # the new process, stopped cleanly
+    spoken = (tmp_path / "speech.log").read_text().splitlines()
+    assert [line.split("\t")[1] for line in spoken] == ["0", "1"]  # each said once
 
 
 DECOYS = ("schemas", "runtime", "core", "services", "cognition", "beyond", "beyond_self")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
+from typing import Any
 
 import pytest
 from busutil_net import skeleton_frames
@@ -87,3 +88,39 @@ def test_recorded_cues_decode_once_rename_and_skip(tmp_path: Path) -> None:
         out[3].ours()  # sent as recorded by `beyond replay`, refused by the ingest
     skipped = recorded_cues(read_recording(path), lambda k: None if "other" in k else k)
     assert len(list(skipped)) == 3
+
+
+def test_a_looped_source_is_restamped_pass_after_pass(tmp_path: Path) -> None:
+    """Each pass later than the one before by the recording's span and a second: a consumer
+    that refuses stamps going back takes every pass (issue 21); a camera frame's timestamp
+    moves with its header. A restarted source starts with the pass its consumers are in."""
+    from beyond_self.runtime.replay import LOOP_GAP_S, looped
+    from beyond_self.schemas import CameraFrame
+
+    path = tmp_path / "r.mcap"
+    frames = skeleton_frames(3)
+    with RecordingWriter(path) as writer:
+        for f in frames:
+            writer.write(KEYS.skeleton, f)
+        writer.write(KEYS.camera, CameraFrame.build(frames[-1].header, 2, 2, bytes(12)))
+    first, last = frames[0].header.stamp, frames[-1].header.stamp
+    period = last - first + round(LOOP_GAP_S * 1e9)
+    passes = 0
+
+    def one() -> Any:
+        nonlocal passes
+        passes += 1
+        return recorded_cues(read_recording(path)) if passes <= 3 else iter(())
+
+    cues = list(looped(one, loop=True, span=(first, last)))
+    assert len(cues) == 12
+    stamps = [c.stamp for c in cues]
+    assert stamps == sorted(stamps) and len(set(stamps[::4])) == 3  # forward, pass after pass
+    assert [c.stamp - cues[i % 4].stamp for i, c in enumerate(cues)] == [
+        k * period for k in range(3) for _ in range(4)
+    ]
+    camera = cues[-1].ours()
+    assert isinstance(camera, CameraFrame) and camera.timestamp.to_ns() == camera.header.stamp
+    passes = 0
+    resumed = list(looped(one, loop=True, span=(first, last), resume_at=stamps[5]))
+    assert resumed[0].stamp == stamps[4]  # the second pass, from its start

@@ -133,7 +133,7 @@ def test_truncated_file_reports_what_is_readable(tmp_path: Path) -> None:
         assert not info.complete and info.error
         assert info.messages == expected
         line = info.damage()
-        assert f"of {cut}" in line and f"readable: {expected} messages" in line
+        assert f"of {cut}" in line and f"played the other {expected}" in line
         result = subprocess.run(
             [*BEYOND, "inspect", str(cut_path)],
             capture_output=True,
@@ -142,8 +142,8 @@ def test_truncated_file_reports_what_is_readable(tmp_path: Path) -> None:
         )
         assert result.returncode == 2
         errors = result.stderr.strip().splitlines()
-        assert len(errors) == 1 and "truncated or corrupt" in errors[0]
-        assert f"readable: {expected} messages" in errors[0]
+        assert len(errors) == 1 and "is damaged: truncated at byte" in errors[0]
+        assert f"played the other {expected}" in errors[0]
 
 
 def test_corrupt_chunk_is_detected(tmp_path: Path) -> None:

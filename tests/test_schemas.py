@@ -112,6 +112,7 @@ def examples() -> list[s.Message]:
             dropped=0,
             malformed=3,
             errors=0,
+            restarts=2,
         ),
         s.StreamEnd(
             header=_h(s.StreamEnd),
@@ -119,6 +120,14 @@ def examples() -> list[s.Message]:
             messages=12,
             dropped=1,
             last_stamps={"skeleton": 5, "camera": 4},
+            damage="demo.mcap is damaged: truncated at byte 9 of 10 (ends inside a record)",
+        ),
+        s.Ledger(
+            header=H,
+            service="describer",
+            handled={"beyond/robot/language/words": {"words": [(1, 0, 0), (2, 0, 0)]}},
+            resume={"segments": 2, "events": 4},
+            resume_stamps={"stamp": 1_700_000_000_123_456_789},  # above 2**53: a time in JSON
         ),
         s.Progress(
             header=H,

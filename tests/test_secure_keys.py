@@ -88,6 +88,7 @@ def test_rules_follow_the_declarations() -> None:
             "beyond/*/language/words/@adv/**",
             "beyond/*/progress/*",
             "beyond/*/clock",  # a replay's stream clock, which every service may follow
+            "beyond/*/ledger/*",  # everyone's ledger, kept by every service (runtime.ledger)
         ]
     )
     assert "beyond/*/clock" in by_id["ingest-out-ingress"]["key_exprs"]  # the player's

@@ -5,25 +5,34 @@
 No bus, no services: the skeleton and camera streams are read in recording order and go through
 the same library classes the services run (cognition.episodes), with the same options (the
 per-service options of `--config`, as for `beyond up`). It prints the lines `beyond up` prints
-for the same recording; a run on the bus, at any rate and under any load, must equal it.
+for the same recording; a run on the bus, at any rate and under any load, must equal it. A
+damaged recording is analysed as far as it is readable, with the frames the ingest would play,
+and what was lost is said in one line (exit 2), as `inspect`, `replay` and `up` say it.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 from beyond_self.cognition.bn import learn_network, load_model, synthetic_dataset
-from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
+from beyond_self.cognition.episodes.offline import (
+    CameraInput,
+    OfflineRun,
+    SkeletonInput,
+    analyse_stream,
+)
 from beyond_self.cognition.gestures import load_models
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.images import image_from_message
-from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.recording import inspect_recording, read_recording, require_mcap
+from beyond_self.runtime.recording_damage import Losses
+from beyond_self.runtime.replay import Cue, looped, recorded_cues
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
 from beyond_self.schemas.keys import split_key
 from beyond_self.services.options import check_options, load_options
@@ -38,14 +47,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="one JSON object per gesture")
 
 
-def _inputs(path: Path, hand: str, torso: str) -> Iterator[SkeletonInput | CameraInput]:
-    for item in read_recording(path):
-        split = split_key(item.key)
-        if split is None or item.cls is None:
+def _inputs(
+    path: Path, hand: str, torso: str, losses: Losses | None = None
+) -> Iterator[SkeletonInput | CameraInput]:
+    """The skeleton and camera frames of a recording, as the ingest plays them: what does not
+    decode or does not move forward in time is dropped and counted in `losses`
+    (runtime.recording_damage), the same frames every command drops."""
+    tally = losses if losses is not None else Losses(str(path))
+    return inputs_of(recorded_cues(read_recording(path, losses=tally), None, tally), hand, torso)
+
+
+def inputs_of(cues: Iterable[Cue], hand: str, torso: str) -> Iterator[SkeletonInput | CameraInput]:
+    """The pipeline's inputs in cues (a recording's, or a looped one's)."""
+    for cue in cues:
+        split = split_key(cue.key)
+        if split is None or cue.message is None:
             continue
-        if item.cls is SkeletonFrame:
-            msg = item.message()
-            assert isinstance(msg, SkeletonFrame)
+        msg = cue.message
+        if isinstance(msg, SkeletonFrame):
             joint = msg.joints.get(hand)
             if joint is None:
                 raise InputError(
@@ -56,10 +75,37 @@ def _inputs(path: Path, hand: str, torso: str) -> Iterator[SkeletonInput | Camer
             yield SkeletonInput(
                 msg.header.stamp, msg.frame, joint.position, body.position if body else None
             )
-        elif item.cls in (CameraFrame, CompressedCameraFrame):
-            cam = item.message()
-            assert isinstance(cam, CameraFrame | CompressedCameraFrame)
-            yield CameraInput(cam.header.stamp, cam.header.seq, image_from_message(cam))
+        elif isinstance(msg, CameraFrame | CompressedCameraFrame):
+            yield CameraInput(msg.header.stamp, msg.header.seq, image_from_message(msg))
+
+
+def looped_inputs(
+    path: Path, passes: int, hand: str = "right_hand", torso: str = "torso"
+) -> Iterator[SkeletonInput | CameraInput]:
+    """The inputs of `passes` passes of a recording, each restamped after the last, as the
+    ingest plays it with `loop: true` (runtime.replay.looped): what `up` over a looped source
+    must tell."""
+    info = inspect_recording(path)
+    if info.start is None or info.end is None:
+        return iter(())
+    made = 0
+
+    def one_pass() -> Iterator[Cue]:
+        nonlocal made
+        made += 1
+        return recorded_cues(read_recording(path)) if made <= passes else iter(())
+
+    return inputs_of(looped(one_pass, loop=True, span=(info.start, info.end)), hand, torso)
+
+
+def default_run(inputs: Iterable[SkeletonInput | CameraInput]) -> OfflineRun:
+    """The offline analysis with the default models (no --config): what `up` prints."""
+    return analyse_stream(
+        inputs,
+        gesture_models=default_models(),
+        clusters=ClusterModel.load(),
+        network=learn_network(synthetic_dataset()),
+    )
 
 
 def _options(config: str | None) -> dict[str, dict[str, Any]]:
@@ -69,18 +115,20 @@ def _options(config: str | None) -> dict[str, dict[str, Any]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.recording.is_file():
-        raise InputError(f"recording {args.recording} does not exist")
-    info = inspect_recording(args.recording)
-    if info.error:
-        raise InputError(f"recording {args.recording}: {info.damage()}")
+    require_mcap(args.recording)
+    losses = Losses(str(args.recording))
     o = _options(args.config)
     g, ob, r, d = o["gestures"], o["objects"], o["reasoner"], o["describer"]
     models = load_models(Path(g["models"])) if g.get("models") else default_models()
     network = load_model(Path(r["model"])) if r.get("model") else learn_network(synthetic_dataset())
     emit = None if args.json else (lambda line: print(line, flush=True))
     result = analyse_stream(
-        _inputs(args.recording, g.get("hand_joint", "right_hand"), g.get("torso_joint", "torso")),
+        _inputs(
+            args.recording,
+            g.get("hand_joint", "right_hand"),
+            g.get("torso_joint", "torso"),
+            losses,
+        ),
         gesture_models=models,
         clusters=ClusterModel.load(ob.get("clusters")),
         network=network,
@@ -105,4 +153,6 @@ def run(args: argparse.Namespace) -> int:
                     }
                 )
             )
+    if losses.any:  # what was readable is analysed above; what was not, in one line (exit 2)
+        raise InputError(losses.line())
     return 0

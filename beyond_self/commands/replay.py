@@ -198,10 +198,8 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(pace_for) or 'nobody'})",
             file=sys.stderr,
         )
-        if stats.damaged and stats.messages == 0:
-            raise InputError(f"nothing replayed: {stats.damaged}")
-        if stats.damaged:
-            print(f"warning: {stats.damaged}", file=sys.stderr)
+        if stats.damaged:  # one line, the same as inspect, analyse and up say (exit 2)
+            raise InputError(stats.damaged)
         return 0
 
     return asyncio.run(go())

@@ -2,18 +2,26 @@
 
     beyond up [--recording FILE | --log DIR | --live-source module:function] [--config FILE]
               [--profile all|robot|workstation] [--rate R] [--no-live] [--timeout S]
-              [--wait-for NAME,...] [--until-stream-end] [bus options]
+              [--skip NAME] [--without NAME] [--wait-for NAME,...] [--until-stream-end]
+              [bus options]
 
 Starts the services of the profile on the configured bus (default: Zenoh peers on loopback), the
 source last (it waits for their liveliness before it publishes), as a `services.deployment.
 Deployment`: this module is the command line and the terminal around it. Service logs go to
 stderr with the service name; pipeline events (recognised action, anticipated effect,
 description) to stdout, and a live view when stdout is a terminal. With a source it exits once
-the source has ended and every gesture has its final description (status 0); Ctrl-C stops
-everything cleanly. --timeout bounds start-up (nothing handled or published that long after the
-services are up) and the tail (the source ended, and nothing moved that long): status 1. A source
-that is silent while it runs, a live camera paused for an hour or a gap in a recording played at
-rate 1, is never timed out: the pipeline waits for it, and describes the next gesture.
+the source has ended and every gesture has its final description (status 0), or, with a damaged
+recording, with the same one line and status 2 as `beyond analyse`; Ctrl-C stops everything
+cleanly. --timeout bounds start-up (nothing handled or published that long after the services
+are up) and the tail (the source ended, and nothing moved that long): status 1. A source that is
+silent while it runs, a live camera paused for an hour or a gap in a recording played at rate 1,
+is never timed out: the pipeline waits for it, and describes the next gesture. A service that
+dies is started again (services.supervision), said on stderr and counted in the live view; one
+that keeps dying is given up on, and `up` ends.
+
+`--skip NAME`: NAME runs elsewhere (your own synthesizer, another machine): it is not started
+here, and the others still expect it. `--without NAME`: the deployment has no NAME at all: it is
+neither started nor waited for, and the services that would use it are told.
 
 Two machines (see README, Deployment): `--profile robot` (ingest, gestures, objects) and
 `--profile workstation` (reasoner, describer, speech) start one side each, against a router
@@ -48,16 +56,17 @@ from rich.live import Live
 
 from beyond_self.cognition.paths import DEMO_RECORDING
 from beyond_self.commands import argtypes
-from beyond_self.core.errors import InputError
+from beyond_self.core.errors import InputError, unknown
 from beyond_self.live_view import render
 from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.config import BusConfig
 from beyond_self.runtime.process import exit_process
+from beyond_self.runtime.recording import require_mcap
 from beyond_self.schemas.keys import check_name
 from beyond_self.services.deployment import Deployment, Ending
 from beyond_self.services.options import load_options
-from beyond_self.services.registry import PROFILES
+from beyond_self.services.registry import PROFILES, SERVICES
 
 HELP = "start the pipeline's services as separate processes and watch them"
 SECURE_LOCAL_ROUTER = "tls/127.0.0.1:7447"  # a side's own router, when it links to another
@@ -81,7 +90,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="SERVICE",
-        help="do not start this service (e.g. speech, when your own synthesizer replaces it)",
+        help="do not start this service here: it runs elsewhere (e.g. your own speech "
+        "synthesizer), and the others still expect it (the source waits for it)",
+    )
+    parser.add_argument(
+        "--without",
+        action="append",
+        default=[],
+        metavar="SERVICE",
+        help="the deployment has no such service: it is not started nor waited for, and the "
+        "services that would use it are told (--without objects: no object evidence)",
     )
     parser.add_argument(
         "--rate",
@@ -127,7 +145,11 @@ def run(args: argparse.Namespace) -> int:
         config = config.with_(mode="client")
     if config.secure is not None and config.identity is None:  # the monitor is the side's
         config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
-    status = asyncio.run(up(args, local_group(config)))
+    try:
+        status = asyncio.run(up(args, local_group(config)))
+    except InputError as exc:  # bad input (a damaged recording...): one line, as every command
+        print(f"beyond up: error: {exc}", file=sys.stderr)
+        status = 2
     # every service is stopped and the session closed: leave before the interpreter's teardown,
     # which aborted `up` now and then (SIGABRT) after a run that had succeeded
     exit_process(status)
@@ -198,6 +220,15 @@ def log_line(name: str, line: str) -> None:
     print(f"[{name}] {line}", file=sys.stderr, flush=True)
 
 
+def service_names(values: list[str]) -> list[str]:
+    """Service names given to --skip or --without (also comma-separated), each a known one."""
+    names = [n.strip() for v in values for n in v.split(",") if n.strip()]
+    for name in names:
+        if name not in SERVICES:
+            raise unknown("service", name, list(SERVICES))
+    return names
+
+
 def service_options(args: argparse.Namespace, names: list[str]) -> tuple[dict[str, Any], bool]:
     """Each service's options (the config file's, then the command line's), and whether the
     source replays something finite (its services then follow the recording's clock). Without
@@ -212,8 +243,8 @@ def service_options(args: argparse.Namespace, names: list[str]) -> tuple[dict[st
             replayed = True
         options["ingest"].update(source)
         options["ingest"].setdefault("rate", args.rate)
-    if "reasoner" in names and "objects" not in names and args.profile == "all":
-        # no object segmenter in this deployment: the reasoner must not wait for one
+    if "reasoner" in names and "objects" in service_names(args.without):
+        # no object segmenter anywhere: the reasoner must not wait for one
         options["reasoner"].setdefault("objects", False)
     return options, replayed
 
@@ -222,7 +253,8 @@ def deployment(
     args: argparse.Namespace, config: BusConfig, lines: EventLines
 ) -> tuple[Deployment, bool]:
     """The side's Deployment, and whether it replays a finite source."""
-    names = [n for n in PROFILES[args.profile] if n not in args.skip]
+    skip, without = service_names(args.skip), service_names(args.without)
+    names = [n for n in PROFILES[args.profile] if n not in skip and n not in without]
     options, replayed = service_options(args, names)
     router = None
     if config.secure is not None:
@@ -232,13 +264,16 @@ def deployment(
         config,
         names,
         options=options,
-        wait_for=wait_list(args.wait_for),
+        wait_for=wait_list(args.wait_for) + [n for n in skip if n in PROFILES[args.profile]],
         watcher=monitor_name(args.profile),
         clock="recording" if replayed else "wall",
         router=router,
         log=log_line,
         on_stuck=lambda n, why: lines.emit(f"service {n} is stuck ({why}); stopping it"),
         stop_on_signals=True,
+        # what dies is started again: said on stderr, beside the services' own logs (stdout
+        # holds the gesture lines, the same as beyond analyse prints)
+        on_restart=lambda n, what: print(f"[up] {n}: {what}", file=sys.stderr, flush=True),
     )
     return side, replayed
 
@@ -267,11 +302,18 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         pipeline.stop()
         codes = await side.stop()
     lines.emit(pipeline.summary())
+    if side.restarts:
+        counts = ", ".join(f"{n} {r.count}" for n, r in side.restarts.items() if r.count)
+        print(f"restarts: {counts or 'none'}", file=sys.stderr)
     err_codes = ", ".join(f"{n} {c}" for n, c in codes.items())
     print(f"services stopped (exit codes: {err_codes})", file=sys.stderr)
     if failed := side.unclean():
         lines.emit(f"services that did not stop cleanly: {failed}")
         return 1
+    end = pipeline.stream_end
+    if ending.ok and end is not None and end.damage:
+        # the readable part was played and described above; what was lost, as analyse says it
+        raise InputError(end.damage)
     return 0 if ending.ok else 1
 
 
@@ -311,7 +353,9 @@ async def watch(
             lines.live.stop()  # drawn once more, as it ends
             lines.live = None
     if ending.reason == "exited":
-        lines.emit(f"service(s) exited early: {', '.join(ending.exited)}")
+        why = {n: side.restarts[n].gave_up for n in ending.exited if n in side.restarts}
+        said = [f"{n} ({why[n]})" if why.get(n) else n for n in ending.exited]
+        lines.emit(f"service(s) exited early: {', '.join(said)}")
     elif ending.reason == "timeout":
         lines.emit(f"timed out after {timeout:.0f} s")
     return ending
@@ -319,8 +363,7 @@ async def watch(
 
 def _source(args: argparse.Namespace) -> dict[str, str]:
     if args.recording is not None:
-        if not args.recording.is_file():
-            raise InputError(f"recording {args.recording} does not exist")
+        require_mcap(args.recording)  # refused here, on one line, before anything starts
         return {"recording": str(args.recording)}
     if args.log is not None:
         return {"log": str(args.log)}

@@ -86,7 +86,7 @@ class FusionJoin(Generic[R]):
         self.expect_objects = expect_objects
         self.deadline_ns = round(deadline_s * 1e9)
         self.gestures: dict[int, _Gesture[R]] = {}
-        self.finished: set[int] = set()
+        self.finished = Recent()  # gestures told or given up: a repeat about them is ignored
         self.skeleton_time = -1
         self.objects_present = False  # the object segmenter is alive (told by the caller)
 
@@ -135,6 +135,14 @@ class FusionJoin(Generic[R]):
         g = self._gesture(segment_id)
         if g is not None and g.effects is None:
             g.effects = (self.known(object_labels), self.known(effect_labels))
+        return self._flush()
+
+    def done(self, segment_ids: set[int]) -> list[Output[R]]:
+        """These gestures were completed elsewhere (by a previous instance, whose outcome every
+        consumer has): whatever comes about them is a repeat, and they hold nothing back."""
+        for segment_id in segment_ids:
+            self.gestures.pop(segment_id, None)
+            self.finished.add(segment_id)
         return self._flush()
 
     def skeleton_at(self, stamp: int) -> list[Output[R]]:
@@ -232,6 +240,24 @@ class FusionJoin(Generic[R]):
         words = fuse_words(self.model, observed, g.final.belief)
         clipped = {w: min(1.0, max(0.0, p)) for w, p in words.items()}
         return Outcome(segment_id, g.final.frame, g.final.ref, prediction, clipped, dropped)
+
+
+class Recent:
+    """A set of the last `size` segment ids added: what a cache can still repeat (it holds the
+    last 64 events) is remembered, and a long run does not grow without bound."""
+
+    def __init__(self, size: int = 4096) -> None:
+        self.size = size
+        self._ids: dict[int, None] = {}
+
+    def add(self, segment_id: int) -> None:
+        self._ids.pop(segment_id, None)
+        self._ids[segment_id] = None
+        if len(self._ids) > self.size:
+            del self._ids[next(iter(self._ids))]
+
+    def __contains__(self, segment_id: object) -> bool:
+        return segment_id in self._ids
 
 
 def _normalised(dist: Mapping[str, float]) -> dict[str, float]:

@@ -181,6 +181,7 @@ class ObjectWatch(Generic[R]):
         self.camera_done = False
         self.skeleton_time = -1
         self.windows: dict[int, _Window[R]] = {}
+        self.told: deque[int] = deque(maxlen=4096)  # gestures told elsewhere (`done`)
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -203,8 +204,8 @@ class ObjectWatch(Generic[R]):
         return self._decide()
 
     def started(self, segment_id: int, start_stamp: int, ref: R) -> list[Output[R]]:
-        if segment_id in self.windows:
-            return []  # a repeat (recovered from a cache): already under way
+        if segment_id in self.windows or segment_id in self.told:
+            return []  # a repeat (recovered from a cache): already under way, or told
         if len(self.windows) >= self.max_open:
             raise InputError(
                 f"gesture {segment_id} refused: {len(self.windows)} gestures already under way "
@@ -230,6 +231,8 @@ class ObjectWatch(Generic[R]):
             raise InputError(
                 f"gesture {segment_id} ends at {end_stamp}, before its start {start_stamp}"
             )
+        if segment_id in self.told:
+            return []
         window = self.windows.get(segment_id)
         outputs: list[Output[R]] = []
         if window is None:  # its start was never seen: open the window from the buffer
@@ -241,6 +244,34 @@ class ObjectWatch(Generic[R]):
                 window.pending.pop()  # after its end: not the gesture's
         self._skeleton_at(end_stamp)
         return outputs + self._decide()
+
+    @property
+    def restart_point(self) -> int:
+        """A camera stamp from which a fresh watch, fed the frames from it on (and the gesture
+        events and progress again), makes the outputs this one makes from now on: no frame
+        before it is kept, in an open window or the last evicted one that showed an object (a
+        later gesture's start looks back to it), and every frame after it is handled or still
+        to come. -1: from the first frame. A restarted object segmenter starts there rather
+        than going over all the camera history a cache gives back (services/objects.py)."""
+        if self.complete_until < 0:
+            return -1
+        points = [self.complete_until - self.onset_ns - self.lead_ns, self.watermark + 1]
+        points += [w.lo for w in self.windows.values()]
+        if self.buffer:
+            points.append(self.buffer[0].stamp)
+        if self._last_evicted is not None:
+            points.append(self._last_evicted[0])
+        if self._evicted_unknown:  # undescribed, kept aside for a later start's look-back
+            points.append(self._evicted_unknown[0].stamp)
+        return min(points)
+
+    def done(self, segment_ids: set[int]) -> list[Output[R]]:
+        """These gestures were told elsewhere (by a previous instance, whose results every
+        consumer has): what comes about them is a repeat, not measured again."""
+        for segment_id in sorted(segment_ids):
+            self.windows.pop(segment_id, None)
+            self.told.append(segment_id)
+        return self._decide()
 
     def cancelled(self, segment_id: int) -> list[Output[R]]:
         self.windows.pop(segment_id, None)

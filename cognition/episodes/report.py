@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 ANTICIPATION_THRESHOLD = 0.6  # an effect value this probable counts as anticipated
 ANTICIPATED = ("ObjVel",)
 AFTER_ALL_FRAMES = 1 << 62  # recognition and description come after every frame's events
+KEPT = 256  # gestures printed (or skipped) kept, the most recent: what a repeat can be about
 
 # order of event kinds within one frame of a gesture's block
 STARTED, LOOKS, ANTICIPATES, ENDED, RECOGNISED, DESCRIBED = range(6)
@@ -135,6 +136,9 @@ class GestureReport:
                 break
             lines += [f"gesture {segment_id}: {line}" for line in g.block()]
             g.printed = True
+        told = [n for n in ids if self.gestures[n].printed or self.gestures[n].skipped]
+        for segment_id in told[:-KEPT]:  # a long run: keep only the recent ones
+            del self.gestures[segment_id]
         return lines
 
     @property

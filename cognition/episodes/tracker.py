@@ -99,19 +99,49 @@ class GestureTracker(Generic[R]):
         models: GestureModels,
         segmenter: SegmenterConfig | None = None,
         buffer_frames: int = 1800,
+        first_segment_id: int = 0,
     ) -> None:
         self.models = models
         self.recognizer = StreamingRecognizer(models)
         self.segmenter = GestureSegmenter(segmenter)
         self.buffer: deque[_Frame[R]] = deque(maxlen=buffer_frames)
         self.index = 0
-        self.segment_id = 0
+        self.segment_id = first_segment_id  # segments started before this tracker's first frame
         self.in_gesture = False
         self.last_stamp: int | None = None
         self._segmenter_start: int | None = None
         self._start_stamp = 0
         self._results: list[FrameResult] = []  # the recogniser's, frame by frame since the start
         self._results_from = -1  # stream index of the frame the first of them is about
+        self.checkpoint: tuple[int, int] | None = None  # (stamp, segment_id): see `_advance`
+        self._quiet: deque[int] = deque(maxlen=self.memory_frames + 1)  # stamps
+
+    @property
+    def memory_frames(self) -> int:
+        """Frames after which the segmenter no longer depends on what came before them, while
+        no gesture is under way: its median and speed windows, and how far back it may place a
+        gesture's start (cognition.gestures.segmentation)."""
+        cfg = self.segmenter.config
+        return cfg.max_lead + cfg.median_frames + cfg.speed_frames + 1
+
+    def _advance(self, stamp: int, z: float, eventful: bool) -> None:
+        """Move the checkpoint: a frame from which a fresh tracker (`first_segment_id` the
+        segments started before it), fed this tracker's frames from that one on, makes exactly
+        the events this one makes from there on. The first frame is one. So is a frame opening
+        `memory_frames` + 1 frames with no gesture under way, no event, and the hand behind the
+        reach threshold (raw, so that the fresh tracker's first, shorter medians cannot cross it):
+        neither tracker can start a gesture on them, and after them their states agree. A
+        speed-only segmenter (no reach threshold) has no checkpoint but the first frame.
+        A restarted gesture streamer resumes from it (services/gestures.py)."""
+        if self.checkpoint is None:
+            self.checkpoint = (stamp, self.segment_id)
+        reach = self.segmenter.config.reach_on
+        if reach is None or eventful or self.in_gesture or self.segmenter.active or z < reach:
+            self._quiet.clear()
+            return
+        self._quiet.append(stamp)
+        if len(self._quiet) == self._quiet.maxlen:
+            self.checkpoint = (self._quiet[0], self.segment_id)
 
     def push(self, stamp: int, number: int, x: np.ndarray, ref: R) -> list[Event[R]]:
         """The events at this frame (x: the hand in feature space, see extract_features)."""
@@ -138,6 +168,7 @@ class GestureTracker(Generic[R]):
             events += self._begin(start)
         elif self.in_gesture:
             events.append(self._belief(self._recognise(item.x), item))
+        self._advance(stamp, float(item.x[2]), bool(events))
         return events
 
     def _recognise(self, x: np.ndarray) -> FrameResult:

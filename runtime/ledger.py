@@ -1,0 +1,300 @@
+"""Exactly once at the consumer: what each service has handled, by identity, and who knows it.
+
+Every per-gesture output (and every per-frame one) has an identity: robot, segment id, kind,
+and for a per-frame kind its frame (schemas.identity). Three rules, in the Service base, make a
+killed and restarted service neither stall nor repeat anything:
+
+1. A consumer acts on each identity once. What it has handled is recorded per input key
+   (`Handled`); a message whose identity is already there is skipped and counted as a
+   duplicate, whoever republished it: a restarted producer re-deriving its outputs, a
+   publisher's cache after a cut link, a history query.
+2. A restarted producer does not send again what every consumer of its key has handled. Each
+   service publishes its `Handled` as a `Ledger` (`ledger/<service>`) when a per-gesture entry
+   is added and with its health otherwise; every service keeps the last one of all the others
+   (`LedgerBook`) and answers for all of them on query. So a restarted reasoner does not
+   republish a whole run of predictions: it sends what its consumers lack, and only that. It
+   suppresses only what consumers *handled* (never what its predecessor merely put: a put can
+   die in the process's send queue), so nothing is lost, and what goes out twice (a message
+   still in a consumer's queue when it asked) is skipped there by rule 1.
+3. A service whose handling is a side effect (speech: a sentence said; the describer: a
+   description made) takes its predecessor's `Handled` for those inputs (`once`), from the
+   copies the others kept, and does not act again on what its predecessor acted on.
+
+The book answers per service; several copies of one service's ledger (its own answer, the
+copies others kept) are merged, since what a service has handled only grows. A service's
+`resume` numbers (its checkpoint) are taken from whichever copy is newest by stamp.
+"""
+
+from __future__ import annotations
+
+import bisect
+import contextlib
+import logging
+import time
+from collections.abc import Callable, Coroutine, Iterable, Mapping
+from typing import Any
+
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import STATUS
+from beyond_self.runtime.log import event
+from beyond_self.runtime.publisher import Publisher
+from beyond_self.runtime.subscription import consume
+from beyond_self.schemas.base import Header, Message
+from beyond_self.schemas.identity import Identity, identify
+from beyond_self.schemas.messages import LEDGER_RANGES, Ledger, Range
+
+SEGMENTS_KEPT = 256  # per key and kind: older segments are forgotten (no cache holds them)
+RANGES_KEPT = 64  # per key, kind and segment: older ranges are forgotten
+
+
+class Handled:
+    """Identities handled, per input key: kind -> segment -> sorted, disjoint [first, last]
+    ranges of frames. Bounded: forgetting (the oldest segments, the oldest ranges) only ever
+    makes a producer send more, never less."""
+
+    def __init__(self) -> None:
+        self.keys: dict[str, dict[str, dict[int, list[list[int]]]]] = {}
+
+    def declare(self, key: str) -> None:
+        """`key` is taken, so it is listed (and its producers learn it is wanted) before any
+        message on it has been handled."""
+        self.keys.setdefault(key, {})
+
+    def has(self, key: str, ident: Identity) -> bool:
+        ranges = self.keys.get(key, {}).get(ident.kind, {}).get(ident.segment_id)
+        if not ranges:
+            return False
+        i = bisect.bisect_right(ranges, [ident.frame, float("inf")]) - 1
+        return i >= 0 and ranges[i][0] <= ident.frame <= ranges[i][1]
+
+    def add(self, key: str, ident: Identity) -> bool:
+        """Record `ident` handled on `key`; whether it was new."""
+        if self.has(key, ident):
+            return False
+        self._add_range(key, ident.kind, ident.segment_id, ident.frame, ident.frame)
+        return True
+
+    def _add_range(self, key: str, kind: str, segment: int, first: int, last: int) -> None:
+        segments = self.keys.setdefault(key, {}).setdefault(kind, {})
+        ranges = segments.get(segment)
+        if ranges is None:
+            ranges = segments[segment] = []
+            if len(segments) > SEGMENTS_KEPT:
+                del segments[min(segments)]
+        i = bisect.bisect_left(ranges, [first, first])
+        ranges.insert(i, [first, last])
+        merged: list[list[int]] = []
+        for lo, hi in ranges:  # short lists: merge overlapping and adjacent ranges
+            if merged and lo <= merged[-1][1] + 1:
+                merged[-1][1] = max(merged[-1][1], hi)
+            else:
+                merged.append([lo, hi])
+        ranges[:] = merged[-RANGES_KEPT:]
+
+    def segments(self, key: str, kind: str) -> set[int]:
+        """Segment ids with `kind` handled on `key`."""
+        return set(self.keys.get(key, {}).get(kind, {}))
+
+    # -- on the wire ------------------------------------------------------------------------
+
+    def wire(self) -> dict[str, dict[str, list[Range]]]:
+        out: dict[str, dict[str, list[Range]]] = {}
+        for key, kinds in self.keys.items():
+            out[key] = {}
+            for kind, segments in kinds.items():
+                flat = [(s, lo, hi) for s, ranges in segments.items() for lo, hi in ranges]
+                out[key][kind] = flat[-LEDGER_RANGES:]
+        return out
+
+    def merge(
+        self,
+        handled: Mapping[str, Mapping[str, Iterable[Range]]],
+        keys: Iterable[str] | None = None,
+    ) -> None:
+        """Add what another record says was handled (on `keys` only, if given)."""
+        wanted = None if keys is None else set(keys)
+        for key, kinds in handled.items():
+            if wanted is not None and key not in wanted:
+                continue
+            self.declare(key)
+            for kind, ranges in kinds.items():
+                for segment, first, last in ranges:
+                    self._add_range(key, kind, segment, first, last)
+
+
+class LedgerBook:
+    """The last word of every service of a robot on what it handled (its own `Ledger`s, heard
+    or asked), merged per service."""
+
+    def __init__(self) -> None:
+        self.handled: dict[str, Handled] = {}
+        self.resume: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, numbers)
+        self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
+
+    def heard(self, ledger: Ledger) -> None:
+        name = ledger.service
+        self.handled.setdefault(name, Handled()).merge(ledger.handled)
+        stamp, _ = self.resume.get(name, (-1, {}))
+        numbers = {**ledger.resume, **ledger.resume_stamps}
+        if numbers and ledger.header.stamp >= stamp:
+            self.resume[name] = (ledger.header.stamp, numbers)
+        self.last[name] = ledger
+
+    def resume_of(self, service: str) -> dict[str, int]:
+        return dict(self.resume.get(service, (-1, {}))[1])
+
+    def consumers_have(self, key: str, ident: Identity, producer: str) -> bool:
+        """Every service (but `producer`) that takes `key` has handled `ident`, and there is at
+        least one: what a restarted producer need not send again."""
+        takers = [h for n, h in self.handled.items() if n != producer and key in h.keys]
+        return bool(takers) and all(h.has(key, ident) for h in takers)
+
+    def done(self, key: str, kind: str, producer: str) -> set[int]:
+        """Segments whose `kind` on `key` every service (but `producer`) taking it has handled
+        (none when nobody takes it)."""
+        takers = [h for n, h in self.handled.items() if n != producer and key in h.keys]
+        if not takers:
+            return set()
+        return set.intersection(*(h.segments(key, kind) for h in takers))
+
+    def taken(self, key: str, producer: str) -> bool:
+        """Some service (but `producer`) takes `key`: its identities are worth checking."""
+        return any(key in h.keys for n, h in self.handled.items() if n != producer)
+
+
+# asking the others for the ledgers at start: answered at once by idle services, but a service
+# busy on a loaded machine may take seconds, and its answer is what keeps a sentence from being
+# said twice (the query ends as soon as every service has answered)
+ASK_TIMEOUT_S = 10.0
+
+
+class Keeper:
+    """A service's part in exactly-once: its own `Handled`, the `LedgerBook` of the others', its
+    `Ledger` published and answered for, and the checks the Service base makes with them."""
+
+    def __init__(self, name: str, header: Callable[[type[Ledger], int | None], Header]) -> None:
+        self.name = name
+        self.handled = Handled()
+        self.book = LedgerBook()
+        self.duplicates = 0  # messages skipped: their identity was handled already
+        # what this service's next instance resumes from (its checkpoint)
+        self.resume: dict[str, int] = {}
+        self.resume_stamps: dict[str, int] = {}
+        self._header = header
+        self._pub: Publisher[Ledger] | None = None
+        self._dirty = False
+
+    async def ask(self, bus: Bus, log: logging.Logger) -> None:
+        """What the others know (their ledgers, and the copies they kept of everyone's, this
+        service's predecessor's among them): called before the service opens its streams."""
+        began = time.monotonic()
+        with contextlib.suppress(InputError, TimeoutError):  # a malformed one: no ledgers
+            replies = await bus.query(bus.keys.ledger(), Ledger, timeout=ASK_TIMEOUT_S, every=True)
+            for reply in replies:
+                self.book.heard(reply.message)
+        if self.name in self.book.handled:
+            took = round(time.monotonic() - began, 3)
+            event(log, logging.INFO, "resuming after a previous instance", asked_s=took)
+
+    def predecessor(self) -> dict[str, int]:
+        """The numbers the previous instance of this service left to resume from ({} if none)."""
+        return self.book.resume_of(self.name)
+
+    def adopt(self, keys: Iterable[str]) -> None:
+        """Take the predecessor's handled identities on `keys`: not to act on them again."""
+        before = self.book.handled.get(self.name)
+        if before is not None:
+            self.handled.merge(before.wire(), keys)
+
+    def open(
+        self, bus: Bus, on_error: Callable[[str, Exception], None]
+    ) -> Coroutine[Any, Any, None]:
+        """Publish this service's ledger, answer for everyone's, and keep hearing the others';
+        returns the coroutine to run beside the handlers."""
+        self._pub = bus.publisher(bus.keys.ledger(self.name), Ledger, STATUS)
+        self._pub.put(self.ledger())
+
+        async def answer(_key: str, _request: None) -> list[tuple[str, Message]]:
+            mine = self.ledger()
+            others = [m for n, m in self.book.last.items() if n != self.name]
+            return [(bus.keys.ledger(m.service), m) for m in [mine, *others]]
+
+        bus.queryable(bus.keys.ledger(), None, answer, on_error=on_error)
+        sub = bus.subscribe(bus.keys.ledger(), Ledger, STATUS)
+
+        def heard(msg: Ledger) -> None:
+            if msg.service != self.name:
+                self.book.heard(msg)
+
+        return consume(sub, heard, on_error)
+
+    def ledger(self) -> Ledger:
+        return Ledger(
+            header=self._header(Ledger, None),
+            service=self.name,
+            handled=self.handled.wire(),
+            resume=dict(self.resume),
+            resume_stamps=dict(self.resume_stamps),
+        )
+
+    def publish(self) -> None:
+        self._dirty = False
+        if self._pub is not None:
+            self._pub.put(self.ledger())
+
+    def tick(self) -> None:
+        """With health: publish what changed since (per-frame entries, a new checkpoint)."""
+        if self._dirty:
+            self.publish()
+
+    def checkpoint(
+        self, stamps: Mapping[str, int], counts: Mapping[str, int] | None = None
+    ) -> None:
+        """Where a next instance would resume, its stamps and counts (published with the next
+        ledger; `predecessor` gives both back as one mapping)."""
+        counts = dict(counts or {})
+        if dict(stamps) != self.resume_stamps or counts != self.resume:
+            self.resume_stamps, self.resume = dict(stamps), counts
+            self._dirty = True
+
+    # -- the checks -------------------------------------------------------------------------
+
+    def duplicate(self, key: str, message: Message) -> Identity | None:
+        """The identity of a message already handled on `key` (counted), else None."""
+        ident = identify(key, message)
+        if ident is not None and self.handled.has(key, ident):
+            self.duplicates += 1
+            return ident
+        return None
+
+    def record(self, key: str, message: Message) -> None:
+        """`message` on `key` has been handled: a per-gesture one is told at once."""
+        ident = identify(key, message)
+        if ident is None or not self.handled.add(key, ident):
+            return
+        if ident.per_gesture:
+            self.publish()
+        else:
+            self._dirty = True
+
+    def seen_downstream(self, key: str, kinds: Iterable[str]) -> int:
+        """The highest segment id any consumer of `key` has handled with one of `kinds` (0:
+        none): where a restarted producer that cannot rebuild its state exactly numbers on."""
+        return max(
+            (max(h.segments(key, kind), default=0) for n, h in self.book.handled.items()
+             if n != self.name for kind in kinds),
+            default=0,
+        )  # fmt: skip
+
+    def done_downstream(self, key: str, kind: str) -> set[int]:
+        """Segments whose `kind` every consumer of this service's `key` has handled: a
+        restarted service need not work on them again."""
+        return self.book.done(key, kind, self.name)
+
+    def suppressed(self, key: str, message: Message) -> bool:
+        """Every consumer of `key` has handled `message` already: do not send it again."""
+        if not self.book.taken(key, self.name):
+            return False
+        ident = identify(key, message)
+        return ident is not None and self.book.consumers_have(key, ident, self.name)

@@ -1,0 +1,86 @@
+"""What a service says about itself: its health (answered and published every second) and the
+counts it logs when it stops. Kept apart from runtime.service, which runs the service."""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from typing import TYPE_CHECKING, Any
+
+from beyond_self.runtime.log import event
+from beyond_self.schemas.base import Header
+from beyond_self.schemas.messages import ServiceHealth
+
+if TYPE_CHECKING:
+    from beyond_self.runtime.service import Service
+
+RESTARTS_ENV = "BEYOND_RESTARTS"  # set by a supervisor (services.supervision) on a restart
+_STOP_COUNTS = ("messages_in", "messages_out", "malformed", "dropped", "errors", "restarts")
+
+
+def restarts() -> int:
+    """How many times this service was restarted before this instance (its supervisor says)."""
+    text = os.environ.get(RESTARTS_ENV, "0")
+    return int(text) if text.isdigit() else 0
+
+
+def health_of(service: Service, seq: int) -> ServiceHealth:
+    subs, publishers = service.subscriptions, service.publishers
+    keys = service.bus.keys
+    return ServiceHealth(
+        header=Header(
+            version=ServiceHealth.VERSION,
+            source=service.name,
+            seq=seq,
+            stamp=service.clock.now_ns(),
+            correlation=f"{service.name}/health/{seq}",
+        ),
+        service=service.name,
+        uptime_s=round(time.monotonic() - service.started_at, 3),
+        messages_in=sum(s.received for s in subs),
+        messages_out=sum(p.sent for p in publishers),
+        dropped=sum(s.dropped for s in subs),
+        malformed=sum(s.malformed for s in subs) + service.account.malformed_other,
+        errors=service.account.errors,
+        last_error=service.account.last_error,
+        inputs=sorted({s.key for s in subs}),
+        outputs=sorted(
+            {p.key for p in publishers}
+            | ({keys.progress(service.name)} if service.paced_keys else set())
+        ),
+        restarts=restarts(),
+    )
+
+
+def stop_counts(service: Service, health: ServiceHealth) -> dict[str, Any]:
+    """What a stopping service logs: its counts, what caches gave back, what it skipped."""
+    recovered, missed = service.recovery()
+    counts: dict[str, Any] = {"service": service.name}
+    counts.update({f: getattr(health, f) for f in _STOP_COUNTS})
+    counts.update(recovered=recovered, missed=missed)
+    counts["not_logged"] = service.account.once.repeats  # problems of a shape logged before
+    counts["duplicates"] = service.ledgers.duplicates  # handled already: skipped
+    counts["stale"] = service.stale  # sensor messages not after the last one handled
+    counts["suppressed"] = sum(p.suppressed for p in service.publishers)  # consumers had it
+    return counts
+
+
+def recovery_of(subscriptions: list[Any]) -> tuple[int, int]:
+    """(recovered, missed) over `subscriptions` (runtime.recovery)."""
+    return sum(s.recovered for s in subscriptions), sum(s.missed for s in subscriptions)
+
+
+def log_recovery(service: Service, reported: tuple[int, int]) -> tuple[int, int]:
+    """Log what publisher caches gave back since `reported`; the new figures."""
+    now = service.recovery()
+    if now != reported:
+        event(
+            service.log,
+            logging.INFO,
+            "recovered messages from publisher caches",
+            service=service.name,
+            recovered=now[0],
+            missed=now[1],
+        )
+    return now
