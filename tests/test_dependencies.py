@@ -16,7 +16,7 @@ from importlib.metadata import packages_distributions
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("beyond", "cognition", "core", "runtime", "schemas", "services", "bench", "tests")
+PACKAGES = ("beyond_self", "cognition", "core", "runtime", "schemas", "services", "bench", "tests")
 
 
 def _normalise(name: str) -> str:
@@ -48,11 +48,12 @@ def imports(path: Path) -> Iterator[tuple[str, int]]:
 
 
 def ours(module: str, importer: Path) -> bool:
-    """A package of this repository, or a helper module beside the importing file (tests and
-    their examples import their siblings)."""
+    """A package of this repository, a helper module beside the importing file (tests and
+    their examples import their siblings), or one of the tests' helpers (the benchmarks load the
+    machine as the tests do)."""
     return any(
         (folder / module).is_dir() or (folder / f"{module}.py").is_file()
-        for folder in (ROOT, importer.parent)
+        for folder in (ROOT, importer.parent, ROOT / "tests")
     )
 
 
