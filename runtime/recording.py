@@ -28,6 +28,7 @@ from beyond_self.schemas.codec import (
     from_recording_json,
     wire_encoding,
 )
+from beyond_self.schemas.keys import forward_only
 
 
 @dataclass(slots=True, frozen=True)
@@ -260,14 +261,16 @@ def _sorted(
     scanner: _Scanner, *, reorder_window: float = 2.0, views: bool = False
 ) -> Iterator[RecordedMessage]:
     """Every readable message in publish_time order (sorted within `reorder_window` s of log
-    time), a message whose publish_time is not after the previous one on its key dropped and
-    counted (runtime.recording_damage: what no consumer could take)."""
+    time), a sensor frame whose publish_time is not after the previous one on its key dropped and
+    counted (runtime.recording_damage: what no consumer could take; schemas.keys.forward_only)."""
     losses = scanner.info.losses
     window = int(reorder_window * 1e9)
     heap: list[tuple[int, int, RecordedMessage]] = []
     last: dict[str, int] = {}
 
     def in_order(item: RecordedMessage) -> bool:
+        if not forward_only(item.key):
+            return True
         previous = last.get(item.key)
         if previous is not None and item.publish_time <= previous:
             losses.drop(NOT_AFTER, f"{item.key} at {losses.at(item.publish_time)}")
@@ -302,9 +305,9 @@ def decoded(
     items: Iterable[RecordedMessage], losses: Losses
 ) -> Iterator[tuple[RecordedMessage, Message | None]]:
     """Each item with its decoded message (None: a sample not ours, kept raw). One that does
-    not decode, or holds a value out of its bounds (a NaN joint), or whose header stamp is not
-    after the previous one on its key, is dropped and counted in `losses`: one bad frame is
-    not the end of the source."""
+    not decode, or holds a value out of its bounds (a NaN joint), or a sensor frame whose header
+    stamp is not after the previous one on its key, is dropped and counted in `losses`: one bad
+    frame is not the end of the source."""
     last: dict[str, int] = {}
     for item in items:
         if item.cls is None:
@@ -316,7 +319,7 @@ def decoded(
             losses.drop(UNDECODABLE, f"{item.key} at {losses.at(item.publish_time)}: {exc}")
             continue
         stamp, previous = message.header.stamp, last.get(item.key)
-        if previous is not None and stamp <= previous:
+        if previous is not None and stamp <= previous and forward_only(item.key):
             losses.drop(NOT_AFTER, f"{item.key} at {losses.at(item.publish_time)}")
             continue
         last[item.key] = stamp

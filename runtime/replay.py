@@ -26,8 +26,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-import msgspec
-
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.clock import ClockTicks
@@ -92,10 +90,9 @@ class Cue:
 def restamped(message: M, offset: int) -> M:
     """`message` moved `offset` ns later: every stamp it holds (schemas.codec.shift_stamps) and
     a camera frame's `timestamp` (which must equal its header stamp)."""
-    moved = shift_stamps(message, offset)
-    if isinstance(getattr(moved, "timestamp", None), Time):
-        return msgspec.structs.replace(moved, timestamp=Time.from_ns(moved.header.stamp))
-    return moved
+    if isinstance(getattr(message, "timestamp", None), Time):
+        return shift_stamps(message, offset, timestamp=Time.from_ns(message.header.stamp + offset))
+    return shift_stamps(message, offset)
 
 
 def recorded_cues(

@@ -279,13 +279,16 @@ def stamp_paths(cls: type[Message]) -> list[str]:
     return sorted(found, key=lambda p: not p.startswith("header."))  # header.stamp first
 
 
-def shift_stamps(message: M, offset: int) -> M:
+def shift_stamps(message: M, offset: int, **also: Any) -> M:
     """`message` with every stamp it holds (header.stamp and every field typed `base.Stamp`,
     wherever it is) `offset` ns later; a "none yet" stamp (-1) stays none. How a looped replay
-    moves a pass later without missing a stamp nested in a dict or a list."""
-    if offset == 0:
+    moves a pass later without missing a stamp nested in a dict or a list. `also`: other fields
+    to change at once (a field that must agree with the stamps: a camera frame's timestamp)."""
+    if offset == 0 and not also:
         return message
-    return cast(M, _shift(message, stamp_plan(type(message)), offset))
+    plan = stamp_plan(type(message))
+    changes = {name: _shift(getattr(message, name), sub, offset) for name, sub in plan.items()}
+    return cast(M, msgspec.structs.replace(message, **changes, **also))
 
 
 def _shift(value: Any, plan: Plan, offset: int) -> Any:

@@ -161,6 +161,18 @@ def split_key(key: str) -> tuple[str, str] | None:
     return parts[1], parts[2]
 
 
+# streams whose stamps only move forward: a sensor frame stamped at or before the previous one
+# is refused by every consumer (they pace on them). Other keys may repeat a stamp: a gesture's
+# start and first belief share its frame's, health on a paused replay's clock stands still.
+FORWARD_ONLY = frozenset(STREAMS[name][0] for name in ("skeleton", "camera", "camera_compressed"))
+
+
+def forward_only(key: str) -> bool:
+    """`key` carries a sensor stream whose stamps must increase (FORWARD_ONLY)."""
+    split = split_key(key)
+    return split is not None and split[1] in FORWARD_ONLY
+
+
 def type_for_key(key: str) -> type[Message] | None:
     """The message type a concrete key carries, if it is one of ours."""
     split = split_key(key)

@@ -109,7 +109,10 @@ def queries(
         if kind == "hard":
             evidence[name] = draw(st.sampled_from(model.values[name]))
         elif kind == "soft":
-            vec = draw(st.lists(st.floats(0.0, 2.0), min_size=card, max_size=card))
+            # subnormal likelihoods hold a few bits: a ratio of two is exact to no 1e-12
+            vec = draw(
+                st.lists(st.floats(0.0, 2.0, allow_subnormal=False), min_size=card, max_size=card)
+            )
             soft[name] = vec if any(x > 0 for x in vec) else [1.0] * card
     return query, evidence, soft
 

@@ -92,8 +92,9 @@ def test_an_object_watch_started_at_its_restart_point_makes_the_same_outputs() -
     order = [(lane, item) for _, lane, item in sorted(timed, key=lambda t: (t[0], t[1]))]
 
     def feed(watch: ObjectWatch[int], lane: int, item: Any) -> list[Any]:
-        if lane == 0:
-            return watch.camera(item.stamp, item.frame, item.image, item.frame)
+        if lane == 0:  # as a replaying segmenter does: the gestures' part, then its objects
+            made = watch.camera(item.stamp, item.frame, item.image)
+            return [*made, watch.frame_objects(item.stamp, item.frame, item.image, item.frame)]
         if lane == 2:
             return watch.gestures_complete(item[0])
         if isinstance(item, Started):
