@@ -10,14 +10,14 @@ recording is answered whatever order the end marker and the frames arrive in.
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
 from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
-from beyond_self.cognition.gestures import GestureModels, extract_features, load_models
-from beyond_self.cognition.gestures.default_models import default_models
+from beyond_self.cognition.episodes.tracker import hand_position
+from beyond_self.cognition.gestures import GestureModels
+from beyond_self.cognition.gestures.default_models import pipeline_models
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.delivery import EVENTS, FRAMES
 from beyond_self.runtime.service import Service
@@ -49,9 +49,7 @@ class GestureStreamer(Service):
         self.finished = False
 
     async def setup(self) -> None:
-        self.gesture_models: GestureModels = (
-            load_models(Path(self.models_path)) if self.models_path else default_models()
-        )
+        self.gesture_models: GestureModels = pipeline_models(self.models_path)
         self.tracker: GestureTracker[Header] = GestureTracker(
             self.gesture_models, buffer_frames=self.buffer_frames
         )
@@ -72,8 +70,8 @@ class GestureStreamer(Service):
                 f"joints: {shown or 'none'}"
             )
         torso = frame.joints.get(self.torso_joint)
-        return cast(
-            np.ndarray, extract_features(hand.position, torso.position if torso else None)[0]
+        return hand_position(
+            hand.position, torso.position if torso else None, f"skeleton frame {frame.frame}"
         )
 
     def on_frame(self, frame: SkeletonFrame) -> None:
