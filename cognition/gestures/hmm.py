@@ -34,7 +34,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from beyond_self.cognition.gestures.features import POSITION, check_space
+from beyond_self.cognition.gestures.features import MOTION, POSITION, check_space
 from beyond_self.cognition.variables import ACTIONS
 from beyond_self.core.errors import InputError, unknown
 
@@ -528,7 +528,7 @@ def train_models(
     actions: Sequence[str] | None = None,
     meta: Mapping[str, Any] | None = None,
     on_model: Callable[[str], None] | None = None,
-    features: str = POSITION,
+    features: str = MOTION,
     floor_margin: float | None = FLOOR_MARGIN,
 ) -> GestureModels:
     """One HMM per action from `{action: [sequence (T_i, D), ...]}` in feature space `features`.

@@ -20,6 +20,8 @@ tracker glitches:
   frames are more than `max_jumps` tracker jumps (steps above `jump` per frame, which no hand
   makes), one shorter than `min_gesture` or longer than `max_gesture` frames. A gesture
   reported as started and then found to be one of these is reported `Discarded`, with why.
+  No gesture starts while a jump is still inside the median's window: a tracker that has lost
+  the hand starts nothing.
 
 After an end the segmenter waits for the hand to rest again (or to come back near its rest
 pose) before another gesture can start, so the way home never starts one.
@@ -37,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from beyond_self.cognition.gestures.features import HandSmoother
+from beyond_self.cognition.gestures.features import HandSmoother, median_rows
 from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
@@ -55,7 +57,7 @@ class SegmenterConfig:
     reach: float = 0.8  # how far forward a gesture must reach
     back: float = 0.45  # on the way back: distance to rest below (1 - back) of its maximum
     turn: float = 1 / 3  # the end: where the hand had come this part of the way back
-    jump: float = 0.6  # a step longer than this between two frames is a tracker jump
+    jump: float = 0.5  # a step longer than this between two frames is a tracker jump
     max_jumps: float = 0.1  # a gesture with more jumps than this share of its frames is not one
     min_gesture: int = 20  # frames
     max_gesture: int = 900  # frames (30 s)
@@ -121,8 +123,10 @@ class GestureSegmenter:
         self._smoother = HandSmoother(cfg.median_frames)
         history = max(cfg.rest_frames, cfg.max_lead + 1)
         self._recent: deque[FloatArray] = deque(maxlen=history)  # smoothed, last frames
+        self._jumped: deque[bool] = deque(maxlen=history)  # ... and whether each jumped
         self._distances: deque[float] = deque(maxlen=cfg.max_gesture + 1)  # in the gesture
         self._raw_prev: FloatArray | None = None
+        self._since_jump = 0  # frames since the last tracker jump
         self._state = _IDLE
         self._rest: FloatArray | None = None
         self._start = 0
@@ -157,8 +161,10 @@ class GestureSegmenter:
         self._t += 1
         jumped = self._raw_prev is not None and np.linalg.norm(p - self._raw_prev) > cfg.jump
         self._raw_prev = p
+        self._since_jump = 0 if jumped else self._since_jump + 1
         smooth = self._smoother.push(p)
         self._recent.append(smooth)
+        self._jumped.append(bool(jumped))
         if self._state == _RETURNING and (
             self._resting() is not None or self._distance(smooth) < cfg.near
         ):
@@ -167,7 +173,8 @@ class GestureSegmenter:
             rest = self._resting()
             if rest is not None:
                 self._rest = rest
-            if self._rest is not None and self._rest[2] - smooth[2] > cfg.leave:
+            steady = self._since_jump >= cfg.median_frames  # no jump left in the median
+            if steady and self._rest is not None and self._rest[2] - smooth[2] > cfg.leave:
                 self._begin(t)
             return None
         if self._state == _ACTIVE:
@@ -193,7 +200,7 @@ class GestureSegmenter:
         if len(self._recent) < n:
             return None
         window = np.stack(list(self._recent)[-n:])
-        centre = np.median(window, axis=0)
+        centre = median_rows(window)
         if np.max(np.linalg.norm(window - centre, axis=1)) > self.config.rest_radius:
             return None
         return centre
@@ -214,7 +221,7 @@ class GestureSegmenter:
             self._distances.append(self._distance(q))
         self._farthest = max(self._distances)
         self._forward = max(float(self._rest[2] - q[2]) for q in recent[-1 - back :])  # type: ignore[index]
-        self._jumps = 0
+        self._jumps = sum(list(self._jumped)[-1 - back :])
 
     def _follow(self, t: int, smooth: FloatArray, jumped: bool) -> Segment | Discarded | None:
         cfg = self.config

@@ -317,12 +317,13 @@ def _gesture_path(
         t_before = p.duration
         p.to(through, stroke)
         p.mark("contact_stop")
-        # contact when the sweep reaches the object's side
-        grid = np.linspace(t_before, p.duration, 400)
-        at = np.flatnonzero(p.sample(grid)[:, 0] <= scene.obj[0] + reach)
-        p.marks["contact_start"] = float(grid[at[0]]) if len(at) else p.duration
         push_speed = 1.875 * (beside[0] - through[0]) / stroke * rng.uniform(0.8, 1.1)
         p.to(scene.rest, dur(1.1))
+        # contact when the sweep reaches the object's side (on the whole path: the curve
+        # through a key pose depends on the poses around it)
+        grid = np.linspace(t_before, p.marks["contact_stop"], 400)
+        at = np.flatnonzero(p.sample(grid)[:, 0] <= scene.obj[0] + reach)
+        p.marks["contact_start"] = float(grid[at[0]]) if len(at) else p.marks["contact_stop"]
     else:
         raise unknown("action", action, ACTIONS)
     return p, push_speed
