@@ -273,7 +273,8 @@ def simulate_scene(
     n_cam = int(np.floor(duration * camera_fps + 1e-9)) + 1
     cam_t = np.arange(n_cam) / camera_fps
 
-    blocks = _blocks(skel, cam_t, camera_fps, _default_segments(skel))
+    detected = _default_segments(skel)
+    blocks = _blocks(skel, cam_t, camera_fps, detected)
     object_index = np.full(n_cam, -1, dtype=np.int64)
     object_xyz = np.zeros((n_cam, 3))
     hand_xyz = np.full((n_cam, 3), np.nan)
@@ -284,7 +285,11 @@ def simulate_scene(
         # the approach at the camera's rate: from the first camera frame at or after the
         # gesture's start to the one nearest its contact (the track's last point is contact)
         n_contact = int(np.floor(g.contact_start * camera_fps / fps_s + 0.5))
-        n_start = int(np.ceil(g.start * camera_fps / fps_s - 1e-9))
+        # the hand comes into the camera's view once it is on its way: not before the gesture
+        # segmenter finds the gesture's start (the hand leaving its rest)
+        found = detected[k]
+        first = max(g.start, found[0]) if found is not None else g.start
+        n_start = int(np.ceil(first * camera_fps / fps_s - 1e-9))
         n_start = min(n_start, n_contact - 1)
         track = _resample(hand, fps_s, cam_t[n_start : n_contact + 1])
         rng = np.random.default_rng(seeds[2 + k])

@@ -109,7 +109,7 @@ def test_leave_one_recording_out_with_the_robots_own_experience(shared_data: Pat
     DIR` does. On the recordings alone a recording-out fold has too little to learn from (one
     grasp recording: see test_gesture_recognition)."""
     recorded = load_gestures(shared_data / HUMAN, push_as="touch")
-    mixed = synthetic_gestures(30, seed=0)
+    mixed = synthetic_gestures(60, seed=0)  # what the default models were trained on
     report = cross_validate(
         recorded, TrainingConfig(n_iter=10), folds="recording", also_train_on=mixed
     )

@@ -147,7 +147,7 @@ def realism_command(args: argparse.Namespace, gestures: Gestures) -> int:
     plot = plot_profiles(recorded, synthetic, args.out / "realism.png")
     out = Console(width=None if sys.stdout.isatty() else 140)
     table = Table(title="recorded vs synthetic gestures (mean ± sd; u = body units)")
-    table.add_column("measure")
+    table.add_column("measure", no_wrap=True)
     for r in rows:
         table.add_column(f"{r.action} recorded ({r.n_recorded})", justify="right")
         table.add_column(f"{r.action} synthetic ({r.n_synthetic})", justify="right")
