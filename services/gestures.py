@@ -1,5 +1,8 @@
-"""Gesture HMM streamer: skeleton frames in; gesture start/end events and, every frame of a
-gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out.
+"""Gesture HMM streamer: skeleton frames in; gesture start/end/cancel events and, every frame of a
+gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out. A started gesture that turns
+out to be none (drift, a tracker failure, a movement no model fits) is cancelled, and the log
+says why; a skeleton frame that is not a person's hand (NaN, or metres away) is counted and
+skipped.
 
 The per-gesture logic is `cognition.episodes.GestureTracker`; this service turns messages into
 its calls and its events into messages (each derived from the skeleton frame it is about: same
@@ -10,6 +13,7 @@ recording is answered whatever order the end marker and the frames arrive in.
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 import numpy as np
@@ -20,6 +24,7 @@ from beyond_self.cognition.gestures import GestureModels
 from beyond_self.cognition.gestures.default_models import pipeline_models
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.delivery import EVENTS, FRAMES
+from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
 
@@ -112,6 +117,9 @@ class GestureStreamer(Service):
                 )
             elif isinstance(ev, Ended | Cancelled):
                 ended = isinstance(ev, Ended)
+                if isinstance(ev, Cancelled):  # why a started gesture is not described
+                    why = {"segment": ev.segment_id, "frame": ev.frame, "reason": ev.reason}
+                    event(self.log, logging.INFO, "gesture cancelled", **why)
                 self.events += 1
                 self.segments.put(
                     GestureSegment(

@@ -59,61 +59,50 @@ def compare_on_recordings(
     given). `synthetic`: the robot's own gestures the mixed cross-validation trains on (default:
     `n_synthetic` per action from `seed`)."""
 
-    def step(name: str) -> None:
-        if on_step is not None:
-            on_step(name)
-
     recorded = load_gestures(folder, push_as=push_as)
-    out = [
-        Entry(
+    ranged = article_gestures(folder, push_as=push_as)
+    mixed = synthetic if synthetic is not None else synthetic_gestures(n_synthetic, seed)
+    plan: list[tuple[str, str, Callable[[], EvaluationReport]]] = [
+        (
             "default",
             "our default models (synthetic training only), every execution the segmenter finds",
-            evaluate(default, recorded),
-        )
-    ]
-    step(out[-1].name)
-    out.append(
-        Entry(
+            lambda: evaluate(default, recorded),
+        ),
+        (
             "loro",
             "leave-one-recording-out, trained on the other recordings",
-            cross_validate(recorded, config, folds="recording"),
-        )
-    )
-    step(out[-1].name)
-    mixed = synthetic if synthetic is not None else synthetic_gestures(n_synthetic, seed)
-    out.append(
-        Entry(
+            lambda: cross_validate(recorded, config, folds="recording"),
+        ),
+        (
             "loro+synthetic",
             f"leave-one-recording-out, trained on the other recordings and {len(mixed)} "
             "synthetic gestures",
-            cross_validate(recorded, config, folds="recording", also_train_on=mixed),
-        )
-    )
-    step(out[-1].name)
-    out.append(
-        Entry(
+            lambda: cross_validate(recorded, config, folds="recording", also_train_on=mixed),
+        ),
+        (
             "logo",
             "leave-one-gesture-out, trained on every other execution (same recordings)",
-            cross_validate(recorded, config, folds="gesture"),
-        )
-    )
-    step(out[-1].name)
-    ranged = article_gestures(folder, push_as=push_as)
+            lambda: cross_validate(recorded, config, folds="gesture"),
+        ),
+    ]
     if article is not None:
-        out.append(
-            Entry(
+        plan.append(
+            (
                 "article",
                 "the article's HMM_M3_Q6 models on the article's own ranges",
-                evaluate(article.subset([a for a in article.actions if a != "garbage"]), ranged),
+                lambda: evaluate(article, ranged),
             )
         )
-        step(out[-1].name)
-    out.append(
-        Entry(
+    plan.append(
+        (
             "default@ranges",
             "our default models on the article's own ranges",
-            evaluate(default, ranged),
+            lambda: evaluate(default, ranged),
         )
     )
-    step(out[-1].name)
+    out = []
+    for name, what, run in plan:
+        out.append(Entry(name, what, run()))
+        if on_step is not None:
+            on_step(name)
     return out

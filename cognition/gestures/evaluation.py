@@ -336,6 +336,15 @@ def pyplot() -> Any:
     return plt
 
 
+def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
+    """Write a figure as a PNG (creating its folder) and free it."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi)
+    pyplot().close(fig)
+    return out
+
+
 def plot_report(report: EvaluationReport, out_dir: str | Path, title: str = "") -> list[Path]:
     """Confusion matrix and early-recognition curve as PNGs in `out_dir`; returns their paths."""
     plt = pyplot()

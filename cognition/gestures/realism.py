@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from beyond_self.cognition.gestures.evaluation import LabelledGesture, pyplot
+from beyond_self.cognition.gestures.evaluation import LabelledGesture, pyplot, save_figure
 from beyond_self.cognition.gestures.features import NOMINAL_FPS, smooth_positions
 from beyond_self.core.errors import InputError
 
@@ -152,8 +152,4 @@ def plot_profiles(
         axes[3, col].set_xlabel("time since the gesture began (s)")
         axes[3, col].set_ylim(0, 8)
     fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=90)
-    plt.close(fig)
-    return out
+    return save_figure(fig, path, dpi=90)
