@@ -69,7 +69,11 @@ sys.path.insert(0, str(REPO / "tests"))  # busutil_net: the loaded machine the t
 from busutil_net import busy_loops  # noqa: E402
 
 import beyond_self.schemas as s  # noqa: E402
-from beyond_self.cognition.gestures import GestureSegmenter, synthesize_continuous  # noqa: E402
+from beyond_self.cognition.gestures import (  # noqa: E402
+    GestureSegmenter,
+    Segment,
+    synthesize_continuous,
+)
 from beyond_self.runtime.bus import Bus  # noqa: E402
 from beyond_self.runtime.config import BusConfig  # noqa: E402
 from beyond_self.runtime.publisher import Publisher  # noqa: E402
@@ -95,7 +99,7 @@ def stream_frames(seed: int) -> tuple[list[s.SkeletonFrame], list[int]]:
         header = s.Header(version=1, source="bench", seq=i, stamp=10**18 + i * 33_333_333)
         frames.append(s.SkeletonFrame(header=header, frame=i + 1, joints=joints))
     seg = GestureSegmenter()
-    triggers = [i for i, x in enumerate(stream.features()) if seg.push(x) is not None]
+    triggers = [i for i, x in enumerate(stream.features()) if isinstance(seg.push(x), Segment)]
     return frames, triggers
 
 

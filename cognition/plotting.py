@@ -4,6 +4,7 @@ P_HMM(A | G_1^t) set as $P_{\\mathrm{HMM}}(A \\mid G_1^t)$, never as the raw cha
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 # fragments of mathtext (without the $), to build labels from
@@ -42,3 +43,12 @@ def pyplot() -> Any:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
+    """Write a figure as a PNG (creating its folder) and free it: a long run makes many."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi)
+    pyplot().close(fig)
+    return out

@@ -46,6 +46,7 @@ import numpy as np
 from beyond_self.cognition.gestures.synthetic import (
     GestureBounds,
     SkeletonStream,
+    SynthesisConfig,
     synthesize_continuous,
 )
 from beyond_self.cognition.variables import ACTIONS, AFFORDANCE_VARIABLES
@@ -63,6 +64,8 @@ from beyond_self.core.errors import InputError, unknown
 # Every recording starts at this instant (2019-01-01T00:00:00Z), so files are deterministic.
 EPOCH_NS = 1_546_300_800 * 1_000_000_000
 CAMERA_FPS_RANGE = (5.0, 30.0)
+# the person acts on an object on a table: taps at its height, touches that touch it
+SCENE_GESTURES = SynthesisConfig(air_taps=0.0, pushes=0.0)
 SWITCH_LEAD_S = 0.5  # the next object is on the table this long before its gesture starts
 WINDOW_LEAD_S = 0.3  # the object segmenter's window opens this long before a gesture's start
 LINGER_S = 0.6  # the hand keeps its last velocity this long after the experiment, then withdraws
@@ -263,14 +266,15 @@ def simulate_scene(
         raise InputError(f"seed {seed} is negative; valid: an integer >= 0")
     cam = camera or Camera()
     seeds = _child_seeds(seed, 2 + len(items))
-    skel = synthesize_continuous([it.action for it in items], seed=seeds[0])
+    skel = synthesize_continuous([it.action for it in items], seed=seeds[0], config=SCENE_GESTURES)
     hand = skel.joints["right_hand"]
     fps_s = skel.fps
     duration = (skel.n_frames - 1) / fps_s
     n_cam = int(np.floor(duration * camera_fps + 1e-9)) + 1
     cam_t = np.arange(n_cam) / camera_fps
 
-    blocks = _blocks(skel, cam_t, camera_fps, _default_segments(skel))
+    detected = _default_segments(skel)
+    blocks = _blocks(skel, cam_t, camera_fps, detected)
     object_index = np.full(n_cam, -1, dtype=np.int64)
     object_xyz = np.zeros((n_cam, 3))
     hand_xyz = np.full((n_cam, 3), np.nan)
@@ -281,7 +285,11 @@ def simulate_scene(
         # the approach at the camera's rate: from the first camera frame at or after the
         # gesture's start to the one nearest its contact (the track's last point is contact)
         n_contact = int(np.floor(g.contact_start * camera_fps / fps_s + 0.5))
-        n_start = int(np.ceil(g.start * camera_fps / fps_s - 1e-9))
+        # the hand comes into the camera's view once it is on its way: not before the gesture
+        # segmenter finds the gesture's start (the hand leaving its rest)
+        found = detected[k]
+        first = max(g.start, found[0]) if found is not None else g.start
+        n_start = int(np.ceil(first * camera_fps / fps_s - 1e-9))
         n_start = min(n_start, n_contact - 1)
         track = _resample(hand, fps_s, cam_t[n_start : n_contact + 1])
         rng = np.random.default_rng(seeds[2 + k])

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable
-from typing import Any, TypeVar, cast
+from typing import Any, TypeVar
 
 import msgspec
 
@@ -287,8 +287,9 @@ def shift_stamps(message: M, offset: int, **also: Any) -> M:
     if offset == 0 and not also:
         return message
     plan = stamp_plan(type(message))
+    assert isinstance(plan, dict)  # a message is a struct
     changes = {name: _shift(getattr(message, name), sub, offset) for name, sub in plan.items()}
-    return cast(M, msgspec.structs.replace(message, **changes, **also))
+    return msgspec.structs.replace(message, **changes, **also)
 
 
 def _shift(value: Any, plan: Plan, offset: int) -> Any:

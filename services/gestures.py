@@ -1,5 +1,8 @@
-"""Gesture HMM streamer: skeleton frames in; gesture start/end events and, every frame of a
-gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out.
+"""Gesture HMM streamer: skeleton frames in; gesture start/end/cancel events and, every frame of a
+gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out. A started gesture that turns
+out to be none (drift, a tracker failure, a movement no model fits) is cancelled, and the log
+says why; a skeleton frame that is not a person's hand (NaN, or metres away) is counted and
+skipped.
 
 The per-gesture logic is `cognition.episodes.GestureTracker`; this service turns messages into
 its calls and its events into messages (each derived from the skeleton frame it is about: same
@@ -18,14 +21,14 @@ again.
 from __future__ import annotations
 
 import logging
-from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
 from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
-from beyond_self.cognition.gestures import GestureModels, extract_features, load_models
-from beyond_self.cognition.gestures.default_models import default_models
+from beyond_self.cognition.episodes.tracker import hand_position
+from beyond_self.cognition.gestures import GestureModels
+from beyond_self.cognition.gestures.default_models import pipeline_models
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.delivery import EVENTS, FRAMES, SKELETON
 from beyond_self.runtime.log import event
@@ -61,9 +64,7 @@ class GestureStreamer(Service):
         self.finished = False
 
     async def setup(self) -> None:
-        self.gesture_models: GestureModels = (
-            load_models(Path(self.models_path)) if self.models_path else default_models()
-        )
+        self.gesture_models: GestureModels = pipeline_models(self.models_path)
         # a restarted streamer rebuilds its predecessor's state from the checkpoint it left
         resume = self.ledgers.predecessor()
         self.resume_from = resume.get("stamp", -1)
@@ -92,8 +93,8 @@ class GestureStreamer(Service):
                 f"joints: {shown or 'none'}"
             )
         torso = frame.joints.get(self.torso_joint)
-        return cast(
-            np.ndarray, extract_features(hand.position, torso.position if torso else None)[0]
+        return hand_position(
+            hand.position, torso.position if torso else None, f"skeleton frame {frame.frame}"
         )
 
     def on_frame(self, frame: SkeletonFrame) -> None:
@@ -160,6 +161,9 @@ class GestureStreamer(Service):
                 )
             elif isinstance(ev, Ended | Cancelled):
                 ended = isinstance(ev, Ended)
+                if isinstance(ev, Cancelled):  # why a started gesture is not described
+                    why = {"segment": ev.segment_id, "frame": ev.frame, "reason": ev.reason}
+                    event(self.log, logging.INFO, "gesture cancelled", **why)
                 self.events += 1
                 self.segments.put(
                     GestureSegment(

@@ -43,9 +43,7 @@ from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
 from typing import Any, cast
 
-import numpy as np
-
-from beyond_self.cognition.gestures.logs import read_hand_log
+from beyond_self.cognition.gestures.logs import hand_log_stream
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.accounting import bounded
 from beyond_self.runtime.clock import Clock, ClockTicks
@@ -250,12 +248,11 @@ class SensorIngest(Service):
         await self._play_cues(one_pass, span, send, {k: v[0] for k, v in streams.items()})
 
     async def _play_log(self, path: Path) -> None:
-        log = read_hand_log(path)
+        stamps, positions = hand_log_stream(path, self.scale)
         key = self.bus.keys.skeleton
-        stamps = np.rint(log.time * 1e9).astype(np.int64)
 
         def cues() -> Iterator[Cue]:
-            for i, (xyz, stamp) in enumerate(zip(log.xyz * self.scale, stamps, strict=True)):
+            for i, (xyz, stamp) in enumerate(zip(positions, stamps, strict=True)):
                 joint = Joint(position=(float(xyz[0]), float(xyz[1]), float(xyz[2])))
                 header = Header(  # numbered by the log, so a restarted ingest numbers the same
                     version=SkeletonFrame.VERSION,

@@ -107,9 +107,11 @@ def skeleton_recording(path: Path, actions: list[str], seed: int, robot: str = "
     """A recording of synthetic gestures, skeleton frames only (no camera): the services then
     describe the gestures without measured effects."""
     from beyond_self.cognition.gestures import synthesize_continuous
+    from beyond_self.cognition.scene import SCENE_GESTURES
     from beyond_self.runtime.recording_writer import RecordingWriter
 
-    stream = synthesize_continuous(actions, seed=seed)
+    # gestures on a table, as in the shipped recordings (no slow taps in the air)
+    stream = synthesize_continuous(actions, seed=seed, config=SCENE_GESTURES)
     key = Keys(robot).skeleton
     t0 = 1_546_300_800_000_000_000
     with RecordingWriter(path) as writer:

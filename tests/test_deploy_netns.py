@@ -42,7 +42,7 @@ VERBS = {
     "grasp": r"\b(grasps|grasped|grasping|picks|picked|picking)\b",
     "touch": r"\b(touches|touched|touching|pokes|poked|poking)\b",
 }
-RATE = "2"  # replay speed: the six gestures end about 2.4, 6, 8.3, 10, 13 and 15.5 s in
+RATE = "2"  # replay speed: the six gestures end about 3.3, 6.9, 10, 13.5, 17.9 and 20.4 s in
 RECONNECT_GOAL_S = 5.0
 DEPLOY = REPO / "deploy" / "zenoh"
 

@@ -118,3 +118,56 @@ def test_train_and_evaluate_from_mcap_recordings(
     _write_mcap(unlabelled, ["tap"], seed=23, metadata={})
     assert main(["gesture", "evaluate", str(model_file), str(unlabelled)]) == 2
     assert "no gesture labels" in capsys.readouterr().err
+
+
+def test_train_mixes_synthetic_with_recordings(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "mixed.json"
+    human = str(shared_data / "saponaro2019/human_data")
+    argv = ["gesture", "train", "--data", "synthetic", "--data", human, "--push-as",
+            "touch", "--count", "2", "--states", "3", "--mix", "1", "--iter", "2",
+            "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    models = load_models(out)
+    # two synthetic gestures per action, and the recordings' 4 grasps, 5 taps, 7 touches
+    assert models.meta["sequences"] == {"grasp": 6, "tap": 7, "touch": 9}
+    assert models.meta["data"] == ["synthetic", human]
+    assert models.features == "motion" and models.floor is not None
+    assert "floor" in capsys.readouterr().err
+
+
+def test_evaluate_compare_and_realism(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    human = str(shared_data / "saponaro2019/human_data")
+    small = ["--count", "2", "--states", "3", "--mix", "1", "--iter", "2"]
+    argv = ["gesture", "evaluate", "compare", human, "--json", "--out", str(tmp_path), *small]
+    assert main(argv) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert list(report) == [
+        "default",
+        "loro",
+        "loro+synthetic",
+        "logo",
+        "article",
+        "default@ranges",
+    ]
+    assert report["default"]["n"] == 16 and report["article"]["n"] == 5
+    assert report["default"]["accuracy"] >= 0.9  # the shipped models, trained on nothing real
+    assert report["loro"]["meta"]["without_a_model"] == {"grasp1_hand": ["grasp"]}
+    for name, entry in report.items():
+        assert {r["recording"] for r in entry["recordings"]} <= set(LOG_NAMES)
+        for plot in entry["plots"]:
+            assert Path(plot).read_bytes()[:4] == b"\x89PNG", name
+    assert main(["gesture", "realism", human, "--count", "3", "--out", str(tmp_path)]) == 0
+    table = capsys.readouterr().out
+    assert "median hand speed (u/s)" in table and "trajectory distance (u)" in table
+    assert (tmp_path / "realism.png").read_bytes()[:4] == b"\x89PNG"
+    assert main(["gesture", "evaluate", "compare", str(tmp_path / "nothing")]) == 2
+
+
+LOG_NAMES = (
+    "grasp1_hand", "touch1_hand", "push1_hand", "tap1_hand", "tap_notable_seated_1",
+    "norobotview_tap_notable_seated_2",
+)  # fmt: skip

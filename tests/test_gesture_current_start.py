@@ -1,6 +1,6 @@
 """The segmenter announces a gesture's start while it unfolds (the streamer relies on it)."""
 
-from beyond_self.cognition.gestures import GestureSegmenter, synthesize_continuous
+from beyond_self.cognition.gestures import GestureSegmenter, Segment, synthesize_continuous
 
 
 def test_current_start_is_known_while_the_gesture_unfolds() -> None:
@@ -10,7 +10,7 @@ def test_current_start_is_known_while_the_gesture_unfolds() -> None:
     ends: list[tuple[int, int]] = []
     for x in stream.features():
         done = seg.push(x)
-        if done is not None:
+        if isinstance(done, Segment):
             ends.append((done.start, done.stop))
         if seg.current_start is not None and seg.current_start not in starts_seen:
             starts_seen.append(seg.current_start)

@@ -63,7 +63,8 @@ def test_json_round_trip_is_bit_exact(tmp_path: Path) -> None:
     )
     path = save_models(models, tmp_path / "m.json")
     data = json.loads(path.read_text())
-    assert data["format"] == "beyond-self/gesture-models" and data["version"] == 1
+    assert data["format"] == "beyond-self/gesture-models" and data["version"] == 2
+    assert data["features"] == "position" and data["floor"] is None
     back = load_models(path)
     assert back.actions == models.actions
     for a in (*models.actions, "garbage"):
@@ -79,6 +80,28 @@ def test_json_round_trip_is_bit_exact(tmp_path: Path) -> None:
     (tmp_path / "x.pkl").write_text("")
     with pytest.raises(InputError, match="unknown model file type"):
         load_models(tmp_path / "x.pkl")
+
+
+def test_feature_space_and_floor_travel_with_the_models(tmp_path: Path) -> None:
+    rng = np.random.default_rng(2)
+    hmms = tuple(random_hmm(rng, d=7) for _ in range(3))
+    models = GestureModels(("grasp", "tap", "touch"), hmms, features="motion", floor=-24.5)
+    back = load_models(save_models(models, tmp_path / "m.json"))
+    assert (back.features, back.floor) == ("motion", -24.5)
+    # a version-1 file (before feature spaces) holds "position" models with no floor
+    data = json.loads(
+        save_models(GestureModels(("grasp",), (random_hmm(rng),)), tmp_path / "p.json").read_text()
+    )
+    for key in ("features", "floor"):
+        del data[key]
+    data["version"] = 1
+    (tmp_path / "v1.json").write_text(json.dumps(data))
+    old = load_models(tmp_path / "v1.json")
+    assert (old.features, old.floor) == ("position", None)
+    with pytest.raises(InputError, match="'position' space has 3"):
+        GestureModels(("grasp", "tap", "touch"), hmms)  # 7-D models in the 3-D space
+    with pytest.raises(InputError, match="feature space"):
+        GestureModels(("grasp",), (random_hmm(rng),), features="velocity")
 
 
 def test_matlab_models_use_column_major_layout(shared_data: Path) -> None:

@@ -178,6 +178,11 @@ def test_article_tap_is_recognised_before_it_ends(shared_data: Path) -> None:
     np.testing.assert_allclose(got[-1], expected[-1], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
 
+    # the article's result (recording numbering): tap becomes and stays the most probable
+    # action from frame 175 on
+    best = [models.actions[int(np.argmax(r.posterior))] for r in frames]
+    from_frame = 121 + max(i for i, b in enumerate(best) if b != "tap") + 1
+    assert from_frame == 175 and best[175 - 121 :] == ["tap"] * (214 - 175 + 1)
     tap = np.array([r.posterior[models.actions.index("tap")] for r in frames])
     settled = np.flatnonzero(tap < 0.99)[-1] + 2  # first t from which P(tap) stays >= 0.99
     assert settled < 94, "the posterior must settle on tap before the gesture ends"

@@ -37,7 +37,7 @@ def test_geometry_of_each_action(action: str) -> None:
     assert s.action == action and s.fps == 30.0
     assert set(JOINTS) <= set(s.joints)
     assert all(v.shape == (s.n_frames, 3) for v in s.joints.values())
-    assert 0 < g.start < g.contact_start <= g.contact_stop < g.stop < s.n_frames
+    assert 0 < g.start < g.contact_start <= g.contact_stop <= g.stop < s.n_frames
     hand, torso, obj = s.hand, s.joints["torso"], s.object_xyz
     # camera frame: the person faces the sensor, ~2 m away; the object is between them
     assert 1.5 < torso[:, 2].mean() < 2.6
@@ -57,9 +57,9 @@ def test_geometry_of_each_action(action: str) -> None:
         before = hand[g.contact_start - 3]
         assert before[0] > start[0] + 0.03 and abs(before[1] - start[1]) < 0.08
     if action == "grasp":
-        assert np.linalg.norm(end - start) < 0.02  # put back down
         lifted = obj[g.contact_start : g.contact_stop, 1].max()
         assert lifted > start[1] + 0.1
+        assert np.linalg.norm(end - hand[g.stop]) < 0.1  # taken along to where the hand rests
         # vertical approach: before contact the hand comes down from above the object
         above = hand[g.contact_start - 8]
         assert above[1] > start[1] + 0.03
@@ -78,9 +78,18 @@ def test_continuous_stream_has_rests_between_gestures() -> None:
         synthesize_gesture("push", 0)
 
 
-def test_features_are_in_the_reference_space() -> None:
-    f = synthesize_gesture("grasp", 2).gesture_features()
-    # torso-relative body units like the article's logs / 1000: hand in front (z < 0) and below
-    assert f.shape[1] == 3
-    assert f[:, 2].min() < -0.9 and f[:, 1].min() < -0.8
-    assert np.abs(f).max() < 3.0
+def test_features_are_the_motion_of_the_cut_gesture() -> None:
+    s = synthesize_gesture("grasp", 2)
+    start, stop = s.gesture_span()
+    g = s.gestures[0]
+    assert g.start <= start < g.contact_start < stop <= g.stop  # cut by the segmenter
+    f = s.gesture_features()
+    assert f.shape == (stop - start, 7)
+    # where the hand is relative to the start (it reaches forward and comes down on the
+    # object, body units), how fast (units/s) and since when (s)
+    assert np.array_equal(f[0, :3], np.zeros(3))
+    assert f[:, 2].min() < -1.0 and np.abs(f[:, :3]).max() < 3.0
+    assert 0.5 < np.percentile(np.linalg.norm(f[:, 3:6], axis=1), 90) < 8.0
+    assert np.allclose(np.diff(f[:, 6]), 1 / 30)
+    positions = s.gesture_features(space="position")
+    assert np.array_equal(positions, s.features()[start:stop])

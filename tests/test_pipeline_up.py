@@ -52,7 +52,7 @@ def test_up_describes_every_gesture_with_the_right_verb_and_twice_the_same(tmp_p
     assert [g for g, _ in described] == ["1", "2"], first.stdout
     for (_, sentence), action in zip(described, ["tap", "grasp"], strict=True):
         assert re.search(VERBS[action], sentence), (action, sentence)
-    assert re.search(r"gesture 1: anticipates ObjVel=\w+ .* before the gesture ends", first.stdout)
+    assert re.search(r"gesture \d: anticipates ObjVel=\w+ .* before the gesture ends", first.stdout)
     # paced or as fast as possible, every run prints the same lines in the same order
     for rate in ("0", "0"):
         again = run_up(recording, tmp_path, config, rate)

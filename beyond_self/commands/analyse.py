@@ -1,6 +1,6 @@
 """`beyond analyse RECORDING`: the whole pipeline over a recording, offline, in one process.
 
-    beyond analyse RECORDING [--config FILE] [--json]
+    beyond analyse RECORDING|LOG [--config FILE] [--json]
 
 No bus, no services: the skeleton and camera streams are read in recording order and go through
 the same library classes the services run (cognition.episodes), with the same options (the
@@ -8,6 +8,8 @@ per-service options of `--config`, as for `beyond up`). It prints the lines `bey
 for the same recording; a run on the bus, at any rate and under any load, must equal it. A
 damaged recording is analysed as far as it is readable, with the frames the ingest would play,
 and what was lost is said in one line (exit 2), as `inspect`, `replay` and `up` say it.
+LOG is a YARP hand log (the article's recording folder or its data.log), read exactly as
+`beyond up --log` plays it (the ingest's `scale` and `hand_joint` options apply).
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ from beyond_self.cognition.episodes.offline import (
     SkeletonInput,
     analyse_stream,
 )
-from beyond_self.cognition.gestures import load_models
-from beyond_self.cognition.gestures.default_models import default_models
+from beyond_self.cognition.gestures.default_models import default_models, pipeline_models
+from beyond_self.cognition.gestures.logs import hand_log_stream
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.images import image_from_message
@@ -42,7 +44,9 @@ HELP = "run the pipeline's logic over a recording offline and print what `beyond
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", type=Path, help="MCAP recording (skeleton and camera)")
+    parser.add_argument(
+        "recording", type=Path, help="MCAP recording (skeleton and camera), or a YARP hand log"
+    )
     parser.add_argument("--config", help="YAML/JSON file with per-service options (as for up)")
     parser.add_argument("--json", action="store_true", help="one JSON object per gesture")
 
@@ -108,27 +112,45 @@ def default_run(inputs: Iterable[SkeletonInput | CameraInput]) -> OfflineRun:
     )
 
 
+def log_inputs(path: Path, scale: float) -> Iterator[SkeletonInput]:
+    """A hand log's frames as the ingest service publishes them (one joint, no torso)."""
+    stamps, positions = hand_log_stream(path, scale)
+    for i, (stamp, xyz) in enumerate(zip(stamps, positions, strict=True)):
+        yield SkeletonInput(int(stamp), i + 1, (float(xyz[0]), float(xyz[1]), float(xyz[2])), None)
+
+
 def _options(config: str | None) -> dict[str, dict[str, Any]]:
     file_options = load_options(config)
-    names = ("gestures", "objects", "reasoner", "describer")
+    names = ("ingest", "gestures", "objects", "reasoner", "describer")
     return {n: check_options(n, service_class(n), dict(file_options.get(n, {}))) for n in names}
 
 
+def is_hand_log(path: Path) -> bool:
+    """A YARP hand log (a folder holding data.log, or a data.log), not an MCAP recording."""
+    return (path / "data.log").is_file() if path.is_dir() else path.name == "data.log"
+
+
 def run(args: argparse.Namespace) -> int:
-    require_mcap(args.recording)
     losses = Losses(str(args.recording))
     o = _options(args.config)
     g, ob, r, d = o["gestures"], o["objects"], o["reasoner"], o["describer"]
-    models = load_models(Path(g["models"])) if g.get("models") else default_models()
-    network = load_model(Path(r["model"])) if r.get("model") else learn_network(synthetic_dataset())
-    emit = None if args.json else (lambda line: print(line, flush=True))
-    result = analyse_stream(
-        _inputs(
+    if is_hand_log(args.recording):
+        inputs: Iterable[SkeletonInput | CameraInput] = log_inputs(
+            args.recording, float(o["ingest"].get("scale", 0.001))
+        )
+    else:
+        require_mcap(args.recording)
+        inputs = _inputs(
             args.recording,
             g.get("hand_joint", "right_hand"),
             g.get("torso_joint", "torso"),
             losses,
-        ),
+        )
+    models = pipeline_models(g.get("models"))
+    network = load_model(Path(r["model"])) if r.get("model") else learn_network(synthetic_dataset())
+    emit = None if args.json else (lambda line: print(line, flush=True))
+    result = analyse_stream(
+        inputs,
         gesture_models=models,
         clusters=ClusterModel.load(ob.get("clusters")),
         network=network,

@@ -1,18 +1,26 @@
 """`beyond gesture`: train, run and evaluate the per-action gesture HMMs.
 
-    beyond gesture train [--data synthetic|DIR] -o MODELS.json
+    beyond gesture train [--data synthetic|DIR|MCAP ...] -o MODELS.json
     beyond gesture stream MODELS LOG [--frames A:B] [--scale S] [--json]
-    beyond gesture evaluate MODELS|cv DATA [--json] [-o DIR]
+    beyond gesture evaluate MODELS|cv|compare DATA [--folds recording|gesture] [--json] [-o DIR]
+    beyond gesture realism DATA [-o DIR]
 
-MODELS is a model file written by `train` or one of the article's MATLAB files. DATA is
-`synthetic` (the seeded generator), a folder of hand recordings named <action><n>... (the
-article's human_data/: grasp1_hand, tap1_hand, touch1_hand), cut into repetitions by the
-segmenter, or MCAP recordings (a .mcap file or a folder of them) of skeleton frames on
-beyond/<robot>/sensors/skeleton with joints `right_hand` (and `torso`). An MCAP recording's
-labels come from its "beyond" metadata, `gesture_actions` = "grasp,tap,..." (one per gesture, in
-order) and optionally `gesture_frames` = "start:stop,..." (0-based, over its skeleton frames;
-otherwise the segmenter cuts it), or else from its file name (tap_1.mcap: every gesture a tap).
-`evaluate cv DATA` runs leave-one-gesture-out cross-validation instead of testing a model set.
+MODELS is a model file written by `train`, one of the article's MATLAB files, or `default` (the
+shipped models). DATA is `synthetic` (the seeded generator), a folder of hand recordings named
+after their action (the article's human_data/: grasp1_hand, tap1_hand, touch1_hand,
+tap_notable_seated_1, ...), cut into executions by the segmenter, or MCAP recordings (a .mcap
+file or a folder of them) of skeleton frames on beyond/<robot>/sensors/skeleton with joints
+`right_hand` (and `torso`). An MCAP recording's labels come from its "beyond" metadata,
+`gesture_actions` = "grasp,tap,..." (one per gesture, in order) and optionally
+`gesture_frames` = "start:stop,..." (0-based, over its skeleton frames; otherwise the
+segmenter cuts it), or else from its file name (tap_1.mcap: every gesture a tap). `train`
+takes --data several times and trains on all of it (the robot's synthetic experience mixed
+with people's demonstrations).
+
+`evaluate cv DATA` cross-validates instead of testing a model set: leave one recording out
+(default) or one gesture out, optionally also training every fold on `--with` data. `evaluate
+compare DATA` puts our default models, cross-validation and the article's models (on the
+article's own ranges) side by side. `realism` compares the simulator's gestures with DATA's.
 """
 
 from __future__ import annotations
@@ -25,7 +33,6 @@ from typing import Any
 
 import numpy as np
 from rich.console import Console
-from rich.progress import Progress
 from rich.table import Table
 
 from beyond_self.cognition.gestures.datasets import (
@@ -34,11 +41,17 @@ from beyond_self.cognition.gestures.datasets import (
     load_gestures,
     skeleton_gestures,
 )
-from beyond_self.cognition.gestures.evaluation import LabelledGesture
-from beyond_self.cognition.gestures.features import LOG_SCALE, extract_features
-from beyond_self.cognition.gestures.hmm import load_models, save_models, train_models
-from beyond_self.cognition.gestures.logs import parse_frames, read_hand_log
+from beyond_self.cognition.gestures.evaluation import FOLDS, LabelledGesture
+from beyond_self.cognition.gestures.features import (
+    LOG_SCALE,
+    MOTION,
+    extract_features,
+    gesture_features,
+)
+from beyond_self.cognition.gestures.hmm import GestureModels, load_models, save_models, train_models
+from beyond_self.cognition.gestures.logs import check_positions, parse_frames, read_hand_log
 from beyond_self.commands import argtypes
+from beyond_self.commands.gesture_reports import evaluate_command, realism_command
 from beyond_self.commands.hmm_options import add_training_options, training_config
 from beyond_self.commands.terminal import progress_bar
 from beyond_self.core.errors import InputError
@@ -46,19 +59,17 @@ from beyond_self.core.errors import InputError
 HELP = "train, run (frame by frame) and evaluate the gesture HMMs"
 
 TRAIN_SEED = 0
+TRAIN_COUNT = 60  # synthetic gestures per action of the default models
 EVAL_SEED = 1  # evaluate's synthetic default: held-out gestures, never seen by `train`
+DEFAULT = "default"
 
 
-def _progress(console: Console) -> Progress:
-    return progress_bar(console)
-
-
-def _data_args(p: argparse.ArgumentParser, seed: int) -> None:
+def _data_args(p: argparse.ArgumentParser, seed: int, count: int = 30) -> None:
     p.add_argument(
         "--count",
         type=argtypes.count(1, 100_000),
-        default=30,
-        help="synthetic gestures per action (default 30)",
+        default=count,
+        help=f"synthetic gestures per action (default {count})",
     )
     argtypes.add_seed(p, f"synthetic data seed (default {seed})", default=seed)
     p.add_argument(
@@ -75,16 +86,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     train = sub.add_parser("train", help="train one left-to-right GMM-HMM per action")
     train.add_argument(
         "--data",
-        default=SYNTHETIC,
-        help="'synthetic' (default), a folder of hand recordings (grasp1_hand/ ...), "
-        "or MCAP recordings (a .mcap file or a folder of them)",
+        action="append",
+        default=None,
+        help="'synthetic' (default), a folder of hand recordings (grasp1_hand/ ...), or MCAP "
+        "recordings (a .mcap file or a folder of them); give it several times to train on all",
     )
     argtypes.add_output(train, "model file to write (.json)", required=True, old="--out")
     add_training_options(train, mix=3, iterations=30, states="HMM states per action")
-    _data_args(train, TRAIN_SEED)
+    _data_args(train, TRAIN_SEED, TRAIN_COUNT)
 
     stream = sub.add_parser("stream", help="run the streaming recogniser over a hand log")
-    stream.add_argument("models", type=Path, help="model file (.json) or the article's .mat")
+    stream.add_argument("models", help="model file (.json), the article's .mat, or 'default'")
     stream.add_argument("log", type=Path, help="recording folder or its data.log")
     stream.add_argument("--frames", default=None, help="A:B, 1-based inclusive (default: all)")
     stream.add_argument(
@@ -103,9 +115,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
     ev = sub.add_parser("evaluate", help="accuracy, confusion and early recognition")
-    ev.add_argument("models", help="model file, or 'cv' for leave-one-gesture-out cross-validation")
+    ev.add_argument(
+        "models",
+        help="model file, 'default', 'cv' (cross-validation) or 'compare' (default models, "
+        "cross-validation and the article's models side by side)",
+    )
     ev.add_argument("data", help="'synthetic', a folder of hand recordings, or MCAP recordings")
     ev.add_argument("--json", action="store_true", help="print the report as JSON")
+    ev.add_argument(
+        "--folds",
+        choices=FOLDS,
+        default="recording",
+        help="cv: leave one recording out (default) or one gesture out",
+    )
+    ev.add_argument(
+        "--with",
+        dest="also",
+        action="append",
+        default=[],
+        help="cv: also train every fold on this data ('synthetic', recordings); never tested",
+    )
+    ev.add_argument(
+        "--article",
+        type=Path,
+        default=None,
+        help="compare: the article's models (default: HMM_M3_Q6_mixsplit.mat in DATA)",
+    )
     argtypes.add_output(
         ev,
         "folder for the PNG plots (default ./gesture-evaluation)",
@@ -116,10 +151,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_training_options(ev, mix=3, iterations=30, states="HMM states per action")
     _data_args(ev, EVAL_SEED)
 
+    realism = sub.add_parser("realism", help="the simulator's gestures next to recorded ones")
+    realism.add_argument("data", help="a folder of hand recordings, or MCAP recordings")
+    argtypes.add_output(
+        realism,
+        "folder for the PNG plot (default ./gesture-evaluation)",
+        folder=True,
+        default=Path("gesture-evaluation"),
+    )
+    _data_args(realism, TRAIN_SEED)
+
 
 def run(args: argparse.Namespace) -> int:
-    handlers = {"train": _train, "stream": _stream, "evaluate": _evaluate}
-    return handlers[args.gesture_command](args)
+    command = args.gesture_command
+    if command == "evaluate":
+        return evaluate_command(args, gestures, models_from)
+    if command == "realism":
+        return realism_command(args, gestures)
+    return _train(args) if command == "train" else _stream(args)
+
+
+def models_from(spec: str, *, include_garbage: bool = False) -> GestureModels:
+    """A model set by name: 'default' (the shipped models) or a file."""
+    if spec == DEFAULT:
+        from beyond_self.cognition.gestures.default_models import default_models
+
+        return default_models()
+    return load_models(Path(spec), include_garbage=include_garbage)
 
 
 def _mcap_gestures(path: Path, push_as: str | None) -> list[LabelledGesture]:
@@ -169,7 +227,7 @@ def _mcap_gestures(path: Path, push_as: str | None) -> list[LabelledGesture]:
     return skeleton_gestures(joints, actions, bounds=bounds, source=path.name)
 
 
-def _gestures(args: argparse.Namespace, spec: str) -> list[LabelledGesture]:
+def gestures(args: argparse.Namespace, spec: str) -> list[LabelledGesture]:
     """DATA as labelled gestures: synthetic, recording folders, or MCAP recordings."""
     path = Path(spec)
     mcaps = [path] if path.suffix.lower() == ".mcap" else []
@@ -190,22 +248,30 @@ def _train(args: argparse.Namespace) -> int:
     if args.output.suffix.lower() != ".json":
         raise InputError(f"--output {args.output} must end in .json")
     cfg = training_config(args)
-    with console.status(f"loading gestures from {args.data}"):
-        gestures = _gestures(args, args.data)
+    sources = args.data or [SYNTHETIC]
     data: dict[str, list[Any]] = {}
-    for g in gestures:
-        data.setdefault(g.action, []).append(g.features)
-    with _progress(console) as progress:
+    for spec in sources:
+        with console.status(f"loading gestures from {spec}"):
+            for g in gestures(args, spec):
+                data.setdefault(g.action, []).append(g.features)
+    with progress_bar(console) as progress:
         task = progress.add_task("training HMMs", total=len(data))
         models = train_models(
             data,
             cfg,
-            meta={"data": str(args.data), "seed": args.seed if args.data == SYNTHETIC else None},
+            meta={
+                "data": sources if len(sources) > 1 else sources[0],
+                "seed": args.seed if SYNTHETIC in sources else None,
+            },
             on_model=lambda a: progress.advance(task),
+            features=MOTION,
         )
     save_models(models, args.output)
     counts = ", ".join(f"{a} {len(data[a])}" for a in models.actions)
-    console.print(f"wrote {args.output}: {len(models.actions)} models ({counts} gestures)")
+    console.print(
+        f"wrote {args.output}: {len(models.actions)} models ({counts} gestures), "
+        f"floor {models.floor} per frame"
+    )
     return 0
 
 
@@ -224,10 +290,11 @@ def _parse_priors(text: str | None, n: int) -> list[float] | None:
 def _stream(args: argparse.Namespace) -> int:
     from beyond_self.cognition.gestures.streaming import StreamingRecognizer
 
-    models = load_models(args.models, include_garbage=args.garbage)
+    models = models_from(args.models, include_garbage=args.garbage)
     log = read_hand_log(args.log)
     span = parse_frames(args.frames, len(log))
-    feats = extract_features(log.xyz[span], scale=args.scale)
+    positions = check_positions(extract_features(log.xyz, scale=args.scale), str(args.log))
+    feats = gesture_features(models.features, positions, span.start, span.stop)
     rec = StreamingRecognizer(models, priors=_parse_priors(args.priors, len(models.actions)))
     results = [rec.push(x) for x in feats]
     first = span.start + 1
@@ -262,51 +329,4 @@ def _stream(args: argparse.Namespace) -> int:
         from beyond_self.cognition.gestures.streaming import recognize_sequence
 
         plot_stream(recognize_sequence(rec.compiled, feats), args.plot, str(args.log), first)
-    return 0
-
-
-def _evaluate(args: argparse.Namespace) -> int:
-    from beyond_self.cognition.gestures.evaluation import cross_validate, evaluate, plot_report
-
-    console = Console(stderr=True)
-    with console.status(f"loading gestures from {args.data}"):
-        gestures = _gestures(args, args.data)
-    with _progress(console) as progress:
-        if args.models == "cv":
-            task = progress.add_task("cross-validation folds", total=len(gestures))
-            report = cross_validate(
-                gestures, training_config(args), on_fold=lambda: progress.advance(task)
-            )
-        else:
-            models = load_models(args.models)
-            task = progress.add_task("recognising gestures", total=len(gestures))
-            report = evaluate(models, gestures, on_gesture=lambda: progress.advance(task))
-    report.meta["data"] = str(args.data)
-    report.meta["models"] = str(args.models)
-    plots = plot_report(report, args.output, title=Path(str(args.data)).name)
-    if args.json:
-        out = report.to_dict()
-        out["plots"] = [str(p) for p in plots]
-        json.dump(out, sys.stdout)
-        sys.stdout.write("\n")
-        return 0
-    console = Console()
-    console.print(
-        f"{report.meta['protocol']}: {report.n} gestures, accuracy [bold]{report.accuracy:.1%}"
-    )
-    conf = Table(title="confusion (rows: true, columns: predicted)")
-    conf.add_column("")
-    for a in report.actions:
-        conf.add_column(a, justify="right")
-    for a, row in zip(report.actions, report.confusion, strict=True):
-        conf.add_row(a, *(str(int(v)) for v in row))
-    console.print(conf)
-    early = Table(title="early recognition: accuracy after seeing part of each gesture")
-    for f in report.fractions:
-        early.add_column(f"{f:.0%}", justify="right")
-    early.add_row(*(f"{a:.0%}" for a in report.early_accuracy))
-    console.print(early)
-    console.print(
-        f"accuracy at 60%: {report.accuracy_at(0.6):.1%}; plots: {', '.join(map(str, plots))}"
-    )
     return 0

@@ -246,7 +246,23 @@ def service_options(args: argparse.Namespace, names: list[str]) -> tuple[dict[st
     if "reasoner" in names and "objects" in service_names(args.without):
         # no object segmenter anywhere: the reasoner must not wait for one
         options["reasoner"].setdefault("objects", False)
+    check_inputs(options)
     return options, replayed
+
+
+def check_inputs(options: dict[str, dict[str, Any]]) -> None:
+    """A hand log or gesture models the services would refuse are refused here, before
+    anything starts (one line, exit status 2), exactly as `beyond analyse` refuses them."""
+    from beyond_self.cognition.gestures.default_models import pipeline_models
+    from beyond_self.cognition.gestures.logs import hand_log_stream
+
+    ingest = options.get("ingest", {})
+    scale = ingest.get("scale", 0.001)
+    if ingest.get("log") and isinstance(scale, int | float):  # a bad scale: the options' check
+        hand_log_stream(Path(str(ingest["log"])), float(scale))
+    models = options.get("gestures", {}).get("models")
+    if models:
+        pipeline_models(str(models))
 
 
 def deployment(

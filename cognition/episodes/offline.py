@@ -19,9 +19,17 @@ from beyond_self.cognition.descriptions import nbest_exact
 from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
 from beyond_self.cognition.episodes.objects import GestureEffects, ObjectAtStart, ObjectWatch
 from beyond_self.cognition.episodes.report import GestureReport
-from beyond_self.cognition.episodes.tracker import Belief, Cancelled, Ended, GestureTracker, Started
-from beyond_self.cognition.gestures import GestureModels, extract_features
+from beyond_self.cognition.episodes.tracker import (
+    Belief,
+    Cancelled,
+    Ended,
+    GestureTracker,
+    Started,
+    hand_position,
+)
+from beyond_self.cognition.gestures import GestureModels
 from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.core.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -46,6 +54,8 @@ class OfflineRun:
     sentences: dict[int, list[tuple[str, float]]] = field(default_factory=dict)
     object_at_start: dict[int, ObjectAtStart[None]] = field(default_factory=dict)
     effects: dict[int, GestureEffects[None]] = field(default_factory=dict)
+    skipped: int = 0  # skeleton frames that were not a hand's (counted, as a service counts them)
+    cancelled: dict[int, str] = field(default_factory=dict)  # segment id -> why
 
 
 def analyse_stream(
@@ -111,6 +121,7 @@ def analyse_stream(
                 watched(watch.ended(ev.segment_id, ev.start_stamp, ev.end_stamp, ev.frame, None))
                 joined(join.ended(ev.segment_id, ev.start_stamp, ev.end_stamp))
             elif isinstance(ev, Cancelled):
+                run.cancelled[ev.segment_id] = ev.reason
                 report.cancelled(ev.segment_id)
                 watched(watch.cancelled(ev.segment_id))
                 joined(join.cancelled(ev.segment_id))
@@ -124,10 +135,13 @@ def analyse_stream(
     last_camera: int | None = None
     for item in items:
         if isinstance(item, SkeletonInput):
-            x = extract_features(
-                np.asarray(item.hand), None if item.torso is None else np.asarray(item.torso)
-            )[0]
-            tracked(tracker.push(item.stamp, item.frame, x, None))
+            try:  # a frame that is not a hand's is skipped, as the gesture streamer skips it
+                x = hand_position(item.hand, item.torso, f"skeleton frame {item.frame}")
+                events = tracker.push(item.stamp, item.frame, x, None)
+            except InputError:
+                run.skipped += 1
+                continue
+            tracked(events)
         else:
             last_camera = item.stamp
             watched(watch.camera(item.stamp, item.frame, item.image))

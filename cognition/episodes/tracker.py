@@ -3,9 +3,16 @@
 Push one hand position per frame with its stamp; get back what happened at that frame: a gesture
 started (from the frame the segmenter places its onset, which can be a few frames back: those
 are caught up), the belief P_HMM(A | G_1^t) for each frame of the gesture, and at its end the
-final belief over exactly its frames followed by the end. `finish()` at the end of the stream
-ends a gesture under way, or cancels it when the segmenter would not keep it (the hand never
-came back), so every start is answered.
+final belief over exactly its frames followed by the end. A started gesture is cancelled, with
+the reason, when the segmenter withdraws it (not a gesture after all: see
+`cognition.gestures.segmentation`), when the stream ends before it does, or when no action's
+model fits it (its per-frame log-likelihood under the best model is below the models' floor,
+`GestureModels.floor`): a movement nobody can classify is not described as the least bad
+action. So every start is answered, by an end or a cancel.
+
+The recogniser sees the features its models were trained on (`GestureModels.features`): the
+position frame by frame, or the motion relative to the gesture's first frame, which the tracker
+computes from the segmenter's smoothed positions as the gesture unfolds.
 
 `ref` is whatever the caller wants handed back with each event (a message header): events say
 which input frame they derive from, so a service can copy that frame's stamp and sequence.
@@ -20,9 +27,10 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Generic, TypeVar, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from beyond_self.cognition.gestures import (
     FrameResult,
@@ -32,9 +40,26 @@ from beyond_self.cognition.gestures import (
     StreamingRecognizer,
     recognize_sequence,
 )
-from beyond_self.cognition.gestures.segmentation import SegmenterConfig
+from beyond_self.cognition.gestures.features import (
+    MOTION,
+    MOTION_LAG,
+    extract_features,
+    motion_frame,
+)
+from beyond_self.cognition.gestures.logs import check_positions
+from beyond_self.cognition.gestures.segmentation import Discarded, SegmenterConfig
+from beyond_self.core.errors import InputError
 
 R = TypeVar("R")
+
+
+def hand_position(hand: ArrayLike, torso: ArrayLike | None, what: str) -> np.ndarray:
+    """The tracker's input for one skeleton frame: the hand relative to the torso in body units
+    (without a torso joint, the hand as given: a hand log's frames), or an InputError when it
+    is not a hand's (NaN, or beyond `MAX_BODY_UNITS`). The service and `beyond analyse` both
+    skip such a frame, so they answer alike."""
+    x = extract_features(hand, torso)
+    return cast(np.ndarray, check_positions(x, what)[0])
 
 
 @dataclass(frozen=True)
@@ -76,15 +101,27 @@ class Cancelled(Generic[R]):
     frame: int
     start_stamp: int
     ref: R
+    reason: str = ""  # one line: why the gesture was withdrawn
 
 
 Event = Started[R] | Belief[R] | Ended[R] | Cancelled[R]
 
 
 @dataclass(frozen=True)
+class _Candidate:
+    """A frame on trial as the next checkpoint (`GestureTracker._advance`)."""
+
+    stamp: int
+    segment_id: int
+    index: int  # the tracker's frame count when it was taken
+    shadow: GestureSegmenter  # a fresh segmenter fed from that frame on
+
+
+@dataclass(frozen=True)
 class _Frame(Generic[R]):
     t: int  # index in the stream
-    x: np.ndarray
+    x: np.ndarray  # the position as pushed
+    smooth: np.ndarray  # after the segmenter's causal median
     stamp: int
     number: int
     ref: R
@@ -109,66 +146,77 @@ class GestureTracker(Generic[R]):
         self.segment_id = first_segment_id  # segments started before this tracker's first frame
         self.in_gesture = False
         self.last_stamp: int | None = None
-        self._segmenter_start: int | None = None
+        self._start = 0  # stream index of the gesture's first frame
         self._start_stamp = 0
         self._results: list[FrameResult] = []  # the recogniser's, frame by frame since the start
         self._results_from = -1  # stream index of the frame the first of them is about
         self.checkpoint: tuple[int, int] | None = None  # (stamp, segment_id): see `_advance`
-        self._quiet: deque[int] = deque(maxlen=self.memory_frames + 1)  # stamps
+        self._candidate: _Candidate | None = None
 
     @property
     def memory_frames(self) -> int:
-        """Frames after which the segmenter no longer depends on what came before them, while
-        no gesture is under way: its median and speed windows, and how far back it may place a
-        gesture's start (cognition.gestures.segmentation)."""
+        """Frames a checkpoint must stay quiet for: the segmenter's median and history windows
+        (a start may be placed `max_lead` frames back) and the motion features' lag."""
         cfg = self.segmenter.config
-        return cfg.max_lead + cfg.median_frames + cfg.speed_frames + 1
+        return cfg.median_frames + max(cfg.rest_frames, cfg.max_lead + 1) + MOTION_LAG
 
-    def _advance(self, stamp: int, z: float, eventful: bool) -> None:
+    def _advance(self, stamp: int, x: np.ndarray, eventful: bool) -> None:
         """Move the checkpoint: a frame from which a fresh tracker (`first_segment_id` the
         segments started before it), fed this tracker's frames from that one on, makes exactly
-        the events this one makes from there on. The first frame is one. So is a frame opening
-        `memory_frames` + 1 frames with no gesture under way, no event, and the hand behind the
-        reach threshold (raw, so that the fresh tracker's first, shorter medians cannot cross it):
-        neither tracker can start a gesture on them, and after them their states agree. A
-        speed-only segmenter (no reach threshold) has no checkpoint but the first frame.
-        A restarted gesture streamer resumes from it (services/gestures.py)."""
+        the events this one makes from there on. The first frame is one. Later, a frame is one
+        once it is proven: a shadow segmenter started on it, fed the same frames, has stayed
+        idle with this one (no gesture under way, no event) for `memory_frames` frames and is
+        now in the same state (its window, rest pose, jump count), so from here both run alike.
+        Proving rather than bounding keeps the checkpoint exact whatever the segmenter's
+        thresholds. A restarted gesture streamer resumes from it (services/gestures.py)."""
         if self.checkpoint is None:
             self.checkpoint = (stamp, self.segment_id)
-        reach = self.segmenter.config.reach_on
-        if reach is None or eventful or self.in_gesture or self.segmenter.active or z < reach:
-            self._quiet.clear()
+        if eventful or self.in_gesture or not self.segmenter.idle:
+            self._candidate = None
             return
-        self._quiet.append(stamp)
-        if len(self._quiet) == self._quiet.maxlen:
-            self.checkpoint = (self._quiet[0], self.segment_id)
+        if self._candidate is None:
+            shadow = GestureSegmenter(self.segmenter.config)
+            self._candidate = _Candidate(stamp, self.segment_id, self.index, shadow)
+        candidate = self._candidate
+        if candidate.shadow.push(x) is not None or not candidate.shadow.idle:
+            self._candidate = None  # a fresh tracker would have started a gesture here
+            return
+        quiet = self.index - candidate.index
+        if quiet >= self.memory_frames and candidate.shadow.course() == self.segmenter.course():
+            self.checkpoint = (candidate.stamp, candidate.segment_id)
+            self._candidate = None
 
     def push(self, stamp: int, number: int, x: np.ndarray, ref: R) -> list[Event[R]]:
-        """The events at this frame (x: the hand in feature space, see extract_features)."""
+        """The events at this frame (x: the hand in body units, see extract_features)."""
         if self.last_stamp is not None and stamp <= self.last_stamp:
-            from beyond_self.core.errors import InputError
-
             raise InputError(
                 f"skeleton frame {number} stamped {stamp} is not after the previous frame "
                 f"({self.last_stamp}); valid: frames in increasing stamp order"
             )
-        ended = self.segmenter.push(x)  # validates x before anything changes
+        outcome = self.segmenter.push(x)  # validates x before anything changes
         self.last_stamp = stamp
-        item = _Frame(self.index, np.asarray(x, dtype=np.float64), stamp, number, ref)
+        item = _Frame(
+            self.index,
+            np.asarray(x, dtype=np.float64),
+            self.segmenter.smoothed,
+            stamp,
+            number,
+            ref,
+        )
         self.index += 1
         self.buffer.append(item)
         events: list[Event[R]] = []
         if self.in_gesture:
-            if ended is not None:
-                events += self._end(ended)
-            elif self.segmenter.current_start != self._segmenter_start:
-                events.append(self._cancel())  # discarded by the segmenter (too short)
+            if isinstance(outcome, Segment):
+                events += self._end(outcome)
+            elif isinstance(outcome, Discarded):
+                events.append(self._cancel(outcome.reason))
         start = self.segmenter.current_start
         if start is not None and not self.in_gesture:
             events += self._begin(start)
         elif self.in_gesture:
-            events.append(self._belief(self._recognise(item.x), item))
-        self._advance(stamp, float(item.x[2]), bool(events))
+            events.append(self._belief(self._recognise(self._features(item)), item))
+        self._advance(stamp, item.x, bool(events))
         return events
 
     def _recognise(self, x: np.ndarray) -> FrameResult:
@@ -180,18 +228,29 @@ class GestureTracker(Generic[R]):
         """End of the stream: end the gesture under way, or cancel it if it is not kept."""
         if not self.in_gesture:
             return []
-        segment = self.segmenter.finish()
-        if segment is not None:
-            return self._end(segment)
-        return [self._cancel()]
+        outcome = self.segmenter.finish()
+        if isinstance(outcome, Segment):
+            return self._end(outcome)
+        reason = outcome.reason if outcome is not None else "the stream ended"
+        return [self._cancel(reason)]
 
-    def _cancel(self) -> Cancelled[R]:
+    def _cancel(self, reason: str) -> Cancelled[R]:
         self.in_gesture = False
         last = self.buffer[-1]
-        return Cancelled(self.segment_id, last.number, self._start_stamp, last.ref)
+        return Cancelled(self.segment_id, last.number, self._start_stamp, last.ref, reason)
 
     def _since(self, start: int, stop: int | None = None) -> list[_Frame[R]]:
         return [f for f in self.buffer if f.t >= start and (stop is None or f.t < stop)]
+
+    def _features(self, item: _Frame[R]) -> np.ndarray:
+        """The recogniser's input for one frame of the gesture under way."""
+        if self.models.features != MOTION:
+            return item.x
+        first = self.buffer[0].t
+        origin = self.buffer[max(self._start - first, 0)].smooth
+        gap = min(item.t - first, MOTION_LAG)  # frames before the buffer are gone
+        earlier = self.buffer[item.t - first - gap].smooth
+        return motion_frame(item.smooth, earlier, gap, origin, item.t - self._start)
 
     def _belief(self, result: FrameResult, item: _Frame[R], final: bool = False) -> Belief[R]:
         return Belief(self.segment_id, item.number, item.stamp, item.ref, result, final)
@@ -200,26 +259,35 @@ class GestureTracker(Generic[R]):
         frames = self._since(start) or [self.buffer[-1]]
         self.segment_id += 1
         self.in_gesture = True
-        self._segmenter_start = start
         first = frames[0]
+        self._start = first.t
         self._start_stamp = first.stamp
         events: list[Event[R]] = [Started(self.segment_id, first.number, first.stamp, first.ref)]
         self.recognizer.reset()
         self._results, self._results_from = [], first.t
-        events += [self._belief(self._recognise(f.x), f) for f in frames]
+        events += [self._belief(self._recognise(self._features(f)), f) for f in frames]
         return events
 
     def _end(self, segment: Segment) -> list[Event[R]]:
         frames = self._since(segment.start, segment.stop)
-        self.in_gesture = False
         if not frames:
-            last = self.buffer[-1]
-            return [Cancelled(self.segment_id, last.number, last.stamp, last.ref)]
+            return [self._cancel("its frames are no longer buffered")]
         n = segment.stop - segment.start
         if segment.start == self._results_from and len(frames) == n <= len(self._results):
             result = self._results[n - 1]  # over exactly the gesture's frames already
         else:
-            result = recognize_sequence(self.models, np.stack([f.x for f in frames])).final
+            features = np.stack([self._features(f) for f in frames])
+            result = recognize_sequence(self.models, features).final
+        floor = self.models.floor
+        if floor is not None and float(np.max(result.normalized)) < floor:
+            best = float(np.max(result.normalized))
+            return [
+                self._cancel(
+                    f"no action fits it (best {result.best}, log-likelihood {best:.1f} per "
+                    f"frame, the models' floor {floor:.1f})"
+                )
+            ]
+        self.in_gesture = False
         last = frames[-1]
         return [
             self._belief(result, last, final=True),

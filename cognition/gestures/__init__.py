@@ -2,19 +2,22 @@
 
 The API other modules use (fusion, services, reproduction, the simulator):
 
-    from beyond_self.cognition.gestures import load_models, StreamingRecognizer, extract_features
-    models = load_models("models.json")          # or the article's .mat file
+    from beyond_self.cognition.gestures import load_models, StreamingRecognizer, gesture_features
+    models = load_models("models.json")          # or the article's .mat; default_models()
+    x = extract_features(hand, torso)            # (T, 3): the hand in body units (metres in)
+    features = gesture_features(models.features, x, start, stop)   # the models' feature space
     rec = StreamingRecognizer(models)            # priors=None: equal priors
-    for hand, torso in frames:                   # metres, camera frame (x right, y up, z away)
-        r = rec.push(extract_features(hand, torso)[0])
+    for f in features:
+        r = rec.push(f)
         r.posterior                              # P_HMM(A | G_1^t) in models.actions order
-    rec.reset()                                  # next gesture
 
-For the article's hand logs: `extract_features(log.xyz, scale=0.001)` (no torso: the logs are
-already torso-relative and normalised). `BatchRecognizer` updates many streams at once;
-`recognize_sequence` runs a whole gesture; `GestureSegmenter` cuts a continuous stream into
-gestures; `synthesize_gesture`/`synthesize_continuous` make seeded skeleton streams.
-Heavy dependencies (hmmlearn, scipy.io) are imported only by the functions that need them.
+For a live or recorded stream, `cognition.episodes.GestureTracker` does it all frame by frame:
+the segmenter (`GestureSegmenter`: one gesture per execution, rest, drift and tracker failures
+withdrawn), the features as the gesture unfolds, and a cancel for a movement no model fits. For
+the article's hand logs: positions = the logged values times 0.001 (`hand_log_stream`).
+`BatchRecognizer` updates many streams at once; `recognize_sequence` runs a whole gesture;
+`synthesize_gesture`/`synthesize_continuous` make seeded skeleton streams. Heavy dependencies
+(hmmlearn, scipy.io) are imported only by the functions that need them.
 """
 
 from beyond_self.cognition.gestures.evaluation import (
@@ -27,9 +30,12 @@ from beyond_self.cognition.gestures.evaluation import (
 )
 from beyond_self.cognition.gestures.features import (
     LOG_SCALE,
+    MOTION,
+    POSITION,
     body_scale,
     extract_features,
     features_from_joints,
+    gesture_features,
 )
 from beyond_self.cognition.gestures.hmm import (
     GestureHMM,
@@ -43,6 +49,7 @@ from beyond_self.cognition.gestures.hmm import (
 from beyond_self.cognition.gestures.logs import HandLog, read_hand_log
 from beyond_self.cognition.gestures.matlab import load_matlab_models
 from beyond_self.cognition.gestures.segmentation import (
+    Discarded,
     GestureSegmenter,
     Segment,
     SegmenterConfig,
@@ -67,8 +74,11 @@ from beyond_self.cognition.gestures.synthetic import (
 
 __all__ = [
     "LOG_SCALE",
+    "MOTION",
+    "POSITION",
     "BatchRecognizer",
     "BatchResult",
+    "Discarded",
     "EvaluationReport",
     "FrameResult",
     "GestureBounds",
@@ -89,6 +99,7 @@ __all__ = [
     "evaluate",
     "extract_features",
     "features_from_joints",
+    "gesture_features",
     "load_matlab_models",
     "load_models",
     "plot_report",

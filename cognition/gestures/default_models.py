@@ -1,12 +1,14 @@
 """The gesture models every service and demo uses by default: HMMs trained on synthetic gestures.
 
-Training takes about 20 s, so the result ships with the package. It is regenerated, byte for
-byte, by
+They have never seen a recording of a person: they are trained on the simulator's gestures
+(`cognition.gestures.synthetic`, whose shapes and tempi follow the article's recordings:
+`beyond gesture realism` prints the comparison), cut by the default segmenter, in the "motion"
+feature space. Training takes a few minutes, so the result ships with the package. It is
+regenerated, byte for byte, by
 
     beyond gesture train -o cognition/gestures/data/synthetic_models.json
 
-(30 synthetic gestures per action, seed 0, 6 states, 3 Gaussians); a test checks that it still
-is what that command makes.
+(60 synthetic gestures per action, seed 0, 6 states, 3 Gaussians, 30 EM iterations at most).
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from functools import cache
 from pathlib import Path
 
 from beyond_self.cognition.gestures.hmm import GestureModels, load_models
+from beyond_self.cognition.variables import ACTIONS
+from beyond_self.core.errors import InputError
 
 DEFAULT_MODELS_PATH = Path(__file__).with_name("data") / "synthetic_models.json"
 
@@ -22,3 +26,16 @@ DEFAULT_MODELS_PATH = Path(__file__).with_name("data") / "synthetic_models.json"
 @cache
 def default_models() -> GestureModels:
     return load_models(DEFAULT_MODELS_PATH)
+
+
+def pipeline_models(path: str | Path | None = None) -> GestureModels:
+    """The gesture models a pipeline runs: the default ones, or those of a file, which must
+    recognise exactly the actions the network reasons about (their posterior is its soft
+    evidence on Action); a file for other actions is an InputError naming both sets."""
+    models = load_models(Path(path)) if path else default_models()
+    if set(models.actions) != set(ACTIONS):
+        raise InputError(
+            f"gesture models {path} recognise {', '.join(models.actions)}; the pipeline needs "
+            f"models for exactly {', '.join(ACTIONS)}"
+        )
+    return models

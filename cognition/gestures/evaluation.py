@@ -17,11 +17,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from beyond_self.cognition import plotting
+from beyond_self.cognition.gestures.features import MOTION, POSITION
 from beyond_self.cognition.gestures.hmm import (
+    GestureHMM,
     GestureModels,
     TrainingConfig,
     train_hmm,
-    train_models,
 )
 from beyond_self.cognition.gestures.streaming import (
     CompiledModels,
@@ -37,11 +38,29 @@ FRACTIONS: tuple[float, ...] = tuple(round(0.1 * i, 1) for i in range(1, 11))
 
 @dataclass(frozen=True, eq=False)
 class LabelledGesture:
-    """One gesture's features (T, D) and its true action; `source` says where it came from."""
+    """One gesture's features (T, D) and its true action; `source` says where it came from.
+
+    `positions`: the same frames in the "position" space (the article's models read those);
+    `recording`: the recording it was cut from, so a cross-validation can leave out whole
+    recordings (empty: the gesture is its own recording).
+    """
 
     action: str
     features: FloatArray
     source: str = ""
+    positions: FloatArray | None = None
+    recording: str = ""
+
+    def in_space(self, space: str) -> FloatArray:
+        """The gesture's frames in feature space `space` (the models' `features`)."""
+        if space == MOTION:
+            return self.features
+        if space == POSITION and self.positions is not None:
+            return self.positions
+        raise InputError(
+            f"gesture {self.source or self.action} has no {space!r} features; valid: "
+            + ", ".join([MOTION] + ([POSITION] if self.positions is not None else []))
+        )
 
 
 @dataclass(frozen=True)
@@ -51,6 +70,18 @@ class Prediction:
     predicted: str
     posterior: tuple[float, ...]
     early: tuple[str, ...]  # predicted action at each fraction
+    recording: str = ""
+
+
+@dataclass(frozen=True)
+class RecordingScore:
+    """How one recording's gestures were recognised."""
+
+    recording: str
+    action: str  # the true action of its gestures (the first one's, if they differ)
+    n: int
+    correct: int
+    predicted: dict[str, int]  # action -> how many gestures were called it
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,11 +112,34 @@ class EvaluationReport:
             f"no early accuracy at {fraction}; valid: {', '.join(map(str, self.fractions))}"
         )
 
+    def per_recording(self) -> list[RecordingScore]:
+        """One row per recording, in the order recordings first appear."""
+        rows: dict[str, RecordingScore] = {}
+        for p in self.predictions:
+            key = p.recording or p.source
+            row = rows.get(key) or RecordingScore(key, p.action, 0, 0, {})
+            predicted = dict(row.predicted)
+            predicted[p.predicted] = predicted.get(p.predicted, 0) + 1
+            rows[key] = RecordingScore(
+                key, row.action, row.n + 1, row.correct + (p.predicted == p.action), predicted
+            )
+        return list(rows.values())
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "actions": list(self.actions),
             "n": self.n,
             "accuracy": self.accuracy,
+            "recordings": [
+                {
+                    "recording": r.recording,
+                    "action": r.action,
+                    "n": r.n,
+                    "correct": r.correct,
+                    "predicted": r.predicted,
+                }
+                for r in self.per_recording()
+            ],
             "confusion": self.confusion.tolist(),
             "early": {
                 "fractions": list(self.fractions),
@@ -94,6 +148,7 @@ class EvaluationReport:
             "predictions": [
                 {
                     "source": p.source,
+                    "recording": p.recording,
                     "action": p.action,
                     "predicted": p.predicted,
                     "posterior": list(p.posterior),
@@ -114,7 +169,7 @@ def _predict(
     fractions: Sequence[float],
     priors: ArrayLike | None,
 ) -> Prediction:
-    res: SequenceResult = recognize_sequence(compiled, g.features, priors)
+    res: SequenceResult = recognize_sequence(compiled, g.in_space(compiled.models.features), priors)
     actions = compiled.actions
     rows = _prefix_rows(len(res), fractions)
     return Prediction(
@@ -123,6 +178,7 @@ def _predict(
         predicted=res.final.best,
         posterior=tuple(float(v) for v in res.final.posterior),
         early=tuple(actions[int(np.argmax(res.posterior[r]))] for r in rows),
+        recording=g.recording,
     )
 
 
@@ -179,51 +235,93 @@ def evaluate(
     return _report(models.actions, preds, fractions, {"protocol": "held-out"})
 
 
+FOLDS = ("recording", "gesture")
+
+
 def cross_validate(
     gestures: Sequence[LabelledGesture],
     config: TrainingConfig | None = None,
     *,
+    folds: str = "recording",
+    also_train_on: Sequence[LabelledGesture] = (),
     actions: Sequence[str] | None = None,
     fractions: Sequence[float] = FRACTIONS,
     on_fold: Callable[[], None] | None = None,
 ) -> EvaluationReport:
-    """Leave-one-gesture-out cross-validation (for repetitions: leave-one-repetition-out).
+    """Cross-validation in which no model ever sees what it is tested on.
 
-    Each gesture is recognised by models none of which saw it: its own action's model is
-    retrained without it, the other actions' models are trained once on all their gestures
-    (which never include it), exactly as retraining everything without it.
+    `folds="recording"`: leave one recording out (every gesture of it, so a person's other
+    repetitions of the same movement never help); `"gesture"`: leave one gesture out.
+    `also_train_on`: gestures every fold trains on and none is tested on (the robot's own
+    synthetic experience, mixed with the recordings).
+
+    In each fold only the models of the actions in the held-out part are retrained; the
+    others are trained once on all their gestures (which never include the held-out ones),
+    exactly as retraining everything. An action left with no training gesture in a fold has no
+    model there: its gestures are recognised as one of the others (and counted wrong), which is
+    what a robot that never saw that action would do.
     """
+    if folds not in FOLDS:
+        raise InputError(f"folds {folds!r}; valid: {', '.join(FOLDS)}")
     cfg = config or TrainingConfig()
-    present = {g.action for g in gestures}
+    present = {g.action for g in (*gestures, *also_train_on)}
     if actions is None:
         actions = [a for a in ACTIONS if a in present] + sorted(present - set(ACTIONS))
     order = tuple(actions)
     _check_labels(gestures, order)
-    by_action = {a: [g for g in gestures if g.action == a] for a in order}
-    small = [a for a, gs in by_action.items() if len(gs) < 2]
-    if small:
-        raise InputError(
-            f"cross-validation needs at least 2 gestures per action; {', '.join(small)} has fewer"
+    _check_labels(also_train_on or gestures, order)
+    if len({g.features.shape[1] for g in (*gestures, *also_train_on)}) != 1:
+        raise InputError("the gestures do not all have the same features; use one feature space")
+    extra = {a: [g.features for g in also_train_on if g.action == a] for a in order}
+
+    def group(g: LabelledGesture, i: int) -> str:
+        return (g.recording or g.source or str(i)) if folds == "recording" else str(i)
+
+    parts: dict[str, list[int]] = {}
+    for i, g in enumerate(gestures):
+        parts.setdefault(group(g, i), []).append(i)
+
+    def data(action: str, without: set[int]) -> list[FloatArray]:
+        own = [
+            g.features for j, g in enumerate(gestures) if g.action == action and j not in without
+        ]
+        return own + extra[action]
+
+    def hmm(action: str, without: set[int]) -> GestureHMM | None:
+        seqs = data(action, without)
+        if not seqs:
+            return None
+        return train_hmm(seqs, replace(cfg, seed=cfg.seed + order.index(action)), what=action)
+
+    full = {a: hmm(a, set()) for a in order}
+    preds: list[Prediction | None] = [None] * len(gestures)
+    missing: dict[str, list[str]] = {}
+    for name, members in parts.items():
+        held = set(members)
+        retrain = {gestures[i].action for i in members}
+        fold = {a: (hmm(a, held) if a in retrain else full[a]) for a in order}
+        kept = tuple(a for a in order if fold[a] is not None)
+        absent = [a for a in order if fold[a] is None]
+        if absent:
+            missing[name] = absent
+        models = GestureModels(
+            actions=kept,
+            hmms=tuple(h for h in fold.values() if h is not None),
+            features=MOTION,
         )
-    full = train_models(
-        {a: [g.features for g in gs] for a, gs in by_action.items()}, cfg, actions=order
-    )
-    preds = []
-    for a_i, action in enumerate(order):
-        own = by_action[action]
-        for i, g in enumerate(own):
-            rest = [o.features for j, o in enumerate(own) if j != i]
-            hmm = train_hmm(rest, replace(cfg, seed=cfg.seed + a_i), what=action)
-            hmms = tuple(hmm if a == action else full[a] for a in order)
-            fold = GestureModels(actions=order, hmms=hmms)
-            preds.append(_predict(CompiledModels(fold), g, fractions, None))
-            if on_fold is not None:
-                on_fold()
+        compiled = CompiledModels(models)
+        for i in members:
+            preds[i] = _predict(compiled, gestures[i], fractions, None)
+        if on_fold is not None:
+            on_fold()
     meta = {
-        "protocol": "leave-one-gesture-out cross-validation",
+        "protocol": f"leave-one-{folds}-out cross-validation",
+        "folds": len(parts),
+        "also_trained_on": len(also_train_on),
+        "without_a_model": missing,
         "config": {k: getattr(cfg, k) for k in cfg.__dataclass_fields__},
     }
-    return _report(order, preds, fractions, meta)
+    return _report(order, [p for p in preds if p is not None], fractions, meta)
 
 
 # ---------------------------------------------------------------------------------------------

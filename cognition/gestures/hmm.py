@@ -7,13 +7,17 @@ model came from.
 Model file format (JSON, never pickle; floats are written with Python's shortest round-trip
 representation, so a save/load cycle is bit-exact):
 
-    {"format": "beyond-self/gesture-models", "version": 1,
-     "feature_space": "<what the observations are>",
+    {"format": "beyond-self/gesture-models", "version": 2,
+     "features": "motion" | "position",      # the feature space (cognition.gestures.features)
+     "floor": -30.0 | null,                  # below this per-frame log-likelihood under every
+                                             # model, a gesture is no action (cancelled)
      "actions": ["grasp", "tap", "touch"],
      "models": {"grasp": {"startprob": [Q], "transmat": [Q][Q] (row = from-state),
                           "weights": [Q][M], "means": [Q][M][D], "covars": [Q][M][D][D]}, ...},
      "extra": {"garbage": {...same...}},   # models kept out of the action posterior
      "meta": {...provenance: source, training configuration, sequence counts...}}
+
+Version 1 files (no "features", no "floor") hold "position" models and still load.
 """
 
 from __future__ import annotations
@@ -30,19 +34,18 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from beyond_self.cognition.gestures.features import MOTION, POSITION, check_space
 from beyond_self.cognition.variables import ACTIONS
 from beyond_self.core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
 
 FORMAT = "beyond-self/gesture-models"
-VERSION = 1
-FEATURE_SPACE = (
-    "hand position relative to the torso, x and z divided by 0.33 m, y by 0.23 m "
-    "(equal to the article's YARP hand logs times 0.001); camera frame: x right, y up, "
-    "z away from the sensor"
-)
+VERSION = 2
+READABLE_VERSIONS = (1, 2)
 _TOL = 1e-6
+# nats per frame below the worst-fitting training gesture: people are sloppier than a simulator
+FLOOR_MARGIN = 15.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,10 +183,15 @@ class GestureModels:
     hmms: tuple[GestureHMM, ...]
     extra: Mapping[str, GestureHMM] = field(default_factory=dict)
     meta: Mapping[str, Any] = field(default_factory=dict)
+    features: str = POSITION  # the feature space the models were trained in
+    floor: float | None = None  # per-frame log-likelihood below which no action fits
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "actions", tuple(self.actions))
         object.__setattr__(self, "hmms", tuple(self.hmms))
+        dim = check_space(self.features)
+        if self.floor is not None and not math.isfinite(self.floor):
+            raise InputError(f"gesture model floor {self.floor!r}; valid: a finite number")
         if not self.actions:
             raise InputError("a gesture model set needs at least one action")
         if len(set(self.actions)) != len(self.actions):
@@ -195,6 +203,10 @@ class GestureModels:
         dims = {h.n_features for h in (*self.hmms, *self.extra.values())}
         if len(dims) != 1:
             raise InputError(f"HMMs disagree on the feature dimension ({sorted(dims)}); use one")
+        if dims != {dim}:
+            raise InputError(
+                f"HMMs have {dims.pop()} features but the {self.features!r} space has {dim}"
+            )
 
     @property
     def n_features(self) -> int:
@@ -220,19 +232,26 @@ class GestureModels:
             hmms=(*self.hmms, *(self.extra[n] for n in names)),
             extra={k: v for k, v in self.extra.items() if k not in names},
             meta=self.meta,
+            features=self.features,
+            floor=self.floor,
         )
 
     def subset(self, actions: Sequence[str]) -> GestureModels:
         """Only these actions, in this order."""
         return GestureModels(
-            actions=tuple(actions), hmms=tuple(self[a] for a in actions), meta=self.meta
+            actions=tuple(actions),
+            hmms=tuple(self[a] for a in actions),
+            meta=self.meta,
+            features=self.features,
+            floor=self.floor,
         )
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "format": FORMAT,
             "version": VERSION,
-            "feature_space": FEATURE_SPACE,
+            "features": self.features,
+            "floor": self.floor,
             "actions": list(self.actions),
             "models": {a: h.to_dict() for a, h in zip(self.actions, self.hmms, strict=True)},
             "extra": {k: h.to_dict() for k, h in self.extra.items()},
@@ -243,11 +262,18 @@ class GestureModels:
     def from_dict(cls, data: Mapping[str, Any]) -> GestureModels:
         if not isinstance(data, Mapping) or data.get("format") != FORMAT:
             raise InputError(f"not a gesture model file; valid: JSON with format {FORMAT!r}")
-        if data.get("version") != VERSION:
+        version = data.get("version")
+        if version not in READABLE_VERSIONS:
             raise InputError(
-                f"gesture model file version {data.get('version')!r} is not supported; "
-                f"valid: {VERSION}"
+                f"gesture model file version {version!r} is not supported; "
+                f"valid: {', '.join(map(str, READABLE_VERSIONS))}"
             )
+        features = data.get("features", POSITION) if version >= 2 else POSITION
+        floor = data.get("floor") if version >= 2 else None
+        if not isinstance(features, str) or not (
+            floor is None or (isinstance(floor, int | float) and not isinstance(floor, bool))
+        ):
+            raise InputError("gesture model file: 'features' must be a name, 'floor' a number")
         actions = data.get("actions")
         models = data.get("models")
         if not isinstance(actions, list) or not isinstance(models, Mapping):
@@ -261,6 +287,8 @@ class GestureModels:
             hmms=tuple(GestureHMM.from_dict(models[a]) for a in actions),
             extra={str(k): GestureHMM.from_dict(v) for k, v in extra.items()},
             meta=dict(data.get("meta", {})),
+            features=features,
+            floor=None if floor is None else float(floor),
         )
 
 
@@ -500,11 +528,15 @@ def train_models(
     actions: Sequence[str] | None = None,
     meta: Mapping[str, Any] | None = None,
     on_model: Callable[[str], None] | None = None,
+    features: str = MOTION,
+    floor_margin: float | None = FLOOR_MARGIN,
 ) -> GestureModels:
-    """One HMM per action from `{action: [sequence (T_i, D), ...]}`.
+    """One HMM per action from `{action: [sequence (T_i, D), ...]}` in feature space `features`.
 
     `actions` fixes the order (default: the canonical grasp, tap, touch, then any others in the
-    mapping's order). `on_model(action)` is called after each model, for progress bars.
+    mapping's order). `on_model(action)` is called after each model, for progress bars. The
+    models' `floor` is `floor_margin` below the worst fit of any training sequence (its
+    per-frame log-likelihood under the best model); None: no floor.
     """
     cfg = config or TrainingConfig()
     if actions is None:
@@ -524,7 +556,19 @@ def train_models(
         "frames": {a: int(sum(len(np.asarray(s)) for s in data[a])) for a in actions},
     }
     info.update(meta or {})
-    return GestureModels(actions=tuple(actions), hmms=tuple(hmms), meta=info)
+    models = GestureModels(actions=tuple(actions), hmms=tuple(hmms), meta=info, features=features)
+    if floor_margin is None:
+        return models
+    worst = min(worst_fit(models, seqs) for seqs in data.values())
+    return replace(models, floor=round(worst - floor_margin, 3))
+
+
+def worst_fit(models: GestureModels, sequences: Sequence[ArrayLike]) -> float:
+    """The lowest per-frame log-likelihood of these sequences under their best model."""
+    from beyond_self.cognition.gestures.streaming import CompiledModels, recognize_sequence
+
+    compiled = CompiledModels(models)
+    return min(float(recognize_sequence(compiled, x).final.normalized.max()) for x in sequences)
 
 
 def log_prior(priors: ArrayLike | None, n: int) -> FloatArray:

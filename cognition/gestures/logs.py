@@ -125,3 +125,39 @@ def read_hand_log(path: str | Path, *, min_frames: int = 1) -> HandLog:
         time=np.asarray(times, dtype=np.float64),
         xyz=np.asarray(rows, dtype=np.float64).reshape(-1, 3),
     )
+
+
+MIN_LOG_FRAMES = 30  # one second: less cannot hold a gesture and the rest around it
+# A tracked hand stays within an arm's reach of the torso: 1.5 m is 4.5 body units across and
+# 6.5 up; the article's logs stay within 3.5. Beyond, a log is in other units or corrupt.
+MAX_BODY_UNITS = 10.0
+
+
+def check_positions(positions: FloatArray, what: str) -> FloatArray:
+    """Hand positions in body units, or an InputError when some are not a hand's."""
+    far = np.abs(positions).max(axis=1) if len(positions) else np.zeros(0)
+    bad = np.flatnonzero(far > MAX_BODY_UNITS)
+    if len(bad):
+        raise InputError(
+            f"{what}: frame {bad[0] + 1} is {far[bad[0]]:.3g} body units from the torso; "
+            f"valid: within {MAX_BODY_UNITS:g} (hand logs are in thousandths of a body unit)"
+        )
+    return positions
+
+
+def hand_log_stream(path: str | Path, scale: float = 0.001) -> tuple[NDArray[np.int64], FloatArray]:
+    """A hand log as the pipeline plays it (`beyond up --log`, `beyond analyse`): each frame's
+    stamp (ns, the log's own time) and the hand in body units (the logged values times
+    `scale`), checked: at least `MIN_LOG_FRAMES` frames, finite, within `MAX_BODY_UNITS`, and
+    time going forward."""
+    log = read_hand_log(path, min_frames=MIN_LOG_FRAMES)
+    if not (math.isfinite(scale) and scale > 0):
+        raise InputError(f"log scale {scale!r} is invalid; valid: a positive finite number")
+    stamps = np.rint(log.time * 1e9).astype(np.int64)
+    back = np.flatnonzero(np.diff(stamps) <= 0)
+    if len(back):
+        raise InputError(
+            f"{log.path}: frame {back[0] + 2} is not later than the frame before it; valid: "
+            "times that increase from line to line"
+        )
+    return stamps, check_positions(log.xyz * scale, str(log.path))

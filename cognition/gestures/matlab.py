@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from beyond_self.cognition.gestures.hmm import FEATURE_SPACE, GestureHMM, GestureModels
+from beyond_self.cognition.gestures.features import POSITION
+from beyond_self.cognition.gestures.hmm import GestureHMM, GestureModels
 from beyond_self.core.errors import InputError
 
 # action -> model number in the MATLAB file, in the canonical action order
@@ -82,7 +83,7 @@ def load_matlab_models(path: str | Path, *, include_garbage: bool = False) -> Ge
                 "garbage": "hmm0",
             },
             "touch_is": "push (hmm4), the article's stand-in for touch",
-            "feature_space": FEATURE_SPACE,
         },
+        features=POSITION,  # the hand logs times 0.001, frame by frame
     )
     return models.including("garbage") if include_garbage and "garbage" in extra else models

@@ -1,24 +1,34 @@
-"""Cutting a continuous hand stream into gestures: hand at rest vs hand acting, with hysteresis.
+"""Cutting a continuous hand stream into gestures: one per execution, cut to the movement.
 
-Speed alone does not separate gestures in the article's recordings: the hand is as still while
-it holds or touches the object as while it rests, and between repetitions it often passes
-through its rest pose without stopping. What does separate them is where the hand is: every
-action on the table is an excursion of the hand in front of the body and back. So the segmenter
-runs two hysteresis detectors on the feature-space trajectory (torso-relative, body units, see
-`cognition.gestures.features`):
+Every action on an object is an excursion of the hand: it leaves where it rests, reaches
+forward to the object, acts, and comes back. The segmenter follows that, on the torso-relative
+trajectory in body units (`cognition.gestures.features`), smoothed by a causal median against
+tracker glitches:
 
-- reach: a gesture is under way from the frame the hand goes further forward than `reach_on`
-  (feature z below it; z points away from the sensor, the person faces the sensor) until it comes
-  back behind `reach_off`;
-- stillness: the smoothed speed, with `rest_speed` < `move_speed`, refines the bounds: the
-  gesture starts at the motion onset before the reach (the last still frame, at most
-  `max_lead` frames earlier) and ends when the hand is still again after coming back (at most
-  `max_tail` frames later).
+- rest: the hand stays within `rest_radius` of one place for `rest_frames` frames; that place
+  is the rest pose (re-estimated at every rest, so slow drift is followed). No gesture starts
+  before the hand has been seen resting once.
+- start: the hand goes `leave` further forward (-z) than its rest pose. The gesture is placed
+  back to the last frame the hand was within `near` of the rest pose (at most `max_lead` frames
+  earlier): the movement's onset, not the moment it was noticed.
+- end: a gesture must reach `reach` forward; it is over when the hand is on its way back, its
+  distance to the rest pose fallen below (1 - `back`) of the farthest it went. The end is placed
+  back where the hand had come `turn` of the way: the movement at the object is kept, most of
+  the way home is not (on the article's `tap1_hand` this recovers the hand-picked ranges
+  216-351, 401-511 and 557-664 within a few frames).
+- not gestures: an excursion that comes back without reaching (drift, fidgeting), one whose
+  frames are more than `max_jumps` tracker jumps (steps above `jump` per frame, which no hand
+  makes), one shorter than `min_gesture` or longer than `max_gesture` frames. A gesture
+  reported as started and then found to be one of these is reported `Discarded`, with why.
+  No gesture starts while a jump is still inside the median's window: a tracker that has lost
+  the hand starts nothing.
 
-With `reach_on=None` the segmenter is speed-only (a rest is `min_rest` still frames), for
-streams without a torso-relative frame. Glitches of the tracker are removed by a causal median.
+After an end the segmenter waits for the hand to rest again (or to come back near its rest
+pose) before another gesture can start, so the way home never starts one.
+
 The segmenter is causal: `GestureSegmenter.push` reports each gesture as soon as its end is
-known, so services can use it on live streams; `segment_gestures` runs it over an array.
+known (a third of a second or so after the end it places), so services use it on live streams;
+`segment_gestures` runs it over an array.
 """
 
 from __future__ import annotations
@@ -29,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from beyond_self.cognition.gestures.features import HandSmoother, median_rows
 from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
@@ -36,30 +47,35 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class SegmenterConfig:
-    """Thresholds in feature units (body units; speeds per second)."""
+    """Thresholds in body units (see `cognition.gestures.features`) and frames."""
 
-    fps: float = 30.0
     median_frames: int = 5  # causal median against tracker glitches
-    speed_frames: int = 5  # causal moving average of the speed
-    rest_speed: float = 0.6  # below: still
-    move_speed: float = 1.2  # above: moving
-    reach_on: float | None = -0.9  # feature z below this: acting in front of the body
-    reach_off: float = -0.6  # feature z above this: back near the body
-    min_rest: int = 8  # still frames that end a gesture (speed-only mode)
-    min_gesture: int = 15  # shorter excursions are discarded
-    max_lead: int = 45  # how far back before the reach a start may be placed
-    max_tail: int = 30  # how long after coming back the end may wait for stillness
-    keep_partial: bool = False  # keep gestures cut by the start or the end of the stream
+    rest_frames: int = 15  # a rest: this many frames ...
+    rest_radius: float = 0.12  # ... all within this distance of their median
+    leave: float = 0.4  # forward of the rest pose that starts a gesture
+    near: float = 0.3  # the start: the last frame this close to the rest pose
+    reach: float = 0.8  # how far forward a gesture must reach
+    back: float = 0.45  # on the way back: distance to rest below (1 - back) of its maximum
+    turn: float = 1 / 3  # the end: where the hand had come this part of the way back
+    jump: float = 0.5  # a step longer than this between two frames is a tracker jump
+    max_jumps: float = 0.1  # a gesture with more jumps than this share of its frames is not one
+    min_gesture: int = 20  # frames
+    max_gesture: int = 900  # frames (30 s)
+    max_lead: int = 45  # frames a start may be placed before the frame that noticed it
+    keep_partial: bool = False  # keep a gesture still under way when the stream ends
 
     def __post_init__(self) -> None:
-        if self.fps <= 0 or self.median_frames < 1 or self.speed_frames < 1:
-            raise InputError("segmenter needs fps > 0, median_frames >= 1, speed_frames >= 1")
-        if not 0 <= self.rest_speed <= self.move_speed:
-            raise InputError("segmenter needs 0 <= rest_speed <= move_speed (hysteresis)")
-        if self.reach_on is not None and not self.reach_on <= self.reach_off:
-            raise InputError("segmenter needs reach_on <= reach_off (hysteresis)")
-        if self.min_rest < 1 or self.min_gesture < 1 or self.max_lead < 0 or self.max_tail < 0:
-            raise InputError("segmenter frame counts must be positive")
+        if self.median_frames < 1 or self.rest_frames < 2:
+            raise InputError("segmenter needs median_frames >= 1 and rest_frames >= 2")
+        lengths = (self.rest_radius, self.leave, self.near, self.reach, self.jump)
+        if not all(np.isfinite(v) and v > 0 for v in lengths):
+            raise InputError("segmenter distances must be positive")
+        if not (self.near < self.leave <= self.reach):
+            raise InputError("segmenter needs near < leave <= reach (hysteresis)")
+        if not (0 < self.turn < self.back < 1) or not 0 <= self.max_jumps <= 1:
+            raise InputError("segmenter needs 0 < turn < back < 1 and 0 <= max_jumps <= 1")
+        if not 1 <= self.min_gesture <= self.max_gesture or self.max_lead < 0:
+            raise InputError("segmenter needs 1 <= min_gesture <= max_gesture, max_lead >= 0")
 
 
 @dataclass(frozen=True)
@@ -81,8 +97,21 @@ class Segment:
         return self.stop - self.start
 
 
+@dataclass(frozen=True)
+class Discarded:
+    """A started gesture that turned out not to be one; `reason` says why (one line)."""
+
+    start: int
+    stop: int
+    reason: str
+
+
+_IDLE, _ACTIVE, _RETURNING = range(3)
+
+
 class GestureSegmenter:
-    """Causal segmenter: push one position per frame, get the gestures whose end is now known."""
+    """Causal segmenter: push one position per frame; get a `Segment` when a gesture's end is
+    known, a `Discarded` when a gesture announced by `current_start` is withdrawn, else None."""
 
     def __init__(self, config: SegmenterConfig | None = None) -> None:
         self.config = config or SegmenterConfig()
@@ -91,100 +120,166 @@ class GestureSegmenter:
     def reset(self) -> None:
         cfg = self.config
         self._t = 0
-        self._recent: deque[FloatArray] = deque(maxlen=cfg.median_frames)
-        self._speeds: deque[float] = deque(maxlen=cfg.speed_frames)
-        self._prev: FloatArray | None = None
-        self._last_still = 0  # last frame whose smoothed speed was below rest_speed
-        self._still_run = 0
-        self._active = False  # inside a gesture
-        self._returned_at: int | None = None  # frame the hand came back (reach mode)
+        self._smoother = HandSmoother(cfg.median_frames)
+        history = max(cfg.rest_frames, cfg.max_lead + 1)
+        self._recent: deque[FloatArray] = deque(maxlen=history)  # smoothed, last frames
+        self._jumped: deque[bool] = deque(maxlen=history)  # ... and whether each jumped
+        self._distances: deque[float] = deque(maxlen=cfg.max_gesture + 1)  # in the gesture
+        self._raw_prev: FloatArray | None = None
+        self._since_jump = 0  # frames since the last tracker jump
+        self._state = _IDLE
+        self._rest: FloatArray | None = None
         self._start = 0
-        self._reached = False
-        self._last_stop = 0
-        self._partial = False  # the current gesture was under way when the stream began
+        self._farthest = 0.0  # distance to the rest pose
+        self._forward = 0.0  # forward reach
+        self._jumps = 0
+        self._from_start = False  # under way since the stream's first frame
 
     @property
     def active(self) -> bool:
         """A gesture is under way."""
-        return self._active
+        return self._state == _ACTIVE
+
+    @property
+    def idle(self) -> bool:
+        """No gesture under way, and not on the way back from one."""
+        return self._state == _IDLE
+
+    def course(self) -> tuple[object, ...]:
+        """Everything that decides what this segmenter does from here on while it is idle (its
+        windows, rest pose, whether a jump is still in its median), not where in the stream it
+        is: two idle segmenters with equal courses, fed the same frames, report the same
+        gestures (a restarted tracker's proof that it resumes exactly, cognition.episodes)."""
+        return (
+            self._state,
+            tuple(a.tobytes() for a in self._smoother.window),
+            tuple(a.tobytes() for a in self._recent),
+            tuple(self._jumped),
+            None if self._raw_prev is None else self._raw_prev.tobytes(),
+            min(self._since_jump, self.config.median_frames),
+            None if self._rest is None else self._rest.tobytes(),
+        )
 
     @property
     def current_start(self) -> int | None:
         """0-based frame where the gesture under way began (None between gestures), so a
         streaming recogniser can start from the gesture's first frame, not from the frame the
         segmenter noticed it."""
-        return self._start if self._active else None
+        return self._start if self._state == _ACTIVE else None
 
-    def push(self, position: ArrayLike) -> Segment | None:
+    @property
+    def smoothed(self) -> FloatArray:
+        """The last frame's position after the causal median (what the segmenter used)."""
+        return self._recent[-1]
+
+    def push(self, position: ArrayLike) -> Segment | Discarded | None:
         cfg = self.config
         p = np.asarray(position, dtype=np.float64)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             raise InputError(f"segmenter position has shape {p.shape}; valid: 3 finite numbers")
         t = self._t
         self._t += 1
-        self._recent.append(p)
-        smooth = np.median(np.stack(self._recent), axis=0)
-        step = 0.0 if self._prev is None else float(np.linalg.norm(smooth - self._prev))
-        self._prev = smooth
-        self._speeds.append(step * cfg.fps)
-        speed = float(np.mean(self._speeds))
-        still = speed < cfg.rest_speed
-        self._still_run = self._still_run + 1 if still else 0
-        if still:
-            self._last_still = t
-        if cfg.reach_on is None:
-            return self._speed_only(t, speed)
-        return self._with_reach(t, float(smooth[2]), still)
-
-    def _emit(self, start: int, stop: int) -> Segment | None:
-        self._active = False
-        self._returned_at = None
-        self._last_stop = stop
-        partial, self._partial = self._partial, False
-        if partial and not self.config.keep_partial:
+        jumped = self._raw_prev is not None and np.linalg.norm(p - self._raw_prev) > cfg.jump
+        self._raw_prev = p
+        self._since_jump = 0 if jumped else self._since_jump + 1
+        smooth = self._smoother.push(p)
+        self._recent.append(smooth)
+        self._jumped.append(bool(jumped))
+        if self._state == _RETURNING and (
+            self._resting() is not None or self._distance(smooth) < cfg.near
+        ):
+            self._state = _IDLE
+        if self._state == _IDLE:
+            rest = self._resting()
+            if rest is not None:
+                self._rest = rest
+            steady = self._since_jump >= cfg.median_frames  # no jump left in the median
+            if steady and self._rest is not None and self._rest[2] - smooth[2] > cfg.leave:
+                self._begin(t)
             return None
-        if stop - start >= self.config.min_gesture:
-            return Segment(start, stop)
+        if self._state == _ACTIVE:
+            return self._follow(t, smooth, bool(jumped))
         return None
 
-    def _with_reach(self, t: int, z: float, still: bool) -> Segment | None:
-        cfg = self.config
-        assert cfg.reach_on is not None
-        if not self._active:
-            if z < cfg.reach_on:
-                onset = max(self._last_still, t - cfg.max_lead, self._last_stop)
-                self._active, self._start, self._returned_at = True, onset, None
-                self._partial = t == 0
-            return None
-        if self._returned_at is None:
-            if z > cfg.reach_off:
-                self._returned_at = t
-            return None
-        if z < cfg.reach_on:  # went forward again before settling: the next gesture begins
-            seg = self._emit(self._start, t - (t - self._returned_at) // 2)
-            self._active, self._start = True, self._last_stop
-            return seg
-        if still or t - self._returned_at >= cfg.max_tail:
-            return self._emit(self._start, t)
-        return None
-
-    def _speed_only(self, t: int, speed: float) -> Segment | None:
-        cfg = self.config
-        if not self._active:
-            if speed > cfg.move_speed:
-                self._active = True
-                self._start = max(self._last_still, t - cfg.max_lead, self._last_stop)
-            return None
-        if self._still_run >= cfg.min_rest:
-            return self._emit(self._start, t - cfg.min_rest + 1)
-        return None
-
-    def finish(self) -> Segment | None:
+    def finish(self) -> Segment | Discarded | None:
         """End of stream: a gesture still under way is cut (kept only with `keep_partial`)."""
-        if self._active:
-            self._partial = self._partial or self._returned_at is None
-            return self._emit(self._start, self._t)
-        return None
+        if self._state != _ACTIVE:
+            return None
+        self._state = _IDLE
+        if self.config.keep_partial and not self._from_start:
+            return self._judge(self._start, self._t)
+        return Discarded(self._start, self._t, "still under way when the stream ended")
+
+    # -- internals -----------------------------------------------------------------------
+
+    def _distance(self, q: FloatArray) -> float:
+        return float(np.linalg.norm(q - self._rest)) if self._rest is not None else 0.0
+
+    def _resting(self) -> FloatArray | None:
+        n = self.config.rest_frames
+        if len(self._recent) < n:
+            return None
+        window = np.stack(list(self._recent)[-n:])
+        centre = median_rows(window)
+        if np.max(np.linalg.norm(window - centre, axis=1)) > self.config.rest_radius:
+            return None
+        return centre
+
+    def _begin(self, t: int) -> None:
+        cfg = self.config
+        recent = list(self._recent)
+        back = 0  # frames before t: walk back while the hand is away from rest
+        while back < min(cfg.max_lead, len(recent) - 1):
+            if self._distance(recent[-2 - back]) <= cfg.near:
+                break
+            back += 1
+        self._state = _ACTIVE
+        self._start = t - back
+        self._from_start = self._start == 0
+        self._distances.clear()
+        for q in recent[len(recent) - 1 - back :]:
+            self._distances.append(self._distance(q))
+        self._farthest = max(self._distances)
+        self._forward = max(float(self._rest[2] - q[2]) for q in recent[-1 - back :])  # type: ignore[index]
+        self._jumps = sum(list(self._jumped)[-1 - back :])
+
+    def _follow(self, t: int, smooth: FloatArray, jumped: bool) -> Segment | Discarded | None:
+        cfg = self.config
+        assert self._rest is not None
+        d = self._distance(smooth)
+        self._distances.append(d)
+        self._farthest = max(self._farthest, d)
+        forward = float(self._rest[2] - smooth[2])
+        self._forward = max(self._forward, forward)
+        self._jumps += jumped
+        if self._forward < cfg.reach and forward < cfg.leave / 2:
+            self._state = _IDLE
+            return Discarded(self._start, t + 1, "the hand came back without reaching forward")
+        if t + 1 - self._start > cfg.max_gesture:
+            self._state = _RETURNING
+            return Discarded(
+                self._start, t + 1, f"longer than {cfg.max_gesture} frames without coming back"
+            )
+        if self._forward < cfg.reach or d >= (1 - cfg.back) * self._farthest:
+            return None
+        # on the way back: the end is the last frame still `turn` of the way out
+        self._state = _RETURNING
+        keep = (1 - cfg.turn) * self._farthest
+        dists = list(self._distances)
+        stop = len(dists)
+        while stop > 1 and dists[stop - 1] < keep:
+            stop -= 1
+        return self._judge(self._start, self._start + stop)
+
+    def _judge(self, start: int, stop: int) -> Segment | Discarded:
+        cfg = self.config
+        if stop - start < cfg.min_gesture:
+            return Discarded(start, stop, f"shorter than {cfg.min_gesture} frames")
+        if self._jumps > cfg.max_jumps * (self._t - start):
+            return Discarded(
+                start, stop, f"tracking failed: {self._jumps} jumps in {self._t - start} frames"
+            )
+        return Segment(start, stop)
 
 
 def segment_gestures(positions: ArrayLike, config: SegmenterConfig | None = None) -> list[Segment]:
@@ -193,8 +288,6 @@ def segment_gestures(positions: ArrayLike, config: SegmenterConfig | None = None
     if x.ndim != 2 or x.shape[1] != 3:
         raise InputError(f"positions have shape {x.shape}; valid: (T, 3)")
     seg = GestureSegmenter(config)
-    out = [s for s in (seg.push(p) for p in x) if s is not None]
-    last = seg.finish()
-    if last is not None:
-        out.append(last)
-    return out
+    found = [seg.push(p) for p in x]
+    found.append(seg.finish())
+    return [s for s in found if isinstance(s, Segment)]

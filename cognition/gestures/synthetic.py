@@ -31,7 +31,7 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from beyond_self.cognition.gestures.features import features_from_joints
+from beyond_self.cognition.gestures.features import MOTION, features_from_joints, gesture_features
 from beyond_self.cognition.variables import ACTIONS
 from beyond_self.core.errors import InputError, unknown
 
@@ -91,13 +91,26 @@ class SkeletonStream:
         return self.joints["right_hand"]
 
     def features(self) -> FloatArray:
-        """Recognition features of every frame (see `cognition.gestures.features`)."""
+        """The hand relative to the torso in body units, every frame (what the segmenter and
+        the features start from: `cognition.gestures.features`)."""
         return features_from_joints(self.joints)
 
-    def gesture_features(self, i: int = 0) -> FloatArray:
-        """Features of the frames of gesture i only (what the models are trained on)."""
+    def gesture_span(self, i: int = 0) -> tuple[int, int]:
+        """Frames [start, stop) of gesture i as the default segmenter cuts it (what a robot
+        watching the stream would recognise), or its true frames if the segmenter missed it."""
+        from beyond_self.cognition.gestures.segmentation import segment_gestures
+
         g = self.gestures[i]
-        return self.features()[g.start : g.stop]
+        found = [(s.start, s.stop) for s in segment_gestures(self.features())]
+        overlap = [min(b, g.stop) - max(a, g.start) for a, b in found]
+        if overlap and max(overlap) > 0:
+            return found[int(np.argmax(overlap))]
+        return g.start, g.stop
+
+    def gesture_features(self, i: int = 0, space: str = MOTION) -> FloatArray:
+        """Features of gesture i, cut as `gesture_span` (what the models are trained on)."""
+        start, stop = self.gesture_span(i)
+        return gesture_features(space, self.features(), start, stop)
 
 
 @dataclass(frozen=True)
@@ -108,39 +121,36 @@ class SynthesisConfig:
     speed: tuple[float, float] = (0.75, 1.3)  # global duration factor
     phase_jitter: float = 0.15  # per-phase duration factor 1 +- this
     amplitude: tuple[float, float] = (0.8, 1.2)  # scale of approach heights, lifts, strokes
-    hand_noise: tuple[float, float] = (0.004, 0.012)  # white jitter of the hand, per axis
+    hand_noise: tuple[float, float] = (0.005, 0.02)  # white jitter of the hand in depth (z)
     joint_noise: float = 0.004  # white jitter of the other joints
     drift: float = 0.01  # amplitude of slow tracking drift
-    glitch_rate: float = 0.0  # chance per frame that the hand jumps (a tracking error)
-    rest: tuple[float, float] = (0.2, 0.6)  # s of rest before and after a single gesture
+    glitch_rate: float = 0.01  # chance per frame that the hand's tracking fails for a moment
+    rest: tuple[float, float] = (0.8, 1.4)  # s of rest before and after a single gesture
     rest_between: tuple[float, float] = (1.0, 3.0)  # s of rest between gestures (continuous)
-
-
-def _min_jerk(tau: FloatArray) -> FloatArray:
-    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+    air_taps: float = 0.35  # share of taps held up in the air, with no table under them
+    pushes: float = 0.3  # share of touches that push the object forward (the article's touch)
 
 
 @dataclass
 class _Path:
-    """Key poses and the durations between them (a hold repeats a pose).
+    """Key poses of the hand and when it passes through them (a hold repeats a pose).
 
-    A movement may pass through via points: one minimum-jerk time course drives the hand along a
-    smooth curve through them, so it slows down only where a person would, at the end.
+    The hand moves through them along a shape-preserving cubic in time (PCHIP): smooth, never
+    overshooting a key pose, at rest only where a person is (a hold, a turning point), so
+    several key poses make one fluent movement, as in the recordings of people.
     """
 
     start: FloatArray
     times: list[float] = field(default_factory=lambda: [0.0])
     poses: list[FloatArray] = field(default_factory=list)
-    vias: list[list[FloatArray]] = field(default_factory=list)  # per segment
     marks: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.poses.append(np.asarray(self.start, dtype=np.float64))
 
-    def to(self, pose: FloatArray, duration: float, via: Sequence[FloatArray] = ()) -> None:
+    def to(self, pose: FloatArray, duration: float) -> None:
         self.times.append(self.times[-1] + max(duration, 1e-3))
         self.poses.append(np.asarray(pose, dtype=np.float64))
-        self.vias.append([np.asarray(v, dtype=np.float64) for v in via])
 
     def hold(self, duration: float) -> None:
         self.to(self.poses[-1], duration)
@@ -151,10 +161,9 @@ class _Path:
     def extend(self, other: _Path) -> float:
         """Append another path that starts where this one ends; returns its time offset."""
         t0 = self.duration
-        for time, pose, via in zip(other.times[1:], other.poses[1:], other.vias, strict=True):
+        for time, pose in zip(other.times[1:], other.poses[1:], strict=True):
             self.times.append(t0 + time)
             self.poses.append(pose)
-            self.vias.append(via)
         return t0
 
     @property
@@ -162,30 +171,10 @@ class _Path:
         return self.times[-1]
 
     def sample(self, t: FloatArray) -> FloatArray:
-        times = np.asarray(self.times)
-        out = np.repeat(self.poses[0][None, :], len(t), axis=0)
-        for i in range(len(times) - 1):
-            sel = (t >= times[i]) & (t < times[i + 1]) if i < len(times) - 2 else t >= times[i]
-            if not np.any(sel):
-                continue
-            tau = np.clip((t[sel] - times[i]) / (times[i + 1] - times[i]), 0.0, 1.0)
-            out[sel] = _along([self.poses[i], *self.vias[i], self.poses[i + 1]], _min_jerk(tau))
-        return out
+        from scipy.interpolate import PchipInterpolator
 
-
-def _along(points: list[FloatArray], u: FloatArray) -> FloatArray:
-    """Points on a smooth curve through `points` at fractions u of its chord length."""
-    pts = np.stack(points)
-    if len(pts) == 2:
-        return cast(np.ndarray, pts[0] + (pts[1] - pts[0]) * u[:, None])
-    chord = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
-    if chord[-1] <= 0:
-        return np.repeat(pts[:1], len(u), axis=0)
-    from scipy.interpolate import CubicSpline
-
-    knots = chord / chord[-1]
-    keep = np.r_[True, np.diff(knots) > 1e-9]
-    return np.asarray(CubicSpline(knots[keep], pts[keep], bc_type="natural")(u))
+        curve = PchipInterpolator(np.asarray(self.times), np.stack(self.poses), axis=0)
+        return cast(np.ndarray, curve(np.clip(t, 0.0, self.duration)))
 
 
 @dataclass(frozen=True)
@@ -201,15 +190,21 @@ class _Scene:
 
 
 def _scene(rng: np.random.Generator) -> _Scene:
+    """Where the person, the hand's rest and the object are.
+
+    Measured on the article's recordings (torso-relative): the hand rests beside the hip, about
+    0.3 m to the right of the torso joint and level with it in depth; the object lies on a table
+    0.35-0.45 m below the torso joint, in front of the body (x near 0) and 0.5-0.6 m forward.
+    """
     torso = np.array([rng.uniform(-0.15, 0.15), rng.uniform(-0.1, 0.1), rng.uniform(1.8, 2.4)])
     size = rng.uniform(0.94, 1.06)  # person size
-    table_drop = rng.uniform(0.27, 0.33) * size
+    table_drop = rng.uniform(0.37, 0.43) * size
     obj_half = rng.uniform(0.025, 0.045)
     obj = torso + np.array(
-        [rng.uniform(0.04, 0.12), -table_drop + obj_half, -rng.uniform(0.38, 0.46) * size]
+        [rng.uniform(-0.05, 0.06), -table_drop + obj_half, -rng.uniform(0.48, 0.66) * size]
     )
     rest = torso + np.array(
-        [rng.uniform(0.2, 0.28), -rng.uniform(0.3, 0.36) * size, rng.uniform(0.0, 0.08)]
+        [rng.uniform(0.25, 0.33), -rng.uniform(0.28, 0.36) * size, rng.uniform(0.0, 0.12)]
     )
     return _Scene(
         torso=torso,
@@ -223,65 +218,112 @@ def _scene(rng: np.random.Generator) -> _Scene:
     )
 
 
+_UP = np.array([0.0, 1.0, 0.0])
+_RIGHT = np.array([1.0, 0.0, 0.0])
+_BACK = np.array([0.0, 0.0, 1.0])  # towards the sensor's far side: away from the object
+
+
 def _gesture_path(
     action: str, scene: _Scene, start: FloatArray, rng: np.random.Generator, cfg: SynthesisConfig
 ) -> tuple[_Path, float]:
-    """The hand's key poses for one gesture from `start` back to rest; and the push speed."""
+    """The hand's key poses for one gesture from `start` back to rest; and the push speed.
+
+    Key poses and their timing follow the article's recordings (`beyond gesture compare`
+    prints both side by side):
+    - grasp (about 5 s): up and forward, across to above the object still high, down onto it,
+      a hold while the hand closes, a lift, then up and to the right with it, and back;
+    - touch (about 3 s): the same way out, faster, a brief contact, then up and to the right
+      and back; with `cfg.pushes` a push instead (the article's stand-in for touch): the arm
+      raised in front, down onto the object's near side, and forward;
+    - tap (about 4 s): out to the right of the object, then a slow sweep through it to the
+      left; with `cfg.air_taps` a tap held up in the air with no table under it (the
+      article's "notable" recordings), slower.
+    """
     speed = rng.uniform(*cfg.speed)
     amp = rng.uniform(*cfg.amplitude)
 
     def dur(base: float) -> float:
         return base * speed * rng.uniform(1.0 - cfg.phase_jitter, 1.0 + cfg.phase_jitter)
 
-    up = np.array([0.0, 1.0, 0.0])
-    top = scene.obj + up * scene.obj_half  # where a hand touches the object from above
+    top = scene.obj + _UP * scene.obj_half  # where a hand touches the object from above
+    depth = top[2] - start[2]  # negative: the object is in front
+    across = top[0] - start[0]
+
+    def pose(dx: float, dy: float, dz: float) -> FloatArray:
+        return cast(np.ndarray, start + np.array([dx, dy, dz]))
+
     p = _Path(start=start)
     push_speed = 0.0
     if action == "grasp":
-        # a careful reach: up over the object, then a vertical descent (the hand opens on the way)
-        above = top + up * amp * rng.uniform(0.18, 0.28)
-        p.to(top, dur(1.5), via=[above, top + up * 0.4 * (above - top)[1]])
+        p.to(pose(0.0, 0.2 * amp, 0.65 * depth), dur(0.7))
+        p.to(pose(across * rng.uniform(0.45, 0.65), 0.18 * amp, depth - 0.02), dur(0.5))
+        p.to(top, dur(1.0))
         p.mark("contact_start")
-        p.hold(dur(0.4))  # close the hand
-        p.to(top + up * amp * rng.uniform(0.18, 0.3), dur(0.7))  # lift, straight up
-        p.hold(dur(0.5))  # hold it up
-        p.to(top, dur(0.6))  # put it down
-        p.hold(dur(0.25))  # release
-        p.mark("contact_stop")
-        p.to(scene.rest, dur(1.1), via=[top + up * amp * rng.uniform(0.08, 0.14)])
-    elif action == "touch":
-        # a quick, direct reach: a low arc over the table edge, then down onto the object
-        low = top + (start - top) * 0.25 + up * amp * rng.uniform(0.06, 0.12)
-        p.to(top, dur(0.95), via=[low])
+        p.hold(dur(0.6))  # the hand closes on the object
+        lift = rng.uniform(0.2, 0.3) * amp
+        p.to(top + _UP * lift + _RIGHT * 0.03, dur(1.1))
+        p.to(top + _UP * (lift + 0.04) + _RIGHT * (-across) * rng.uniform(0.7, 0.9), dur(0.7))
+        p.to(scene.rest, dur(1.1))
+        p.mark("contact_stop")  # the object travels with the hand
+    elif action == "touch" and rng.random() >= cfg.pushes:
+        p.to(pose(across * rng.uniform(-0.05, 0.05), 0.25 * amp, 0.85 * depth), dur(0.7))
+        p.to(pose(across * rng.uniform(0.7, 0.9), 0.21 * amp, depth - 0.03), dur(0.25))
+        p.to(top, dur(0.4))
         p.mark("contact_start")
         p.hold(dur(0.2))
         p.mark("contact_stop")
-        # retract: straight back towards the rest pose, only slightly raised
-        back = (
-            top + (scene.rest - top) * rng.uniform(0.3, 0.45) + up * amp * rng.uniform(0.04, 0.08)
-        )
-        p.to(scene.rest, dur(1.05), via=[back])
+        away = pose(across * rng.uniform(0.3, 0.5), rng.uniform(0.28, 0.36) * amp, depth)
+        p.to(away, dur(0.8))
+        p.to(scene.rest, dur(0.8))
+    elif action == "touch":  # a push
+        high = pose(across * rng.uniform(0.3, 0.5), rng.uniform(0.3, 0.4) * amp, 0.6 * depth)
+        near = scene.obj + _BACK * (scene.obj_half + 0.02)
+        p.to(high, dur(1.3))
+        p.to(near, dur(2.0))
+        p.mark("contact_start")
+        shove = rng.uniform(0.04, 0.1)
+        stroke = dur(0.8)
+        p.to(near - _BACK * shove, stroke)
+        p.mark("contact_stop")
+        push_speed = shove / stroke
+        p.to(scene.rest, dur(1.1))
     elif action == "tap":
-        # lateral approach at table height to beside the object, then a fast stroke through it
-        side = np.array([1.0, 0.0, 0.0])
-        height = up * rng.uniform(0.01, 0.03)
-        depth = np.array([0.0, 0.0, rng.uniform(-0.03, 0.03)])
-        beside = scene.obj + side * amp * rng.uniform(0.16, 0.26) + height + depth
-        p.to(beside, dur(0.75), via=[(start + beside) / 2 + up * 0.03])
+        air = rng.random() < cfg.air_taps
         reach = scene.obj_half + 0.01
-        follow = amp * rng.uniform(0.04, 0.08)
-        stroke = dur(0.35)
-        through = scene.obj + side * (reach - follow) + height + depth
-        # contact when the stroke reaches the object's side: invert the min-jerk profile
-        frac = (beside[0] - (scene.obj[0] + reach)) / (beside[0] - through[0])
-        grid = np.linspace(0.0, 1.0, 1001)
-        t_contact = float(np.interp(frac, _min_jerk(grid), grid)) * stroke
+        if air:  # no table: up and forward, then a slow sweep across at that height
+            slow = rng.uniform(1.2, 2.2)
+            height = start[1] + rng.uniform(0.25, 0.36)
+            beside = np.array([start[0] + rng.uniform(-0.03, 0.03), height, top[2]])
+            p.to(pose(beside[0] - start[0], height - start[1], 0.8 * depth), dur(1.5 * slow))
+            p.to(beside, dur(0.6 * slow))
+            stroke = dur(3.0 * slow)
+        else:  # out to the right of the object, at its height, then through it to the left
+            height = scene.obj[1] + rng.uniform(0.0, 0.06)
+            beside = np.array(
+                [
+                    start[0] + rng.uniform(0.05, 0.12),
+                    height,
+                    scene.obj[2] + rng.uniform(-0.03, 0.03),
+                ]
+            )
+            out = pose(0.8 * (beside[0] - start[0]), rng.uniform(0.05, 0.16), 0.75 * depth)
+            p.to(out, dur(1.0))
+            p.to(beside, dur(0.6))
+            stroke = dur(1.8)
+        through = beside.copy()
+        through[0] = scene.obj[0] - reach - amp * rng.uniform(0.05, 0.15)
+        if air:
+            through[2] += rng.uniform(0.0, 0.1)  # the arm sags back a little as it sweeps
         t_before = p.duration
         p.to(through, stroke)
-        p.marks["contact_start"] = t_before + t_contact
         p.mark("contact_stop")
         push_speed = 1.875 * (beside[0] - through[0]) / stroke * rng.uniform(0.8, 1.1)
-        p.to(scene.rest, dur(1.1), via=[scene.obj + up * amp * rng.uniform(0.08, 0.14)])
+        p.to(scene.rest, dur(1.1))
+        # contact when the sweep reaches the object's side (on the whole path: the curve
+        # through a key pose depends on the poses around it)
+        grid = np.linspace(t_before, p.marks["contact_stop"], 400)
+        at = np.flatnonzero(p.sample(grid)[:, 0] <= scene.obj[0] + reach)
+        p.marks["contact_start"] = float(grid[at[0]]) if len(at) else p.marks["contact_stop"]
     else:
         raise unknown("action", action, ACTIONS)
     return p, push_speed
@@ -304,6 +346,12 @@ def _object_track(
             offset = obj0 - hand[i0]
             obj[i0:i1] = hand[i0:i1] + offset
             obj[i1:] = obj[max(i1 - 1, 0)]
+    elif action == "touch" and push_speed > 0:  # pushed forward with the hand
+        i0 = int(np.searchsorted(t, c0))
+        i1 = int(np.searchsorted(t, c1))
+        if i0 < len(t):
+            obj[i0:i1, 2] += hand[i0:i1, 2] - hand[i0, 2]
+            obj[i1:, 2] = obj[max(i1 - 1, 0), 2]
     elif action == "tap":
         tau = 0.5  # s, how long the pushed object keeps going
         dt = np.clip(t - c0, 0.0, None)
@@ -367,16 +415,18 @@ def _body(
         "left_hand": np.broadcast_to(lh, (n, 3)).copy(),
         "right_hand": hand,
     }
-    hand_sigma = rng.uniform(*cfg.hand_noise)
+    # a depth sensor's hand is noisiest in depth, least across the image (as in the article's logs)
+    hand_sigma = rng.uniform(*cfg.hand_noise) * np.array([0.6, 0.85, 1.0])
     for name in JOINTS:
-        sigma = hand_sigma if name == "right_hand" else cfg.joint_noise
+        sigma = hand_sigma if name == "right_hand" else np.full(3, cfg.joint_noise)
         drift = np.cumsum(rng.normal(0.0, 1.0, (n, 3)), axis=0)
         drift -= np.linspace(0, 1, n)[:, None] * drift[-1]  # bridge: bounded drift
         drift *= cfg.drift / max(float(np.abs(drift).max()), 1e-9)
         joints[name] = joints[name] + rng.normal(0.0, sigma, (n, 3)) + drift
-    if cfg.glitch_rate > 0:
-        glitch = rng.random(n) < cfg.glitch_rate
-        joints["right_hand"][glitch] += rng.normal(0.0, 0.15, (int(glitch.sum()), 3))
+    if cfg.glitch_rate > 0:  # the tracker snaps to something else for 1-4 frames
+        hand = joints["right_hand"]
+        for i in np.flatnonzero(rng.random(n) < cfg.glitch_rate):
+            hand[i : i + int(rng.integers(1, 5))] += rng.normal(0.0, 0.12, 3)
     return joints
 
 
@@ -477,7 +527,8 @@ def synthesize_dataset(
     config: SynthesisConfig | None = None,
     actions: Sequence[str] = ACTIONS,
 ) -> dict[str, list[FloatArray]]:
-    """`{action: [gesture features (T_i, 3), ...]}`: n_per_action gestures of each action.
+    """`{action: [gesture features (T_i, D), ...]}`: n_per_action gestures of each action, cut
+    by the default segmenter, in the default models' feature space.
 
     Every gesture has its own seed derived from (seed, action, index), so data sets with
     different seeds share no gesture, and adding gestures does not change the earlier ones.
@@ -488,12 +539,13 @@ def synthesize_dataset(
     for a_i, action in enumerate(actions):
         _check_action(action)
         out[action] = [
-            synthesize_gesture(action, _gesture_seed(seed, a_i, i), config).gesture_features()
+            synthesize_gesture(action, gesture_seed(seed, a_i, i), config).gesture_features()
             for i in range(n_per_action)
         ]
     return out
 
 
-def _gesture_seed(seed: int, action_index: int, i: int) -> int:
+def gesture_seed(seed: int, action_index: int, i: int) -> int:
+    """The seed of gesture i of an action in a data set (so sets extend without changing)."""
     ss = np.random.SeedSequence([seed, action_index, i])
     return int(ss.generate_state(1)[0])
