@@ -91,7 +91,7 @@ async def test_a_loaded_live_run_describes_every_gesture_once_and_counts_what_it
         "BEYOND_TEST_PAUSE": str(PAUSE_S),
         "PYTHONPATH": f"{REPO}:{Path(__file__).resolve().parent}",
     }
-    command = [*BEYOND, "up", "--live-source", "live_scene:scene", "--skip", "speech",
+    command = [*BEYOND, "up", "--live-source", "live_scene:scene", "--without", "speech",
                "--no-live", "--timeout", str(TIMEOUT_S), "--wait-for", PROBE]  # fmt: skip
     try:
         up = await asyncio.create_subprocess_exec(
