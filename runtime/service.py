@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Coroutine
 from typing import Any, TypeVar, overload
 
+from beyond_self.core.errors import InputError
 from beyond_self.runtime import process
 from beyond_self.runtime.accounting import ErrorAccount
 from beyond_self.runtime.acl import check_declared
@@ -56,6 +57,8 @@ class Service:
     subscribes: tuple[str, ...] | None = None  # stream names (schemas.keys.STREAMS)
     publishes: tuple[str, ...] | None = None
     serves: tuple[str, ...] | None = None  # queryable names (runtime.acl.QUERYABLES)
+    # one process may serve many robots, a run per robot (runtime.fleet): not a robot's source
+    fleet: bool = False
 
     def __init__(
         self,
@@ -408,7 +411,17 @@ class Service:
             self._bus = None
 
     @classmethod
-    def main(cls, *args: Any, **kwargs: Any) -> int:
+    def main(cls, *args: Any, config: BusConfig | None = None, **kwargs: Any) -> int:
         """Entry point for a service process: logging, run until SIGINT/SIGTERM; the exit
-        status (2 for bad input such as a bad option)."""
-        return process.run_to_completion(lambda: cls(*args, **kwargs).run())
+        status (2 for bad input such as a bad option). With the robots of a fleet in `config`
+        (`robots`), one run per robot that comes (runtime.fleet)."""
+        config = config or load_config()
+        if config.robots is not None:
+            if not cls.fleet:
+                raise InputError(
+                    f"service {cls.name!r} serves one robot (its --robot), not a fleet's robots"
+                )
+            from beyond_self.runtime.fleet import Fleet
+
+            return process.run_to_completion(lambda: Fleet(cls, config, kwargs).run())
+        return process.run_to_completion(lambda: cls(*args, config=config, **kwargs).run())
