@@ -60,9 +60,10 @@ from beyond_self.schemas.keys import (
 QUERYABLES: dict[str, str] = {"ask": ASK}
 TOOLS_ROLE = "tools"
 SIDE_MONITORS: dict[str, tuple[str, ...]] = {  # side identity -> its monitors' liveliness names
-    "robot": ("monitor-robot",),
-    "workstation": ("monitor", "monitor-workstation"),
-    "router": ("monitor", "monitor-workstation"),  # the workstation's router, seen from the robot's
+    "robot": ("monitor-robot", "monitor-fleet-robot"),
+    "workstation": ("monitor", "monitor-workstation", "monitor-fleet-workstation"),
+    # the workstation's router, seen from the robot's
+    "router": ("monitor", "monitor-workstation", "monitor-fleet-workstation"),
 }
 SIDE_OF = {"robot": "robot", "workstation": "workstation", "router": "workstation"}
 _OUT_IN = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]

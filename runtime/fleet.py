@@ -13,8 +13,9 @@ a frame describer process) is loaded once per process by the services (services.
 
 A robot appears with its source: a run starts when the liveliness token of a robot's ingest
 (`beyond/<robot>/alive/ingest`) matching the pattern appears, and is dropped when the token has
-been gone for `leave_after_s` (a wall-clock wait, the machine's business: a restarted ingest,
-back within seconds, keeps its robot's run, and so its state). The host itself is alive under
+been gone for `leave_after_s` (30 s, or $BEYOND_ROBOT_LEAVE_S: a wall-clock wait, the machine's
+business: a restarted ingest, back within seconds, keeps its robot's run, and so its state; a
+robot back after that starts afresh, as a new stream of its own). The host itself is alive under
 the workstation's own name (`beyond/<robot>/alive/<service>` of its config's `robot`), which
 must not be one of the robots it serves.
 """
@@ -23,6 +24,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -32,13 +35,28 @@ from beyond_self.runtime import process
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.config import BusConfig
 from beyond_self.runtime.log import event
+from beyond_self.runtime.self_report import restarts
+from beyond_self.schemas.base import Header
 from beyond_self.schemas.keys import ALIVE, PREFIX, Keys, robot_matches, split_key
+from beyond_self.schemas.messages import ServiceHealth
 
 if TYPE_CHECKING:
     from beyond_self.runtime.service import Service
 
 PRESENCE = "ingest"  # a robot is there while its source is
 LEAVE_AFTER_S = 30.0
+LEAVE_ENV = "BEYOND_ROBOT_LEAVE_S"  # another wait (s): a test's robots leave and come back
+
+
+def leave_after_s_env() -> float:
+    text = os.environ.get(LEAVE_ENV)
+    try:
+        value = float(text) if text else LEAVE_AFTER_S
+    except ValueError:
+        value = -1.0
+    if not 0 <= value < float("inf"):
+        raise InputError(f"{LEAVE_ENV}={text!r}; valid: a number of seconds >= 0")
+    return value
 
 
 @dataclass
@@ -60,7 +78,7 @@ class Fleet:
         options: Mapping[str, Any] | None = None,
         *,
         bus: Bus | None = None,
-        leave_after_s: float = LEAVE_AFTER_S,
+        leave_after_s: float | None = None,
     ) -> None:
         if config.robots is None:
             raise InputError("a fleet's service needs the robots it serves (--robots PATTERN)")
@@ -74,12 +92,14 @@ class Fleet:
         self.config = config
         self.pattern = config.robots
         self.options = dict(options or {})
-        self.leave_after_s = leave_after_s
+        self.leave_after_s = leave_after_s if leave_after_s is not None else leave_after_s_env()
         self.runs: dict[str, Run] = {}
         self.failed: dict[str, str] = {}  # robot -> why its run ended on its own
         self._bus = bus
         self._leaving: dict[str, asyncio.TimerHandle] = {}
         self._stop = asyncio.Event()
+        self._health_seq = 0
+        self.started_at = time.monotonic()
         self.log = logging.getLogger(f"beyond.{self.name}")
 
     @property
@@ -98,7 +118,13 @@ class Fleet:
         installed = process.install_signals(self.stop) if install_signals else []
         try:
             bus.watch_tokens(f"{PREFIX}/{self.pattern}/{ALIVE}/{PRESENCE}", self._presence)
-            bus.declare_token(Keys(self.config.robot).alive(self.name))
+            own = Keys(self.config.robot)
+
+            async def answer_health(_key: str, _request: None) -> ServiceHealth:
+                return self.health_report()
+
+            bus.queryable(own.health(self.name), None, answer_health)
+            bus.declare_token(own.alive(self.name))
             event(self.log, logging.INFO, "serving robots", service=self.name, robots=self.pattern)
             await self._stop.wait()
         finally:
@@ -110,6 +136,32 @@ class Fleet:
             if owns:
                 bus.close()
                 self._bus = None
+
+    def health_report(self) -> ServiceHealth:
+        """The process's health, for its supervisor (`beyond up`'s health watch): every
+        robot's run summed; a robot's own is its run's, on its keys."""
+        runs = [r.service.health_report() for r in self.runs.values() if r.service.started.is_set()]
+        seq, self._health_seq = self._health_seq, self._health_seq + 1
+        last_error = next((h.last_error for h in runs if h.last_error), "")
+        return ServiceHealth(
+            header=Header(
+                version=ServiceHealth.VERSION,
+                source=self.name,
+                seq=seq,
+                stamp=max((h.header.stamp for h in runs), default=0),
+                correlation=f"{self.name}/health/{seq}",
+            ),
+            service=self.name,
+            uptime_s=round(time.monotonic() - self.started_at, 3),
+            messages_in=sum(h.messages_in for h in runs),
+            messages_out=sum(h.messages_out for h in runs),
+            dropped=sum(h.dropped for h in runs),
+            malformed=sum(h.malformed for h in runs),
+            errors=sum(h.errors for h in runs) + len(self.failed),
+            last_error=last_error or next(iter(self.failed.values()), ""),
+            skipped=sum(h.skipped for h in runs),
+            restarts=restarts(),
+        )
 
     def _presence(self, key: str, present: bool) -> None:
         split = split_key(key)

@@ -22,6 +22,9 @@ PROFILES: dict[str, tuple[str, ...]] = {
     "all": tuple(SERVICES),
     "robot": ("ingest", "gestures", "objects"),
     "workstation": ("reasoner", "describer", "speech"),
+    # a fleet: each robot its source and its voice, one workstation the rest for many robots
+    "fleet-robot": ("ingest", "speech"),
+    "fleet-workstation": ("gestures", "objects", "reasoner", "describer"),
 }
 # what may run on each side, in either layout: a robot with its own pipeline (PROFILES), or a
 # fleet's robot, whose gestures and objects are served by a workstation for many robots
