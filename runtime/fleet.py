@@ -35,8 +35,7 @@ from beyond_self.runtime import process
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.config import BusConfig
 from beyond_self.runtime.log import event
-from beyond_self.runtime.self_report import restarts
-from beyond_self.schemas.base import Header
+from beyond_self.runtime.self_report import health_header, restarts
 from beyond_self.schemas.keys import ALIVE, PREFIX, Keys, robot_matches, split_key
 from beyond_self.schemas.messages import ServiceHealth
 
@@ -144,13 +143,7 @@ class Fleet:
         seq, self._health_seq = self._health_seq, self._health_seq + 1
         last_error = next((h.last_error for h in runs if h.last_error), "")
         return ServiceHealth(
-            header=Header(
-                version=ServiceHealth.VERSION,
-                source=self.name,
-                seq=seq,
-                stamp=max((h.header.stamp for h in runs), default=0),
-                correlation=f"{self.name}/health/{seq}",
-            ),
+            header=health_header(self.name, seq, max((h.header.stamp for h in runs), default=0)),
             service=self.name,
             uptime_s=round(time.monotonic() - self.started_at, 3),
             messages_in=sum(h.messages_in for h in runs),
