@@ -219,3 +219,22 @@ async def test_one_set_of_services_serves_a_fleet_and_its_replay(tmp_path: Path)
     assert from_fleet == live["lab-1"]
     with pytest.raises(InputError, match=r"fleet's recording .* choose one with --robot"):
         _inputs(fleet, "right_hand", "torso")
+
+
+def test_fleet_compose_file_runs_each_service_once_for_the_fleet() -> None:
+    yaml = pytest.importorskip("yaml")
+    from beyond_self.services.registry import PROFILES, service_class
+
+    services = yaml.safe_load((RECORDINGS.parent / "docker-compose.fleet.yml").read_text())
+    services = services["services"]
+    for profile in ("fleet-workstation", "fleet-robot"):
+        named = {n for n, c in services.items() if profile in c["profiles"] and n != "router"}
+        assert named == set(PROFILES[profile]), profile
+    for name in PROFILES["fleet-workstation"]:
+        env = services[name]["environment"]
+        assert service_class(name).fleet and env["BEYOND_ROBOTS"], name
+    for name in PROFILES["fleet-robot"]:
+        assert not service_class(name).fleet
+        assert "BEYOND_ROBOTS" not in services[name]["environment"], name
+    waits = services["ingest"]["command"][-1]  # the robot's source waits for the workstation
+    assert all(n in waits for n in PROFILES["fleet-workstation"])
