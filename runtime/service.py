@@ -24,7 +24,6 @@ import time
 from collections.abc import Callable, Coroutine
 from typing import Any, TypeVar, overload
 
-from beyond_self.core.errors import InputError
 from beyond_self.runtime import process
 from beyond_self.runtime.accounting import ErrorAccount
 from beyond_self.runtime.acl import check_declared
@@ -411,17 +410,7 @@ class Service:
             self._bus = None
 
     @classmethod
-    def main(cls, *args: Any, config: BusConfig | None = None, **kwargs: Any) -> int:
+    def main(cls, *args: Any, **kwargs: Any) -> int:
         """Entry point for a service process: logging, run until SIGINT/SIGTERM; the exit
-        status (2 for bad input such as a bad option). With the robots of a fleet in `config`
-        (`robots`), one run per robot that comes (runtime.fleet)."""
-        config = config or load_config()
-        if config.robots is not None:
-            if not cls.fleet:
-                raise InputError(
-                    f"service {cls.name!r} serves one robot (its --robot), not a fleet's robots"
-                )
-            from beyond_self.runtime.fleet import Fleet
-
-            return process.run_to_completion(lambda: Fleet(cls, config, kwargs).run())
-        return process.run_to_completion(lambda: cls(*args, config=config, **kwargs).run())
+        status (2 for bad input such as a bad option)."""
+        return process.run_to_completion(lambda: cls(*args, **kwargs).run())

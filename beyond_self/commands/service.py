@@ -61,4 +61,11 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.robots is not None:
         config = config.with_(robots=args.robots)
-    exit_process(cls.main(config=config, **options))
+    if config.robots is None:
+        exit_process(cls.main(config=config, **options))
+    if not cls.fleet:  # a robot's source or voice
+        raise InputError(f"service {args.name!r} serves one robot (its --robot), not a fleet")
+    from beyond_self.runtime.fleet import Fleet
+    from beyond_self.runtime.process import run_to_completion
+
+    exit_process(run_to_completion(lambda: Fleet(cls, config, options).run()))
