@@ -48,6 +48,7 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.accounting import bounded
 from beyond_self.runtime.clock import Clock, ClockTicks
 from beyond_self.runtime.delivery import CAMERA, EVENTS, SKELETON, STATUS
+from beyond_self.runtime.fleet_recording import recorded_robot
 from beyond_self.runtime.images import message_from_image
 from beyond_self.runtime.log import event
 from beyond_self.runtime.pacing import DEFAULT_WINDOW_S, Pacer
@@ -66,7 +67,7 @@ from beyond_self.schemas import (
     StreamClock,
     StreamEnd,
 )
-from beyond_self.schemas.keys import with_robot
+from beyond_self.schemas.keys import split_key, with_robot
 
 
 class SensorIngest(Service):
@@ -225,7 +226,14 @@ class SensorIngest(Service):
             keys.camera_compressed: ("camera_compressed", self.compressed),
         }
 
+        require_mcap(path)
+        info = inspect_recording(path)
+        source = recorded_robot(info, keys.robot)  # a fleet's recording: our robot's part
+
         def rename(key: str) -> str | None:  # our robot's sensor streams; nothing else
+            split = split_key(key)
+            if split is None or split[0] != source:
+                return None
             key = with_robot(key, keys.robot)
             return key if key in streams else None
 
@@ -234,8 +242,6 @@ class SensorIngest(Service):
             pub.put(cue.ours())
             self._sent(stream, cue.stamp)
 
-        require_mcap(path)
-        info = inspect_recording(path)
         passes = 0
 
         def one_pass() -> Iterator[Cue]:
