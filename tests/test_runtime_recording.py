@@ -218,12 +218,12 @@ async def test_replay_timing_filters_and_robot_rename(tmp_path: Path) -> None:
             bus, path, rate=4.0, robot=config.robot, topics=["beyond/*/sensors/skeleton"]
         )
         assert stats.messages == 31
-        assert 0.2 <= stats.wall_s < 1.0  # 1 s of recording at 4x
+        assert stats.wall_s >= 0.2  # paced: 1 s of recording at 4x (how fast: bench/bus.py)
         got = [(await sub.recv(timeout=5)).message for _ in range(31)]
         assert [f.frame for f in got] == list(range(31))
         assert len(cams._inbox) == 0  # filtered out
         fast = await replay(bus, path, rate=None, robot=config.robot)
-        assert fast.messages == 42 and fast.speed > 50
+        assert fast.messages == 42  # unpaced; its speed is measured in bench/bus.py, not here
         assert [(await cams.recv(timeout=5)).message.header.seq for _ in range(11)] == list(
             range(0, 31, 3)
         )
