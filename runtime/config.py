@@ -42,6 +42,13 @@ ROUTER_LISTEN = "tcp/[::]:7447"
 OPEN_WAIT_MS = 100  # open() waits this long to connect, then keeps retrying in the background
 CLIENT_WAIT_MS = 30_000  # a client's open() waits this long for a router, then fails
 LEASE_MS = 4000  # Zenoh's default is 10 s: too long for a robot on Wi-Fi (deploy/zenoh agrees)
+# How long a blocking message waits for room in a link's full queue before Zenoh closes the link
+# (Zenoh's default is 5 s). It must be shorter than the lease: the wait holds the thread that
+# received the message, so a router forwarding it onto a dead link stops routing everything else
+# that thread carries, past the lease of its own local sessions; and the dead link's transport,
+# closed late, tears down the new one to the same peer (zenoh 1.10). Half the lease: a live
+# link drains a batch in far less, a dead one is given up on before anything else times out.
+BLOCK_CLOSE_MS = LEASE_MS // 2
 
 ENV_VARS: dict[str, str] = {
     "BEYOND_ROBOT": "robot name, the second chunk of every key (default 'robot')",
@@ -285,6 +292,9 @@ def zenoh_config(config: BusConfig, access_rules: Mapping[str, Any] | None = Non
         # network close and reconnect quickly, and the recovering streams refill the gap.
         sets["transport/link/tx/lease"] = LEASE_MS
         sets["transport/link/tx/keep_alive"] = 4
+        sets["transport/link/tx/queue/congestion_control/block/wait_before_close"] = (
+            BLOCK_CLOSE_MS * 1000  # microseconds
+        )
         if config.mode == "peer":
             sets["listen/timeout_ms"] = 0
             sets["listen/retry"] = retry

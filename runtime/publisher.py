@@ -2,7 +2,7 @@
 
 With `delivery.cache`, the publisher is a zenoh-ext advanced publisher that keeps its last
 `cache` samples for subscribers that recover (runtime.recovery), numbers them (sample miss
-detection), sends a sporadic heartbeat with the last number, and declares itself with a
+detection), sends a periodic heartbeat with the last number, and declares itself with a
 liveliness token (publisher detection). Without, it is a plain Zenoh publisher.
 
 A restarted service need not publish again what its consumers already have (it re-derives its
@@ -58,8 +58,15 @@ def declare_zenoh_publisher(
         express=delivery.express,
         # replies (recovery) keep zenoh's default: blocking, they are what must get through
         cache=ext.CacheConfig(delivery.cache),
+        # A periodic heartbeat, not zenoh-ext's sporadic one: the sporadic heartbeat is sent
+        # with congestion control BLOCK (it is sent once per change, so it must not be lost).
+        # Across a dead link a router's queue fills, and a router forwarding a BLOCK message
+        # waits on it with its receiving thread: every stream through that router stalls, the
+        # local sessions' leases run out, and the dead transport, closed late, takes the new
+        # one to the same router with it (zenoh 1.10). The periodic one repeats the last number
+        # every period, so it may be dropped like the samples it announces.
         sample_miss_detection=ext.MissDetectionConfig(
-            heartbeat=None, sporadic_heartbeat=HEARTBEAT_S
+            heartbeat=HEARTBEAT_S, sporadic_heartbeat=None
         ),
         publisher_detection=True,
     )

@@ -40,7 +40,7 @@ from beyond_self.runtime.inbox import Inbox, direct_callback, undeclare
 
 log = logging.getLogger("beyond.recovery")
 
-HEARTBEAT_S = 0.5  # publishers' sporadic heartbeat: the last sequence number, when it changed
+HEARTBEAT_S = 0.5  # publishers' periodic heartbeat: the last sequence number (droppable)
 _WITNESS_GRACE_S = 1.0  # a delivered sample not witnessed live within this is a recovered one
 _WITNESS_MEMORY = 16384  # live (source, sn) pairs remembered for that comparison
 

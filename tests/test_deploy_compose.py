@@ -25,7 +25,7 @@ import pytest
 import yaml
 
 from beyond_self.cli import COMMANDS, build_parser
-from beyond_self.runtime.config import ENV_VARS
+from beyond_self.runtime.config import BLOCK_CLOSE_MS, ENV_VARS
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import PROFILES, service_class
 
@@ -33,6 +33,7 @@ REPO = Path(__file__).resolve().parent.parent
 COMPOSE = REPO / "docker-compose.yml"
 KNOWN_ENV = set(ENV_VARS) | {"BEYOND_CLOCK", "BEYOND_LOG_FORMAT", "BEYOND_LOG_LEVEL", "BEYOND_DATA"}
 PATH_OPTIONS = ("recording", "log", "models", "clusters", "model")  # options naming input files
+WAIT_BEFORE_CLOSE = "transport/link/tx/queue/congestion_control/block/wait_before_close"
 TOP_LEVEL = {"name", "services", "networks", "volumes", "configs", "secrets"}
 SIDES = {"robot": set(PROFILES["robot"]), "workstation": set(PROFILES["workstation"])}
 
@@ -398,6 +399,12 @@ def test_deploy_configs_load_and_agree() -> None:
     assert modes == {"router": "router", "robot": "peer", "workstation": "client"}
     leases = {k: int(c.get_json("transport/link/tx/lease")) for k, c in configs.items()}
     assert len(set(leases.values())) == 1 and leases["router"] < 10_000  # faster than default
+    # a blocking message gives up on a full queue before the lease runs out (runtime/config.py)
+    for path in sorted(REPO.glob("deploy/zenoh*/*.json5")):
+        config = zenoh.Config.from_file(str(path))
+        block_close_us = int(config.get_json(WAIT_BEFORE_CLOSE))
+        assert block_close_us == BLOCK_CLOSE_MS * 1000, path
+        assert block_close_us < int(config.get_json("transport/link/tx/lease")) * 1000, path
     assert all(yaml.safe_load(c.get_json("timestamping/enabled")) for c in configs.values())
     assert yaml.safe_load(configs["router"].get_json("listen/endpoints")) == ["tcp/[::]:7447"]
     options = load_options(REPO / "deploy/services.yaml")

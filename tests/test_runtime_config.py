@@ -132,3 +132,15 @@ def test_a_connect_timeout_bounds_the_first_link_whatever_the_mode_or_file() -> 
     robot = Path(__file__).resolve().parent.parent / "deploy/zenoh/robot.json5"
     from_file = BusConfig(config_file=robot, connect_timeout_ms=1500)
     assert get(zenoh_config(from_file), "connect/timeout_ms") == 1500
+
+
+@pytest.mark.parametrize("mode", ["peer", "client", "router"])
+def test_a_blocking_message_gives_up_on_a_full_queue_before_the_lease_does(mode: str) -> None:
+    """Zenoh's default wait (5 s) outlasts our lease (4 s): a router forwarding a blocking
+    message onto a dead link would hold the thread that routes every other stream past the
+    lease of its local sessions (runtime/config.py, BLOCK_CLOSE_MS)."""
+    zc = zenoh_config(BusConfig(mode=mode))
+    wait_us = get(zc, "transport/link/tx/queue/congestion_control/block/wait_before_close")
+    lease_ms = get(zc, "transport/link/tx/lease")
+    assert isinstance(wait_us, int) and isinstance(lease_ms, int)
+    assert 0 < wait_us < lease_ms * 1000
