@@ -9,9 +9,13 @@ source plug-in.
   joint, the hand, in metres (`scale`), stamped with the log's own times and played by the same
   engine, at the same rate.
 - plug-in (`module:function`): the function returns an async iterator of `("skeleton", {joint:
-  (x, y, z)})` or `("camera", rgb_uint8_array)` items; ingest stamps them with the clock and
-  numbers them. A bounded queue sits between the plug-in and the bus: when the bus cannot keep up
-  the oldest item is dropped and counted, never silently.
+  (x, y, z)})` (or `(x, y, z, confidence)`), `("camera", rgb_uint8_array)` (the tabletop camera)
+  or `("person_camera", rgb_uint8_array)` (the images a skeleton was estimated from, published
+  compressed) items; ingest stamps them with the clock and numbers them.
+- video file or camera (`video=FILE`, `camera=INDEX`): the pose source (services.pose_source),
+  a plug-in of that shape run here, so the pose model runs where the camera is.
+A bounded queue sits between a live source and the bus: when the bus cannot keep up the oldest
+item is dropped and counted, never silently.
 When the source is exhausted a `StreamEnd` message says how many messages were published and the
 last stamp of each stream, so consumers know when they have seen everything, and what a damaged
 recording lost, in the one line every command says (runtime.recording_damage: every intact chunk is
@@ -67,12 +71,20 @@ from beyond_self.schemas import (
     StreamEnd,
 )
 from beyond_self.schemas.keys import with_robot
+from beyond_self.services.pose_source import joints_of, person_image
 
 
 class SensorIngest(Service):
     name = "ingest"
     subscribes = ()
-    publishes = ("skeleton", "camera", "camera_compressed", "stream_end", "clock")
+    publishes = (
+        "skeleton",
+        "camera",
+        "camera_compressed",
+        "person_camera",
+        "stream_end",
+        "clock",
+    )
     serves = ()
 
     def __init__(
@@ -81,6 +93,8 @@ class SensorIngest(Service):
         recording: str | None = None,
         log: str | None = None,
         plugin: str | None = None,
+        video: str | None = None,
+        camera: int | None = None,
         rate: float = 1.0,
         loop: bool = False,
         scale: float = 0.001,
@@ -93,14 +107,19 @@ class SensorIngest(Service):
         **base: Any,
     ) -> None:
         super().__init__(**base)
-        given = [n for n, v in (("recording", recording), ("log", log), ("plugin", plugin)) if v]
+        sources = (("recording", recording), ("log", log), ("plugin", plugin), ("video", video))
+        given = [n for n, v in sources if v] + (["camera"] if camera is not None else [])
         if len(given) != 1:
             raise InputError(
                 f"sensor ingest needs exactly one source; got {', '.join(given) or 'none'}; "
-                "valid: recording=FILE.mcap, log=DIR_OR_DATA_LOG, plugin=module:function"
+                "valid: recording=FILE.mcap, log=DIR_OR_DATA_LOG, plugin=module:function, "
+                "video=FILE, camera=INDEX"
             )
         self.recording, self.log_path, self.plugin = recording, log, plugin
-        if plugin is None and "clock" not in base:  # a replay: on the stream's clock, always
+        self.video, self.camera_index = video, camera
+        self.live = plugin is not None or video is not None or camera is not None
+        self.source_name = str(recording or log or plugin or video or f"camera {camera}")
+        if not self.live and "clock" not in base:  # a replay: on the stream's clock, always
             self.clock = Clock("recording")
         self.rate = rate_option(rate)  # None: as fast as possible
         self.loop = loop
@@ -114,7 +133,7 @@ class SensorIngest(Service):
             raise InputError(f"window_s {window_s} must be a positive number of seconds")
         self.window_s = window_s
         self.last_stamps: dict[str, int] = {}
-        self.losses = Losses(str(recording or log or plugin))
+        self.losses = Losses(self.source_name)
         self.resume: dict[str, int] = {}
         self.failure = ""
         self.published = 0
@@ -128,6 +147,7 @@ class SensorIngest(Service):
         self.skeleton = self.publisher(keys.skeleton, SkeletonFrame, SKELETON)
         self.camera = self.publisher(keys.camera, CameraFrame, CAMERA)
         self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame, CAMERA)
+        self.person = self.publisher(keys.person_camera, CompressedCameraFrame, CAMERA)
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
         self.stream_clock = self.publisher(keys.clock, StreamClock, STATUS)
         self.spawn(self._play(), "source")
@@ -152,7 +172,7 @@ class SensorIngest(Service):
         await self.pacer.start()
         # where the consumers are: a restarted source goes on from there, not from the start
         self.resume = self.pacer.handled_by_all()
-        ticks = ClockTicks(self._tick) if self.plugin is None else None  # live: the wall's
+        ticks = None if self.live else ClockTicks(self._tick)  # live: the wall's
         self.player = Player(rate=self.rate, pacer=self.pacer, ticks=ticks)
         if self.start_delay_s:
             await asyncio.sleep(self.start_delay_s)
@@ -163,7 +183,7 @@ class SensorIngest(Service):
                 await self._play_log(Path(self.log_path))
             else:
                 while True:  # a live source is not restamped: it has its own clock
-                    await self._play_plugin(str(self.plugin))
+                    await self._play_live()
                     if not self.loop:
                         break
         except InputError as exc:  # nothing playable (a file that is no recording...)
@@ -174,7 +194,7 @@ class SensorIngest(Service):
         damage = self.failure or (self.losses.line() if self.losses.any else "")
         end = StreamEnd(
             header=self.header(StreamEnd),
-            source=bounded(str(self.recording or self.log_path or self.plugin), 256),
+            source=bounded(self.source_name, 256),
             messages=self.published,
             dropped=self.dropped_items,
             last_stamps=dict(self.last_stamps),
@@ -223,6 +243,7 @@ class SensorIngest(Service):
             keys.skeleton: ("skeleton", self.skeleton),
             keys.camera: ("camera", self.camera),
             keys.camera_compressed: ("camera_compressed", self.compressed),
+            keys.person_camera: ("person_camera", self.person),
         }
 
         def rename(key: str) -> str | None:  # our robot's sensor streams; nothing else
@@ -273,8 +294,15 @@ class SensorIngest(Service):
         span = (int(stamps[0]), int(stamps[-1])) if len(stamps) else None
         await self._play_cues(cues, span, send, {key: "skeleton"})
 
-    async def _play_plugin(self, spec: str) -> None:
-        source = load_plugin(spec)()
+    async def _play_live(self) -> None:
+        source: AsyncIterator[tuple[str, Any]]
+        if self.plugin is not None:
+            source = load_plugin(self.plugin)()
+        else:
+            from beyond_self.services.pose_source import PoseSource
+
+            pose = PoseSource(video=self.video, camera=self.camera_index)
+            source = aiter(pose)
         queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue(self.queue_size)
         done = object()
 
@@ -295,16 +323,23 @@ class SensorIngest(Service):
                     break
                 frame += 1
                 if kind == "skeleton":
-                    joints = {n: Joint(position=tuple(map(float, p))) for n, p in payload.items()}  # type: ignore[arg-type]
                     header = self.header(SkeletonFrame)
+                    joints = joints_of(payload)
                     self.skeleton.put(SkeletonFrame(header=header, frame=frame, joints=joints))
                     self._sent("skeleton", header.stamp)
                 elif kind == "camera":
                     header = self.header(CameraFrame)
                     self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
                     self._sent("camera", header.stamp)
+                elif kind == "person_camera":
+                    header = self.header(CompressedCameraFrame)
+                    image = person_image(header, payload)
+                    self.person.put(image)
+                    self._sent("person_camera", header.stamp)
                 else:
-                    raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera")
+                    raise InputError(
+                        f"plug-in item kind {kind!r}; valid: skeleton, camera, person_camera"
+                    )
         finally:
             task.cancel()
 

@@ -9,6 +9,7 @@ one frame interval at the file's rate. A camera's frames are stamped by whoever 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +34,9 @@ class VideoFrame:
 
 
 def _cv2() -> Any:
+    # FFmpeg inside OpenCV logs a damaged file's complaints ("moov atom not found") straight to
+    # stderr; the InputError below says it in one line. 8: FFmpeg's AV_LOG_FATAL.
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "8")
     try:
         import cv2
     except ImportError as exc:

@@ -1,0 +1,142 @@
+"""`beyond video FILE -o REC.mcap` on a real video of a person: a recording of skeleton frames
+(the pose model's, in the gesture models' frame) and the person's images, stamped with the
+video's frame times, the same bytes every time, which `beyond analyse` and `beyond up` play
+alike; bad videos are one line and exit 2, a video with nobody in it exit 0, said."""
+
+from __future__ import annotations
+
+import contextlib
+import filecmp
+import io
+import re
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from busutil_net import env_for, private_config
+from pose_media import carphone, write_empty_room
+
+from beyond_self.cli import main
+from beyond_self.cognition.gestures.synthetic import JOINTS
+from beyond_self.cognition.scene import EPOCH_NS
+from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.schemas import CompressedCameraFrame, SkeletonFrame
+from beyond_self.schemas.keys import Keys
+from beyond_self.services.launcher import BEYOND
+
+FRAMES = 120  # carphone_pristine.mp4, a person in every one
+FPS = 30000 / 1001
+
+
+def beyond(*argv: str) -> tuple[int, str]:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(list(argv))
+    return code, out.getvalue()
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    path = tmp_path_factory.mktemp("video") / "carphone.mcap"
+    code, out = beyond("video", str(carphone()), "-o", str(path))
+    assert code == 0, out
+    return path, out
+
+
+@pytest.mark.slow  # the recording: about 9 s, shared by the tests below
+def test_a_video_becomes_a_recording_stamped_with_its_frame_times(
+    recorded: tuple[Path, str],
+) -> None:
+    path, out = recorded
+    keys = Keys()
+    skeletons: list[SkeletonFrame] = []
+    images: list[CompressedCameraFrame] = []
+    for item in read_recording(path):
+        msg = item.message()
+        if isinstance(msg, SkeletonFrame):
+            assert item.key == keys.skeleton
+            skeletons.append(msg)
+        else:
+            assert isinstance(msg, CompressedCameraFrame) and item.key == keys.person_camera
+            images.append(msg)
+    assert len(images) == FRAMES
+    assert len(skeletons) >= 0.9 * FRAMES, f"a skeleton for {len(skeletons)} of {FRAMES} frames"
+    assert f"a person in {len(skeletons)} " in out
+    # each frame at its own time in the video, from the recordings' epoch
+    stamps = np.array([m.header.stamp for m in images]) - EPOCH_NS
+    assert np.abs(stamps - np.arange(FRAMES) * 1e9 / FPS).max() < 1e6  # within 1 ms
+    by_frame = {m.frame: m for m in skeletons}
+    for image in images:
+        skeleton = by_frame.get(image.header.seq + 1)
+        assert skeleton is None or skeleton.header.stamp == image.header.stamp
+        assert (image.width, image.height, image.format) == (176, 144, "jpeg")
+    for frame in skeletons:
+        joints = frame.joints
+        assert set(JOINTS) <= set(joints)
+        assert joints["torso"].position == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+        assert joints["right_shoulder"].position[0] > 0 > joints["left_shoulder"].position[0]
+        assert joints["head"].position[1] > joints["neck"].position[1] > 0
+        assert joints["head"].confidence > 0.9 and joints["right_hand"].confidence < 0.5
+        assert all(np.linalg.norm(j.position) < 1.2 for j in joints.values())
+    assert inspect_recording(path).metadata["beyond"]["generator"] == "beyond video"
+
+
+@pytest.mark.slow
+def test_the_same_video_gives_the_same_bytes(recorded: tuple[Path, str], tmp_path: Path) -> None:
+    again = tmp_path / "again.mcap"
+    assert beyond("video", str(carphone()), "-o", str(again))[0] == 0
+    assert filecmp.cmp(recorded[0], again, shallow=False)
+
+
+@pytest.mark.slow
+def test_up_plays_it_as_analyse_reads_it(recorded: tuple[Path, str], tmp_path: Path) -> None:
+    path, _ = recorded
+    code, offline = beyond("analyse", str(path))
+    assert code == 0
+    config = private_config()
+    env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
+    cmd = [*BEYOND, "up", "--recording", str(path), "--rate", "0", "--no-live", "--timeout", "60"]
+    up = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert up.returncode == 0, up.stderr[-3000:]
+    gesture_lines = [line for line in up.stdout.splitlines() if line.startswith("gesture ")]
+    assert gesture_lines == offline.splitlines()
+    # every frame was played and taken by the gesture streamer as a person's (none refused)
+    assert f"source finished after {2 * FRAMES} messages (0 dropped)" in up.stdout
+    stopped = re.search(r"beyond\.gestures: stopped .*", up.stderr)
+    assert stopped, up.stderr[-3000:]
+    counts = dict(re.findall(r"(\w+)=(\d+)", stopped.group()))
+    assert int(counts["messages_in"]) >= FRAMES
+    assert counts["malformed"] == counts["errors"] == "0", stopped.group()
+
+
+def test_bad_videos_are_one_line_and_exit_2(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out.mcap"
+    not_video = tmp_path / "notes.mp4"
+    not_video.write_text("not a video\n")
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(carphone().read_bytes()[:5000])  # the header of an mp4, no index, no frames
+    for video, said in (
+        (tmp_path / "missing.mp4", "does not exist"),
+        (not_video, "cannot be read"),
+        (cut, "cannot be read"),
+    ):
+        assert main(["video", str(video), "-o", str(out)]) == 2
+        err = capfd.readouterr().err
+        assert err.count("\n") == 1 and said in err and "Traceback" not in err, err
+        assert not out.exists() and not out.with_name("out.mcap.partial").exists()
+
+
+def test_a_video_with_nobody_in_it_says_so(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    room = write_empty_room(tmp_path / "room.mp4")
+    out = tmp_path / "room.mcap"
+    assert main(["video", str(room), "-o", str(out)]) == 0
+    captured = capfd.readouterr()
+    assert "no person seen" in captured.out and "20 frames" in captured.out, captured.out
+    assert captured.err == "", captured.err
+    counts = {c.topic: c.count for c in inspect_recording(out).channels}
+    assert counts == {Keys().person_camera: 20}, counts
