@@ -71,7 +71,7 @@ from beyond_self.schemas import (
     StreamEnd,
 )
 from beyond_self.schemas.keys import with_robot
-from beyond_self.services.pose_source import joints_of, person_image
+from beyond_self.services.pose_source import PoseCounts, joints_of, person_image
 
 
 class SensorIngest(Service):
@@ -136,6 +136,7 @@ class SensorIngest(Service):
         self.losses = Losses(self.source_name)
         self.resume: dict[str, int] = {}
         self.failure = ""
+        self.pose_counts: PoseCounts | None = None  # a video or camera: what its pose model did
         self.published = 0
         self.dropped_items = 0
         self.finished = asyncio.Event()
@@ -211,6 +212,8 @@ class SensorIngest(Service):
             lost=self.losses.lost if damage else 0,  # the line itself is in StreamEnd.damage
             held_back_s=round(self.pacer.waited_s, 3),
         )
+        if self.pose_counts is not None:  # per-frame work a live video shed is said, counted
+            event(self.log, logging.INFO, "pose", **vars(self.pose_counts))
 
     def _sent(self, stream: str, stamp: int) -> None:
         self.published += 1
@@ -302,6 +305,7 @@ class SensorIngest(Service):
             from beyond_self.services.pose_source import PoseSource
 
             pose = PoseSource(video=self.video, camera=self.camera_index)
+            self.pose_counts = pose.counts
             source = aiter(pose)
         queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue(self.queue_size)
         done = object()

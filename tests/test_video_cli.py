@@ -140,3 +140,48 @@ def test_a_video_with_nobody_in_it_says_so(
     assert captured.err == "", captured.err
     counts = {c.topic: c.count for c in inspect_recording(out).channels}
     assert counts == {Keys().person_camera: 20}, counts
+
+
+@pytest.mark.slow
+def test_up_watches_a_video_live_to_its_end_and_stops_cleanly(tmp_path: Path) -> None:
+    """`beyond up --video`: the pose runs in the ingest (the robot's side) at the video's own
+    pace; the whole pipeline runs until the file ends, then every service stops, exit 0."""
+    config = private_config()
+    env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
+    cmd = [*BEYOND, "up", "--video", str(carphone()), "--no-live", "--timeout", "60"]
+    up = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert up.returncode == 0, up.stderr[-3000:]
+    pose = re.search(r"beyond\.ingest: pose (.*)", up.stderr)
+    assert pose, up.stderr[-3000:]
+    counts = {k: int(v) for k, v in re.findall(r"(\w+)=(\d+)", pose.group(1))}
+    # every frame read; each estimated (a person seen, or counted as not) or shed, counted
+    assert counts["frames"] == FRAMES
+    assert counts["skeletons"] + counts["no_person"] + counts["shed"] == FRAMES
+    assert counts["skeletons"] >= 1
+    # the person's images and the skeletons were all published, nothing dropped
+    assert f"source finished after {FRAMES + counts['skeletons']} messages (0 dropped)" in up.stdout
+    stopped = re.search(r"services stopped \(exit codes: (.*)\)", up.stderr)
+    assert stopped and set(re.findall(r"\w+ (\d+)", stopped.group(1))) == {"0"}, up.stderr[-2000:]
+
+
+def test_up_refuses_a_camera_that_does_not_open_or_a_missing_video_in_one_line(
+    tmp_path: Path,
+) -> None:
+    """Before anything starts (no service, no bus): one line, exit 2; OpenCV's own complaints
+    (a dozen lines from its back ends) stay quiet."""
+    env = env_for(private_config())
+    for source, said in (
+        (["--camera", "63"], "camera 63 does not open"),
+        (["--video", str(tmp_path / "missing.mp4")], "does not exist"),
+    ):
+        done = subprocess.run(
+            [*BEYOND, "up", *source, "--no-live"],
+            env=env,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.count("\n") == 1 and said in done.stderr, done.stderr
+        assert done.stdout == ""

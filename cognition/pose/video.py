@@ -70,7 +70,14 @@ class Video:
                 raise InputError(
                     f"camera index {camera} out of range; valid: 0..{CAMERA_INDEX_MAX}"
                 )
-            self._capture = cv2.VideoCapture(camera)
+            # each of OpenCV's back ends logs its own failure to open, a dozen lines in all;
+            # the InputError below says it in one
+            level = cv2.utils.logging.getLogLevel()
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+            try:
+                self._capture = cv2.VideoCapture(camera)
+            finally:
+                cv2.utils.logging.setLogLevel(level)
             if not self._capture.isOpened():
                 self._capture.release()
                 raise InputError(
