@@ -5,7 +5,8 @@ Measured on one core (the process pinned, BLAS on one thread), on a real video o
 video (tracking) mode as `beyond video` and `up --video/--camera` run it:
 
 - ours: a frame through `cognition.pose` (MediaPipe's BlazePose, full model) and into the
-  `SkeletonFrame` the ingest publishes (joints mapped to the Kinect-like skeleton, encoded);
+  messages the ingest publishes for it (services.pose_source.person_messages: the image as
+  JPEG, the skeleton, the pose in the image), encoded for the bus;
 - reference, same run, same frames: the bare model (`Pose.process`, nothing around it);
 - the budget: 30 frames per second, a camera's rate;
 - camera frame -> skeleton on the bus: from the moment a decoded frame is in hand to the moment
@@ -37,9 +38,9 @@ from beyond_self.cognition.pose.video import Video  # noqa: E402
 from beyond_self.runtime.bus import Bus  # noqa: E402
 from beyond_self.runtime.config import BusConfig  # noqa: E402
 from beyond_self.runtime.delivery import Delivery  # noqa: E402
-from beyond_self.schemas import Header, SkeletonFrame  # noqa: E402
+from beyond_self.schemas import Header, Message, SkeletonFrame  # noqa: E402
 from beyond_self.schemas.codec import encode  # noqa: E402
-from beyond_self.services.pose_source import joints_of, pose_joints  # noqa: E402
+from beyond_self.services.pose_source import PersonFrame, person_messages  # noqa: E402
 
 BUDGET_FPS = 30.0
 SIZES = ((640, 480), (320, 240))
@@ -58,11 +59,14 @@ def video_frames(size: tuple[int, int]) -> list[np.ndarray]:
         return [cv2.resize(f.rgb, size, interpolation=cv2.INTER_LINEAR) for f in video.frames()]
 
 
-def skeleton(estimator: PoseEstimator, rgb: np.ndarray, seq: int, stamp: int) -> SkeletonFrame:
-    pose = estimator.estimate(rgb)
-    joints = joints_of(pose_joints(pose)) if pose is not None else {}
-    header = Header(version=SkeletonFrame.VERSION, source="bench", seq=seq, stamp=stamp)
-    return SkeletonFrame(header=header, frame=seq + 1, joints=joints)
+def messages(estimator: PoseEstimator, rgb: np.ndarray, seq: int, stamp: int) -> list[Message]:
+    """A frame's messages, as the ingest makes them (the skeleton second, when there is one)."""
+
+    def header(cls: type[Message]) -> Header:
+        return Header(version=cls.VERSION, source="bench", seq=seq, stamp=stamp)
+
+    frame = PersonFrame(seq, rgb, estimator.estimate(rgb))
+    return [message for _, message in person_messages(header, frame)]
 
 
 def fps_ours(frames: list[np.ndarray]) -> tuple[float, float]:
@@ -71,9 +75,10 @@ def fps_ours(frames: list[np.ndarray]) -> tuple[float, float]:
         found = 0
         start = time.perf_counter()
         for i, rgb in enumerate(frames):
-            frame = skeleton(estimator, rgb, i, i + 1)
-            encode(frame)
-            found += bool(frame.joints)
+            made = messages(estimator, rgb, i, i + 1)
+            for message in made:
+                encode(message)
+            found += len(made) > 1
         return len(frames) / (time.perf_counter() - start), found / len(frames)
 
 
@@ -103,7 +108,8 @@ async def to_the_bus(frames: list[np.ndarray]) -> list[float]:
             for _ in range(PASSES):
                 for rgb in frames:
                     start = time.monotonic_ns()
-                    out.put(skeleton(estimator, rgb, seq, start))
+                    made = messages(estimator, rgb, seq, start)
+                    out.put(next(m for m in made if isinstance(m, SkeletonFrame)))
                     received = await sub.recv(timeout=10)
                     latencies.append((time.monotonic_ns() - received.message.header.stamp) / 1e6)
                     seq += 1

@@ -26,6 +26,8 @@ STREAMS: dict[str, tuple[str, type[Message]]] = {
     # the images a skeleton was estimated from (a camera watching the person, cognition.pose):
     # for people to see, never the tabletop camera the object segmenter reads
     "person_camera": ("sensors/person/compressed", m.CompressedCameraFrame),
+    # where the skeleton's joints are in those images (pixels), to draw the pose over them
+    "person_pose": ("sensors/person/pose", m.PersonPose),
     "objects": ("vision/objects", m.DetectedObjects),
     "effects": ("vision/effects", m.ObjectEffects),
     "gesture_object": ("vision/gesture_object", m.GestureObject),
@@ -94,6 +96,10 @@ class Keys:
     @property
     def person_camera(self) -> str:
         return self.stream("person_camera")
+
+    @property
+    def person_pose(self) -> str:
+        return self.stream("person_pose")
 
     @property
     def objects(self) -> str:
@@ -172,7 +178,8 @@ def split_key(key: str) -> tuple[str, str] | None:
 # is refused by every consumer (they pace on them). Other keys may repeat a stamp: a gesture's
 # start and first belief share its frame's, health on a paused replay's clock stands still.
 FORWARD_ONLY = frozenset(
-    STREAMS[name][0] for name in ("skeleton", "camera", "camera_compressed", "person_camera")
+    STREAMS[name][0]
+    for name in ("skeleton", "camera", "camera_compressed", "person_camera", "person_pose")
 )
 
 

@@ -10,8 +10,9 @@ source plug-in.
   engine, at the same rate.
 - plug-in (`module:function`): the function returns an async iterator of `("skeleton", {joint:
   (x, y, z)})` (or `(x, y, z, confidence)`), `("camera", rgb_uint8_array)` (the tabletop camera)
-  or `("person_camera", rgb_uint8_array)` (the images a skeleton was estimated from, published
-  compressed) items; ingest stamps them with the clock and numbers them.
+  or `("person", services.pose_source.PersonFrame)` (a frame through the pose model: its image,
+  skeleton and pose in the image, one stamp for the three) items; ingest stamps them with the
+  clock and numbers them.
 - video file or camera (`video=FILE`, `camera=INDEX`): the pose source (services.pose_source),
   a plug-in of that shape run here, so the pose model runs where the camera is.
 A bounded queue sits between a live source and the bus: when the bus cannot keep up the oldest
@@ -41,11 +42,14 @@ oldest item and counts it.
 from __future__ import annotations
 
 import asyncio
+import functools
 import importlib
 import logging
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
+
+import msgspec
 
 from beyond_self.cognition.gestures.logs import hand_log_stream
 from beyond_self.core.errors import InputError
@@ -66,12 +70,14 @@ from beyond_self.schemas import (
     CompressedCameraFrame,
     Header,
     Joint,
+    PersonPose,
+    ServiceHealth,
     SkeletonFrame,
     StreamClock,
     StreamEnd,
 )
 from beyond_self.schemas.keys import with_robot
-from beyond_self.services.pose_source import PoseCounts, joints_of, person_image
+from beyond_self.services.pose_source import PersonFrame, PoseCounts, person_messages
 
 
 class SensorIngest(Service):
@@ -82,6 +88,7 @@ class SensorIngest(Service):
         "camera",
         "camera_compressed",
         "person_camera",
+        "person_pose",
         "stream_end",
         "clock",
     )
@@ -148,10 +155,23 @@ class SensorIngest(Service):
         self.skeleton = self.publisher(keys.skeleton, SkeletonFrame, SKELETON)
         self.camera = self.publisher(keys.camera, CameraFrame, CAMERA)
         self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame, CAMERA)
-        self.person = self.publisher(keys.person_camera, CompressedCameraFrame, CAMERA)
+        self.person_camera = self.publisher(keys.person_camera, CompressedCameraFrame, CAMERA)
+        self.person_pose = self.publisher(keys.person_pose, PersonPose, SKELETON)
+        self.person_streams: dict[str, Publisher[Any]] = {
+            "person_camera": self.person_camera,
+            "skeleton": self.skeleton,
+            "person_pose": self.person_pose,
+        }
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
         self.stream_clock = self.publisher(keys.clock, StreamClock, STATUS)
         self.spawn(self._play(), "source")
+
+    def health_report(self) -> ServiceHealth:
+        """With a camera source, `skipped` counts the frames whose pose was shed to keep up."""
+        report = super().health_report()
+        if self.pose_counts is None:
+            return report
+        return msgspec.structs.replace(report, skipped=self.pose_counts.shed)
 
     def _tick(self, stamp: int) -> None:
         """The stream's time, for this service's own clock and everyone's (runtime.clock)."""
@@ -246,7 +266,8 @@ class SensorIngest(Service):
             keys.skeleton: ("skeleton", self.skeleton),
             keys.camera: ("camera", self.camera),
             keys.camera_compressed: ("camera_compressed", self.compressed),
-            keys.person_camera: ("person_camera", self.person),
+            keys.person_camera: ("person_camera", self.person_camera),
+            keys.person_pose: ("person_pose", self.person_pose),
         }
 
         def rename(key: str) -> str | None:  # our robot's sensor streams; nothing else
@@ -335,17 +356,25 @@ class SensorIngest(Service):
                     header = self.header(CameraFrame)
                     self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
                     self._sent("camera", header.stamp)
-                elif kind == "person_camera":
-                    header = self.header(CompressedCameraFrame)
-                    image = person_image(header, payload)
-                    self.person.put(image)
-                    self._sent("person_camera", header.stamp)
+                elif kind == "person" and isinstance(payload, PersonFrame):
+                    stamp = self.clock.now_ns()  # one stamp: image, skeleton, pose in the image
+                    stamped = functools.partial(self.header, stamp=stamp)
+                    for stream, msg in person_messages(stamped, payload):
+                        self.person_streams[stream].put(msg)
+                        self._sent(stream, stamp)
                 else:
-                    raise InputError(
-                        f"plug-in item kind {kind!r}; valid: skeleton, camera, person_camera"
-                    )
+                    raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera, person")
         finally:
             task.cancel()
+
+
+def joints_of(items: Mapping[str, Sequence[float]]) -> dict[str, Joint]:
+    """Skeleton joints from a plug-in's `joint -> (x, y, z)` or `(x, y, z, confidence)`."""
+    joints = {}
+    for name, p in items.items():
+        x, y, z = (float(v) for v in p[:3])
+        joints[name] = Joint(position=(x, y, z), confidence=float(p[3]) if len(p) > 3 else 1.0)
+    return joints
 
 
 def load_plugin(spec: str) -> Callable[[], AsyncIterator[tuple[str, Any]]]:

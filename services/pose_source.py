@@ -1,55 +1,95 @@
 """A camera watching a person, as the ingest's live source: frames from a video file or a camera
-through the pose model (cognition.pose) become skeleton items, and the frames themselves the
-person's camera stream. It has the shape of an ingest plug-in (an async iterator of
-`("skeleton", {joint: (x, y, z, confidence)})` and `("person_camera", rgb)` items), run by the
-ingest itself, so the model runs where the camera is: on the robot's side.
+go through the pose model (cognition.pose) and become, with one stamp per frame, the person's
+image (`person_camera`, JPEG), their skeleton (`skeleton`, the joints the gesture models read)
+and where its joints are in the image (`person_pose`, to draw the pose over it). It has the
+shape of an ingest plug-in (an async iterator of `("person", PersonFrame)` items), run by the
+ingest itself, so the model runs where the camera is: on the robot's side. `beyond video` makes
+the same messages with `person_messages`, stamped with the video's frame times instead.
 
 A video file is watched as a camera would show it, at its own pace (its frame times against
 the wall clock); when the model is slower than the video, a frame more than one interval late
-is not estimated (shed, counted), so the pose keeps up with the picture instead of falling
-further behind. A frame with nobody in it gives no skeleton (counted).
+is not estimated (shed, counted: its image is still published), so the pose keeps up with the
+picture instead of falling further behind. A frame with nobody in it gives no skeleton
+(counted).
 """
 
 from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from beyond_self.cognition.pose.skeleton import PoseEstimate, kinect_joints
+import numpy as np
+
+from beyond_self.cognition.pose.skeleton import PoseEstimate, kinect_joints, pixel_joints
 from beyond_self.cognition.pose.video import Video
 from beyond_self.runtime.images import message_from_image
-from beyond_self.schemas import CompressedCameraFrame, Header, Joint
+from beyond_self.schemas import (
+    CompressedCameraFrame,
+    Header,
+    Joint,
+    Keypoint,
+    Message,
+    PersonPose,
+    SkeletonFrame,
+)
 
 PERSON_CAMERA_FRAME = "person_camera"  # the frame id of the person's images
+SKELETON_FRAME = "person"  # the skeleton's frame: the torso at the origin, OpenNI's axes
 JPEG_QUALITY = 80  # as the shipped recordings' camera
 
 
-def joints_of(items: Mapping[str, Sequence[float]]) -> dict[str, Joint]:
-    """Skeleton joints from `joint -> (x, y, z)` or `(x, y, z, confidence)` (metres, [0, 1]):
-    what a live source yields, and what `beyond video` records, made the same way."""
-    joints = {}
-    for name, p in items.items():
-        x, y, z = (float(v) for v in p[:3])
-        confidence = float(p[3]) if len(p) > 3 else 1.0
-        joints[name] = Joint(position=(x, y, z), confidence=confidence)
-    return joints
+@dataclass(frozen=True, eq=False)
+class PersonFrame:
+    """One frame of a pose source: frame `index` (0-based), its image, its pose if one was
+    estimated (None: nobody there, or shed)."""
+
+    index: int
+    rgb: np.ndarray
+    pose: PoseEstimate | None
 
 
-def person_image(header: Header, rgb: Any) -> CompressedCameraFrame:
-    """The person's camera frame as published and recorded: JPEG, the same way everywhere."""
+def person_messages(
+    header: Callable[[type[Message]], Header], frame: PersonFrame
+) -> list[tuple[str, Message]]:
+    """One frame's messages, each with its stream name (schemas.keys.STREAMS): the image, then
+    the skeleton and the pose in the image if a person was seen. `header(cls)` gives each its
+    header (one stamp for all three)."""
     image = message_from_image(
-        header, rgb, fmt="jpeg", quality=JPEG_QUALITY, frame_id=PERSON_CAMERA_FRAME
+        header(CompressedCameraFrame),
+        frame.rgb,
+        fmt="jpeg",
+        quality=JPEG_QUALITY,
+        frame_id=PERSON_CAMERA_FRAME,
     )
-    assert isinstance(image, CompressedCameraFrame)  # fmt jpeg
-    return image
-
-
-def pose_joints(pose: PoseEstimate) -> dict[str, tuple[float, float, float, float]]:
-    """A pose's skeleton as a live source yields it: joint -> (x, y, z, confidence)."""
-    return {name: (*xyz, c) for name, (xyz, c) in kinect_joints(pose).items()}
+    out: list[tuple[str, Message]] = [("person_camera", image)]
+    pose = frame.pose
+    if pose is None:
+        return out
+    joints = {
+        name: Joint(position=xyz, confidence=c) for name, (xyz, c) in kinect_joints(pose).items()
+    }
+    skeleton = SkeletonFrame(
+        header=header(SkeletonFrame),
+        frame=frame.index + 1,
+        joints=joints,
+        frame_id=SKELETON_FRAME,
+    )
+    keypoints = {
+        name: Keypoint(position=uv, confidence=joints[name].confidence)
+        for name, uv in pixel_joints(pose).items()
+    }
+    in_image = PersonPose(
+        header=header(PersonPose),
+        frame=frame.index + 1,
+        width=pose.width,
+        height=pose.height,
+        keypoints=keypoints,
+        frame_id=PERSON_CAMERA_FRAME,
+    )
+    return [*out, ("skeleton", skeleton), ("person_pose", in_image)]
 
 
 @dataclass
@@ -93,15 +133,14 @@ class PoseSource:
                             await asyncio.sleep((due - now) / 1e9)
                         elif now - due > interval:
                             self.counts.shed += 1
-                            yield ("person_camera", frame.rgb)
+                            yield ("person", PersonFrame(frame.index, frame.rgb, None))
                             continue
                     pose = await asyncio.to_thread(estimator.estimate, frame.rgb)
-                    yield ("person_camera", frame.rgb)  # the image, then its skeleton
                     if pose is None:
                         self.counts.no_person += 1
                     else:
                         self.counts.skeletons += 1
-                        yield ("skeleton", pose_joints(pose))
+                    yield ("person", PersonFrame(frame.index, frame.rgb, pose))
             finally:
                 estimator.close()
         finally:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 from rich.console import Console
@@ -24,38 +25,20 @@ from beyond_self.cognition.scene import EPOCH_NS
 from beyond_self.commands import argtypes
 from beyond_self.commands.terminal import progress_bar
 from beyond_self.runtime.recording_writer import RecordingWriter
-from beyond_self.schemas import CompressedCameraFrame, Header, SkeletonFrame
+from beyond_self.schemas import Header, Message
 from beyond_self.schemas.keys import DEFAULT_ROBOT, Keys
-from beyond_self.services.pose_source import joints_of, person_image, pose_joints
+from beyond_self.services.pose_source import PersonFrame, person_messages
 
 HELP = "turn a video of a person into a recording (skeleton from a pose model + the images)"
 
 SOURCE = "video"
-SKELETON_FRAME = "person"  # the skeleton's frame: the torso at the origin, OpenNI's axes
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("video", type=Path, metavar="FILE", help="a video file (mp4, avi, ...)")
-    parser.add_argument(
-        "-o",
-        "--output",
-        type=argtypes.output_file,
-        required=True,
-        metavar="REC.mcap",
-        help="the recording to write",
-    )
+    argtypes.add_output(parser, "the recording to write (REC.mcap)", required=True)
     parser.add_argument(
         "--robot", default=DEFAULT_ROBOT, help=f"robot name in the keys (default {DEFAULT_ROBOT})"
-    )
-
-
-def _header(seq: int, stamp: int, stream: str, version: int) -> Header:
-    return Header(
-        version=version,
-        source=SOURCE,
-        seq=seq,
-        stamp=stamp,
-        correlation=f"{SOURCE}/{stream}/{seq}",
     )
 
 
@@ -64,6 +47,22 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     partial = out.with_name(out.name + ".partial")  # the file appears whole, or not at all
     video = Video(args.video)
+    seqs: dict[type[Message], int] = {}  # each stream numbered on its own
+
+    def header_at(stamp: int) -> Callable[[type[Message]], Header]:
+        def header(cls: type[Message]) -> Header:
+            seq = seqs[cls] = seqs.get(cls, -1) + 1
+            stream = cls.type_name()
+            return Header(
+                version=cls.VERSION,
+                source=SOURCE,
+                seq=seq,
+                stamp=stamp,
+                correlation=f"{SOURCE}/{stream}/{seq}",
+            )
+
+        return header
+
     frames = skeletons = 0
     console = Console(stderr=True)
     try:
@@ -75,23 +74,11 @@ def run(args: argparse.Namespace) -> int:
         ):
             task = progress.add_task(f"pose of {args.video.name}", total=video.frame_count)
             for frame in video.frames():
-                stamp = EPOCH_NS + frame.time_ns
                 pose = estimator.estimate(frame.rgb)
-                if pose is not None:
-                    joints = joints_of(pose_joints(pose))
-                    header = _header(skeletons, stamp, "skeleton", SkeletonFrame.VERSION)
-                    skeleton = SkeletonFrame(
-                        header=header,
-                        frame=frame.index + 1,
-                        joints=joints,
-                        frame_id=SKELETON_FRAME,
-                    )
-                    writer.write(keys.skeleton, skeleton)
-                    skeletons += 1
-                image = person_image(
-                    _header(frame.index, stamp, "camera", CompressedCameraFrame.VERSION), frame.rgb
-                )
-                writer.write(keys.person_camera, image)
+                person = PersonFrame(frame.index, frame.rgb, pose)
+                for stream, message in person_messages(header_at(EPOCH_NS + frame.time_ns), person):
+                    writer.write(keys.stream(stream), message)
+                skeletons += pose is not None
                 frames += 1
                 progress.advance(task)
         os.replace(partial, out)

@@ -12,12 +12,12 @@ import contextlib
 import os
 import warnings
 from collections.abc import Iterator
-from types import TracebackType
 from typing import Any
 
 import numpy as np
 
 from beyond_self.cognition.pose.skeleton import LANDMARKS, PoseEstimate
+from beyond_self.cognition.pose.video import Closing
 from beyond_self.core.errors import InputError
 
 MODEL_COMPLEXITY = 1  # 0 lite, 1 full, 2 heavy: the wheel bundles the full one only
@@ -50,7 +50,7 @@ def _native_stderr_muted() -> Iterator[None]:
         os.close(saved)
 
 
-class PoseEstimator:
+class PoseEstimator(Closing):
     """One person's pose per RGB image. `video=True`: consecutive frames of one stream."""
 
     def __init__(self, *, video: bool = True) -> None:
@@ -91,14 +91,3 @@ class PoseEstimator:
 
     def close(self) -> None:
         self._model.close()
-
-    def __enter__(self) -> PoseEstimator:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

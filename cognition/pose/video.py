@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -47,7 +47,25 @@ def _cv2() -> Any:
     return cv2
 
 
-class Video:
+class Closing:
+    """Something to close after use, in a `with` block (a capture device, a model's graph)."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class Video(Closing):
     """An opened video file (`path`) or camera (`camera`: its index), read frame by frame."""
 
     def __init__(self, path: str | Path | None = None, *, camera: int | None = None) -> None:
@@ -116,14 +134,3 @@ class Video:
 
     def close(self) -> None:
         self._capture.release()
-
-    def __enter__(self) -> Video:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
