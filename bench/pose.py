@@ -29,6 +29,7 @@ import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 import uuid  # noqa: E402
+import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -42,6 +43,8 @@ from beyond_self.schemas import Header, Message, SkeletonFrame  # noqa: E402
 from beyond_self.schemas.codec import encode  # noqa: E402
 from beyond_self.services.pose_source import PersonFrame, person_messages  # noqa: E402
 
+# protobuf 4.25 deprecates a call MediaPipe 0.10.14 makes for every result (the bare model too)
+warnings.filterwarnings("ignore", message="SymbolDatabase.GetPrototype")
 BUDGET_FPS = 30.0
 SIZES = ((640, 480), (320, 240))
 PASSES = 2  # over the video's 120 frames, per latency measurement

@@ -183,6 +183,10 @@ FORWARD_ONLY = frozenset(
 )
 
 
+# the tabletop camera the object segmenter reads; a person's camera (person_camera) never is
+TABLETOP_CAMERA = frozenset(STREAMS[name][0] for name in ("camera", "camera_compressed"))
+
+
 def forward_only(key: str) -> bool:
     """`key` carries a sensor stream whose stamps must increase (FORWARD_ONLY)."""
     split = split_key(key)
