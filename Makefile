@@ -26,8 +26,8 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-# Two workers: the container test (mostly waiting on podman) beside the rest, which keeps its
-# file order in one worker (tests/conftest.py puts each test in its group).
+# Two workers, a test file at a time, the longest files first (tests/conftest.py): the container
+# test, mostly waiting on podman, runs beside the rest.
 pytest: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
 

@@ -87,9 +87,9 @@ QUIET = {"BEYOND_LOG_FORMAT": "text", "BEYOND_LOG_LEVEL": "WARNING"}
 CHUNK = 256  # frames per burst in the throughput pass (the streamer's queue holds 1024)
 
 
-def stream_frames(seed: int) -> tuple[list[s.SkeletonFrame], list[int]]:
-    """Skeleton frames of GESTURES gestures and the indices of the frames that end them."""
-    stream = synthesize_continuous(GESTURES, seed=seed)
+def stream_frames(seed: int, gestures: int = GESTURES) -> tuple[list[s.SkeletonFrame], list[int]]:
+    """Skeleton frames of `gestures` gestures and the indices of the frames that end them."""
+    stream = synthesize_continuous(gestures, seed=seed)
     frames = []
     for i in range(stream.n_frames):
         joints = {

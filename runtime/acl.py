@@ -5,7 +5,10 @@ serves (`subscribes`, `publishes`, `serves`: names from schemas/keys.py), and th
 refuses at run time any key it did not declare, so these rules and the code cannot drift apart.
 From them, `access_control()` builds the block of a Zenoh router's configuration:
 
-- default deny; a subject is a certificate's common name (runtime/keystore.py);
+- default deny; a subject is a certificate's common name (runtime/keystore.py), and every rule
+  of a subject names only the robots its certificate is bound to (`beyond/<robots>/...`, its
+  `Binding`): a robot's certificate speaks for that robot alone, a workstation's for the
+  robots it was granted (a pattern such as `lab-$*`), a service's for the deployment's robots;
 - a service may put only on its outputs (and its own health, Progress and Ledger), declare
   subscribers only on its inputs (and everyone's Progress and Ledger) and receive only those,
   serve only its queryables (and its health, its Progress and the ledgers, which every service
@@ -16,11 +19,13 @@ From them, `access_control()` builds the block of a Zenoh router's configuration
   hearing of an interest reveals no data, and the put and reply rules are unchanged;
 - `tools` (`beyond echo`, `topics`, `ask`, `record`) may read everything and ask the queryables,
   but put, serve and declare nothing;
-- the sides' identities (`robot`, `workstation`, and `router`, the workstation's router) read
-  like tools, declare their monitor's liveliness token, and may do whatever the services of their
-  side may: a side's router links to the other side's router with that certificate and carries
-  its services' traffic (on a secure split each machine runs a router, so the robot's own
-  pipeline keeps running through its router when the network between the machines fails).
+- the sides (`robot`, `workstation`, and `router`, the workstation's router) read like tools,
+  declare their monitor's liveliness token, and may do whatever the services that run on their
+  side may (`sides`, services.registry): a side's router links to the other side's router with
+  that certificate and carries its services' traffic (on a secure split each machine runs a
+  router, so the robot's own pipeline keeps running through its router when the network between
+  the machines fails). A fleet's robot certificates are the robot side bound to one robot, its
+  workstation certificates the workstation side bound to the robots they serve.
 
 Recovering streams (runtime/reliable.py) carry zenoh-ext's own traffic under `<key>/@adv/...`:
 the publisher's cache answers history queries there, declares a liveliness token there (how
@@ -39,23 +44,45 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from beyond_self.core.errors import InputError, unknown
-from beyond_self.schemas.keys import ALIVE, ASK, HEALTH, LEDGER, PREFIX, PROGRESS, STREAMS
+from beyond_self.schemas.keys import (
+    ALIVE,
+    ASK,
+    DEFAULT_ROBOT,
+    HEALTH,
+    LEDGER,
+    PREFIX,
+    PROGRESS,
+    STREAMS,
+)
 
 # queryable name -> key suffix after beyond/<robot>/ (besides every service's own health and
 # Progress, answered by each service for itself)
 QUERYABLES: dict[str, str] = {"ask": ASK}
 TOOLS_ROLE = "tools"
 SIDE_MONITORS: dict[str, tuple[str, ...]] = {  # side identity -> its monitors' liveliness names
-    "robot": ("monitor-robot",),
-    "workstation": ("monitor", "monitor-workstation"),
-    "router": ("monitor", "monitor-workstation"),  # the workstation's router, seen from the robot's
+    "robot": ("monitor-robot", "monitor-fleet-robot"),
+    "workstation": ("monitor", "monitor-workstation", "monitor-fleet-workstation"),
+    # the workstation's router, seen from the robot's
+    "router": ("monitor", "monitor-workstation", "monitor-fleet-workstation"),
 }
-SIDE_PROFILES = {"robot": "robot", "workstation": "workstation", "router": "workstation"}
-_ANY_ROBOT = f"{PREFIX}/*"
+SIDE_OF = {"robot": "robot", "workstation": "workstation", "router": "workstation"}
 _OUT_IN = ["put", "delete", "declare_queryable", "reply", "liveliness_token"]
 _OUT_EG = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
 _IN_IN = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
 _IN_EG = ["put", "delete", "reply", "liveliness_token", "declare_queryable"]
+
+
+@dataclass(frozen=True)
+class Binding:
+    """What an identity may do (`role`: a service's name, `tools`, or a side) and for which
+    robots (`robots`: one key-expression chunk, `lab-1`, `lab-$*` or `*`); its certificate
+    carries it (runtime/keystore.py)."""
+
+    role: str
+    robots: str = DEFAULT_ROBOT
+
+
+Grant = tuple[str, list[str], str, list[str]]  # (what, messages, flow, key expressions)
 
 
 @dataclass(frozen=True)
@@ -93,14 +120,14 @@ def declaration_of(name: str, cls: type) -> Declaration:
     return Declaration(name, subscribes, publishes, serves)
 
 
-def _key(suffix: str) -> str:
-    return f"{_ANY_ROBOT}/{suffix}"
+def _key(robots: str, suffix: str) -> str:
+    return f"{PREFIX}/{robots}/{suffix}"
 
 
-def _stream_keys(streams: Iterable[str]) -> list[str]:
+def _stream_keys(robots: str, streams: Iterable[str]) -> list[str]:
     keys = []
     for stream in streams:
-        key = _key(STREAMS[stream][0])
+        key = _key(robots, STREAMS[stream][0])
         keys += [key, f"{key}/@adv/**"]
     return keys
 
@@ -111,41 +138,41 @@ class _Rules:
     subjects: list[dict[str, Any]] = field(default_factory=list)
     policies: list[dict[str, Any]] = field(default_factory=list)
 
-    def role(
-        self,
-        subject: str,
-        grants: list[tuple[str, list[str], str, list[str]]],
-        also: Sequence[str] = (),
-    ) -> list[str]:
-        """One subject (certificate common name) and its rules: (what, messages, flow, keys),
-        plus rules already made for others (`also`, by id). Returns the ids of its own."""
-        ids: list[str] = []
+    def role(self, subject: str, grants: list[Grant]) -> None:
+        """One subject (certificate common name) and its rules: (what, messages, flow, keys);
+        grants of the same what and flow are one rule."""
+        merged: dict[tuple[str, str], tuple[list[str], set[str]]] = {}
         for what, messages, flow, keys in grants:
-            if not keys:
-                continue
+            if keys:
+                old = merged.setdefault((what, flow), (list(messages), set()))
+                old[0].extend(m for m in messages if m not in old[0])
+                old[1].update(keys)
+        ids: list[str] = []
+        for (what, flow), (messages, exprs) in merged.items():
             rule_id = f"{subject}-{what}-{flow}"
             self.rules.append(
                 {
                     "id": rule_id,
-                    "messages": list(messages),
+                    "messages": messages,
                     "flows": [flow],
                     "permission": "allow",
-                    "key_exprs": sorted(set(keys)),
+                    "key_exprs": sorted(exprs),
                 }
             )
             ids.append(rule_id)
         self.subjects.append({"id": subject, "cert_common_names": [subject]})
-        self.policies.append({"id": subject, "rules": ids + list(also), "subjects": [subject]})
-        return ids
+        self.policies.append({"id": subject, "rules": ids, "subjects": [subject]})
 
 
-def _reader_grants(declarations: list[Declaration]) -> list[tuple[str, list[str], str, list[str]]]:
-    """Read everything, ask every queryable, watch liveliness: no put, no serving."""
-    everything = [f"{_ANY_ROBOT}/**"]
+def _reader_grants(declarations: list[Declaration], robots: str) -> list[Grant]:
+    """Read everything of `robots`, ask every queryable, watch liveliness: no put, no
+    serving."""
+    everything = [_key(robots, "**")]
     streams = sorted({s for d in declarations for s in d.publishes})
-    read = everything + _stream_keys(streams)
-    ask = [_key(QUERYABLES[q]) for d in declarations for q in d.serves] + [_key(f"{HEALTH}/*")]
-    alive = [_key(f"{ALIVE}/**")]
+    read = everything + _stream_keys(robots, streams)
+    ask = [_key(robots, QUERYABLES[q]) for d in declarations for q in d.serves]
+    ask.append(_key(robots, f"{HEALTH}/*"))
+    alive = [_key(robots, f"{ALIVE}/**")]
     return [
         ("read", _IN_IN, "ingress", read),
         ("read", _IN_EG, "egress", read),
@@ -156,11 +183,49 @@ def _reader_grants(declarations: list[Declaration]) -> list[tuple[str, list[str]
     ]
 
 
+def _service_grants(d: Declaration, robots: str) -> list[Grant]:
+    """What service `d` may do, on the keys of `robots`."""
+
+    def key(suffix: str) -> str:
+        return _key(robots, suffix)
+
+    health = [key(f"{HEALTH}/{d.name}")]
+    progress = [key(f"{PROGRESS}/{d.name}")]  # its own Progress, answered to players
+    ledgers = [key(f"{LEDGER}/*")]  # everyone's ledger, kept and answered for by all
+    alive = [key(f"{ALIVE}/**")]
+    # every service reports its own Progress and Ledger and may read and ask everyone's
+    # (pacing, resuming, exactly once): what each has handled, never any data; and every
+    # service may follow a replay's clock (runtime.clock)
+    outputs = [*_stream_keys(robots, d.publishes), *health, *progress, key(f"{LEDGER}/{d.name}")]
+    clock = key(STREAMS["clock"][0])
+    inputs = [*_stream_keys(robots, d.subscribes), key(f"{PROGRESS}/*"), *ledgers, clock]
+    serves = [key(QUERYABLES[q]) for q in d.serves] + health + progress + ledgers
+    return [
+        ("out", _OUT_IN, "ingress", outputs),
+        # whoever subscribes or asks, with whatever wildcard: a publisher must hear of it to
+        # send at all (clients filter on the writer's side); it learns only what others ask
+        # for, and still puts and replies on nothing but its own keys
+        ("out", _OUT_EG, "egress", [key("**"), *outputs]),
+        ("in", _IN_IN, "ingress", inputs),
+        ("in", _IN_EG, "egress", inputs),
+        ("serve", ["declare_queryable", "reply"], "ingress", serves),
+        ("serve", ["query"], "egress", serves),
+        ("alive", ["liveliness_token"], "ingress", [key(f"{ALIVE}/{d.name}")]),
+        ("watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", alive),
+        ("watch", ["liveliness_token"], "egress", alive),
+    ]
+
+
 def access_control(
-    declarations: list[Declaration], profiles: Mapping[str, Sequence[str]]
+    declarations: list[Declaration],
+    sides: Mapping[str, Sequence[str]],
+    subjects: Mapping[str, Binding] | None = None,
 ) -> dict[str, Any]:
     """The `access_control` block of the router's Zenoh configuration, for the services
-    `declarations` describe, `profiles` saying which run on which side (services.registry)."""
+    `declarations` describe, `sides` saying which services run on the robot's side and which
+    on the workstation's (services.registry.SIDES), one subject per identity of `subjects`
+    (certificate name -> binding, runtime.keystore.bindings; default: every identity in its
+    own role for the one robot `robot`)."""
     published = {s: d.name for d in declarations for s in d.publishes}
     names = [d.name for d in declarations]
     reserved = [TOOLS_ROLE, *SIDE_MONITORS]
@@ -173,46 +238,27 @@ def access_control(
                     f"service {d.name!r} subscribes to {stream!r}, which no service publishes; "
                     f"published: {', '.join(sorted(published))}"
                 )
+    if subjects is None:
+        subjects = {name: Binding(name) for name in identities(declarations)}
+    by_name = {d.name: d for d in declarations}
     rules = _Rules()
-    alive = [_key(f"{ALIVE}/**")]
-    own: dict[str, list[str]] = {}
-    for d in declarations:
-        health = [_key(f"{HEALTH}/{d.name}")]
-        progress = [_key(f"{PROGRESS}/{d.name}")]  # its own Progress, answered to players
-        ledgers = [_key(f"{LEDGER}/*")]  # everyone's ledger, kept and answered for by all
-        # every service reports its own Progress and Ledger and may read and ask everyone's
-        # (pacing, resuming, exactly once): what each has handled, never any data; and every
-        # service may follow a replay's clock (runtime.clock)
-        outputs = [*_stream_keys(d.publishes), *health, *progress, _key(f"{LEDGER}/{d.name}")]
-        clock = _key(STREAMS["clock"][0])
-        inputs = [*_stream_keys(d.subscribes), _key(f"{PROGRESS}/*"), *ledgers, clock]
-        serves = [_key(QUERYABLES[q]) for q in d.serves] + health + progress + ledgers
-        own[d.name] = rules.role(
-            d.name,
-            [
-                ("out", _OUT_IN, "ingress", outputs),
-                # whoever subscribes or asks, with whatever wildcard: a publisher must hear of
-                # it to send at all (clients filter on the writer's side); it learns only what
-                # others ask for, and still puts and replies on nothing but its own keys
-                ("out", _OUT_EG, "egress", [_key("**"), *outputs]),
-                ("in", _IN_IN, "ingress", inputs),
-                ("in", _IN_EG, "egress", inputs),
-                ("serve", ["declare_queryable", "reply"], "ingress", serves),
-                ("serve", ["query"], "egress", serves),
-                ("alive", ["liveliness_token"], "ingress", [_key(f"{ALIVE}/{d.name}")]),
-                ("watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", alive),
-                ("watch", ["liveliness_token"], "egress", alive),
-            ],
-        )
-    rules.role(TOOLS_ROLE, _reader_grants(declarations))
-    for side, monitors in SIDE_MONITORS.items():
-        tokens = [_key(f"{ALIVE}/{m}") for m in monitors]
-        services = [n for n in profiles[SIDE_PROFILES[side]] if n in own]
-        rules.role(
-            side,
-            [*_reader_grants(declarations), ("alive", ["liveliness_token"], "ingress", tokens)],
-            also=[rule for n in services for rule in own[n]],
-        )
+    for subject, binding in subjects.items():
+        robots = binding.robots
+        if binding.role in by_name:
+            grants = _service_grants(by_name[binding.role], robots)
+        elif binding.role == TOOLS_ROLE:
+            grants = _reader_grants(declarations, robots)
+        elif binding.role in SIDE_MONITORS:
+            tokens = [_key(robots, f"{ALIVE}/{m}") for m in SIDE_MONITORS[binding.role]]
+            grants = [
+                *_reader_grants(declarations, robots),
+                ("alive", ["liveliness_token"], "ingress", tokens),
+            ]
+            for name in sides[SIDE_OF[binding.role]]:
+                grants += _service_grants(by_name[name], robots)
+        else:
+            raise unknown(f"role of identity {subject!r}", binding.role, identities(declarations))
+        rules.role(subject, grants)
     return {
         "enabled": True,
         "default_permission": "deny",

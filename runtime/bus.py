@@ -60,12 +60,22 @@ def open_failure(config: BusConfig, exc: Exception) -> str:
 
 
 class Bus:
-    def __init__(self, session: zenoh.Session, config: BusConfig) -> None:
+    def __init__(
+        self, session: zenoh.Session, config: BusConfig, *, owns_session: bool = True
+    ) -> None:
         self.session = session
         self.config = config
         self.keys = Keys(config.robot)
+        self._owns_session = owns_session
         self._closers: list[Callable[[], None]] = []
         self._tasks: set[asyncio.Task[None]] = set()
+
+    def for_robot(self, robot: str) -> Bus:
+        """The same session seen as robot `robot`'s bus (its keys), for one robot a fleet's
+        service serves (runtime.fleet): closing it undeclares what was opened through it, and
+        leaves the session open (the caller closes it when the robot leaves)."""
+        view = Bus(self.session, self.config.with_(robot=robot, robots=None), owns_session=False)
+        return view
 
     @classmethod
     def open(
@@ -221,5 +231,7 @@ class Bus:
         self._closers.clear()
         for task in list(self._tasks):
             task.cancel()
+        if not self._owns_session:
+            return
         with contextlib.suppress(Exception):
             self.session.close()  # type: ignore[no-untyped-call]  # zenoh's stub lacks "-> None"

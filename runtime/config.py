@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from beyond_self.core.errors import InputError
-from beyond_self.schemas.keys import DEFAULT_ROBOT, check_name
+from beyond_self.schemas.keys import DEFAULT_ROBOT, check_name, robot_pattern
 
 if TYPE_CHECKING:
     import zenoh
@@ -45,6 +45,8 @@ LEASE_MS = 4000  # Zenoh's default is 10 s: too long for a robot on Wi-Fi (deplo
 
 ENV_VARS: dict[str, str] = {
     "BEYOND_ROBOT": "robot name, the second chunk of every key (default 'robot')",
+    "BEYOND_ROBOTS": "the robots a workstation's services serve, a pattern such as 'lab-*' "
+    "(default: the one robot BEYOND_ROBOT)",
     "BEYOND_ZENOH_CONFIG": "path of a Zenoh JSON5 config file used as the base",
     "BEYOND_ZENOH_MODE": "peer | client | router (default peer)",
     "BEYOND_ZENOH_CONNECT": "comma-separated endpoints to connect to, e.g. tcp/10.0.0.2:7447",
@@ -63,6 +65,9 @@ class BusConfig:
     """How to open the Zenoh session. `listen`/`connect` None = the mode's default."""
 
     robot: str = DEFAULT_ROBOT
+    # the robots a fleet's workstation services serve (schemas.keys.robot_pattern; None: the
+    # one robot `robot`); the workstation's own presence is then under `robot`
+    robots: str | None = None
     mode: str = "peer"
     connect: tuple[str, ...] | None = None
     listen: tuple[str, ...] | None = None
@@ -78,6 +83,8 @@ class BusConfig:
 
     def __post_init__(self) -> None:
         check_name("robot", self.robot)
+        if self.robots is not None:
+            object.__setattr__(self, "robots", robot_pattern(self.robots))
         if self.mode not in MODES:
             raise InputError(f"unknown Zenoh mode {self.mode!r}; valid: {', '.join(MODES)}")
         if self.secure is not None and self.mode == "peer":
@@ -115,6 +122,8 @@ class BusConfig:
         env.update({name: str(path) for name, path in paths.items() if path is not None})
         if self.identity is not None:
             env["BEYOND_ZENOH_IDENTITY"] = self.identity
+        if self.robots is not None:
+            env["BEYOND_ROBOTS"] = self.robots
         return env
 
     def endpoints(self) -> tuple[list[str], list[str]]:
@@ -163,6 +172,7 @@ def load_config(
     env: Mapping[str, str] | None = None,
     *,
     robot: str | None = None,
+    robots: str | None = None,
     mode: str | None = None,
     connect: list[str] | None = None,
     listen: list[str] | None = None,
@@ -190,6 +200,7 @@ def load_config(
     keystore = secure or env.get("BEYOND_ZENOH_SECURE") or None
     return BusConfig(
         robot=robot or env.get("BEYOND_ROBOT") or DEFAULT_ROBOT,
+        robots=robots or env.get("BEYOND_ROBOTS") or None,
         mode=mode or env.get("BEYOND_ZENOH_MODE") or ("client" if keystore else "peer"),
         secure=Path(keystore) if keystore else None,
         identity=identity or env.get("BEYOND_ZENOH_IDENTITY") or None,

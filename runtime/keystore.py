@@ -8,6 +8,16 @@ routers and `beyond up`'s monitors hold), and `tools` (read-only, for `echo`, `t
 `record`). Files are `ca.crt`, `ca.key`, `NAME.crt`, `NAME.key`; keys are mode 0600 and the
 directory 0700, because a key is the identity.
 
+A certificate is bound to the robots it may act for, written into it by the CA (a subject
+alternative name `urn:beyond-self:<role>:<robots>`), so the router's rules follow the
+certificates it was given and a key stolen from one robot speaks for that robot alone: a robot's
+certificate (`beyond keys add lab-1 --robot`) holds exactly its own name, a workstation's
+(`beyond keys add ws-1 --workstation 'lab-*'`) the key-expression pattern of the robots it
+serves, a service's or a side's the robots of the deployment (`--robots`, default the one robot
+`robot`). The role says what the identity may do (runtime/acl.py): a service's own name, `tools`,
+or a side (`robot`, `workstation`, `router`). A certificate made before bindings existed holds
+none; it is read as its own name's role on every robot, as it was then.
+
 Problems with a certificate are found here, before Zenoh sees it: Zenoh reports a bad file as
 a failure to open deep in its link layer (or retries a handshake the other side will never
 accept), while a user needs one line naming the file and what is wrong with it.
@@ -27,7 +37,8 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from beyond_self.core.errors import InputError
-from beyond_self.schemas.keys import check_name
+from beyond_self.runtime.acl import Binding
+from beyond_self.schemas.keys import DEFAULT_ROBOT, check_name, robot_pattern
 
 CA = "ca"
 TOOLS = "tools"
@@ -38,6 +49,24 @@ _DIR_MODE = 0o700
 # TLS wants a subject alternative name on a listener's certificate; host names are not verified
 # on this bus (runtime/secure.py: identities are common names), so any certificate may serve.
 _SAN = ["localhost"]
+_BINDING = "urn:beyond-self:"  # urn:beyond-self:<role>:<robots pattern>
+
+
+def _binding_uri(binding: Binding) -> str:
+    return f"{_BINDING}{binding.role}:{binding.robots}"
+
+
+def binding_of(cert: x509.Certificate, name: str) -> Binding:
+    """The binding a certificate carries (its own name's role on every robot if none)."""
+    try:
+        san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return Binding(name, "*")
+    for uri in san.get_values_for_type(x509.UniformResourceIdentifier):
+        if uri.startswith(_BINDING):
+            role, _, robots = uri[len(_BINDING) :].partition(":")
+            return Binding(role, robots)
+    return Binding(name, "*")
 
 
 @dataclass(frozen=True)
@@ -48,6 +77,7 @@ class Entry:
     path: Path
     not_after: dt.datetime
     issuer: str
+    binding: Binding | None = None  # None for the CA
 
     @property
     def expired(self) -> bool:
@@ -115,8 +145,11 @@ def _key_usage(*allowed: str) -> x509.KeyUsage:
     return x509.KeyUsage(**{usage: usage in allowed for usage in _KEY_USAGES})
 
 
-def init(directory: Path, names: list[str], *, days: int = DEFAULT_DAYS) -> list[Path]:
-    """A new CA in `directory` (which must not hold one) and a certificate for each name."""
+def init(
+    directory: Path, names: list[str], *, days: int = DEFAULT_DAYS, robots: str = DEFAULT_ROBOT
+) -> list[Path]:
+    """A new CA in `directory` (which must not hold one) and a certificate for each name, each
+    bound to `robots` (a robot name or pattern) in its own name's role."""
     if cert_path(directory, CA).exists() or key_path(directory, CA).exists():
         raise InputError(
             f"{directory} already holds a CA ({cert_path(directory, CA)}); "
@@ -143,7 +176,7 @@ def init(directory: Path, names: list[str], *, days: int = DEFAULT_DAYS) -> list
     _write(cert_path(directory, CA), cert.public_bytes(serialization.Encoding.PEM), 0o644)
     written = [cert_path(directory, CA)]
     for name in names:
-        written.append(add(directory, name, days=days))
+        written.append(add(directory, name, days=days, robots=robots))
     return written
 
 
@@ -166,11 +199,15 @@ def add(
     *,
     days: int = DEFAULT_DAYS,
     not_before: dt.datetime | None = None,
+    role: str | None = None,
+    robots: str = DEFAULT_ROBOT,
 ) -> Path:
-    """A certificate + key for identity `name`, signed by the keystore's CA (replacing any)."""
+    """A certificate + key for identity `name`, signed by the keystore's CA (replacing any),
+    bound to acting as `role` (default: its own name) for the robots `robots` matches."""
     check_name("identity", name)
     if name == CA:
         raise InputError(f"identity name {CA!r} is the CA's own; choose another")
+    binding = Binding(check_name("role", role or name), robot_pattern(robots))
     if not 0 < days <= CA_DAYS:
         raise InputError(f"validity of {days} days; valid: 1-{CA_DAYS}")
     ca_cert, ca_key = _load_ca(directory)
@@ -193,7 +230,13 @@ def add(
             critical=False,
         )
         .add_extension(
-            x509.SubjectAlternativeName([x509.DNSName(n) for n in [*_SAN, name]]), critical=False
+            x509.SubjectAlternativeName(
+                [
+                    *[x509.DNSName(n) for n in [*_SAN, name]],
+                    x509.UniformResourceIdentifier(_binding_uri(binding)),
+                ]
+            ),
+            critical=False,
         )
         .add_extension(
             x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False
@@ -229,15 +272,22 @@ def show(directory: Path) -> list[Entry]:
     paths = sorted(directory.glob("*.crt"), key=lambda p: (p.stem != CA, p.stem))
     for path in paths:
         cert = load_certificate(path)
+        name = _common_name(cert) if path.stem != CA else CA
         entries.append(
             Entry(
-                name=_common_name(cert) if path.stem != CA else CA,
+                name=name,
                 path=path,
                 not_after=cert.not_valid_after_utc,
                 issuer=_common_name(cert.issuer),
+                binding=binding_of(cert, name) if name != CA else None,
             )
         )
     return entries
+
+
+def bindings(directory: Path) -> dict[str, Binding]:
+    """Every identity of the keystore and its binding: the subjects of the router's rules."""
+    return {e.name: e.binding for e in show(directory) if e.binding is not None}
 
 
 def check(directory: Path, name: str) -> tuple[Path, Path, Path]:

@@ -25,17 +25,22 @@ def restarts() -> int:
     return int(text) if text.isdigit() else 0
 
 
+def health_header(name: str, seq: int, stamp: int) -> Header:
+    """The header of service `name`'s `seq`-th health report, stamped `stamp`."""
+    return Header(
+        version=ServiceHealth.VERSION,
+        source=name,
+        seq=seq,
+        stamp=stamp,
+        correlation=f"{name}/health/{seq}",
+    )
+
+
 def health_of(service: Service, seq: int) -> ServiceHealth:
     subs, publishers = service.subscriptions, service.publishers
     keys = service.bus.keys
     return ServiceHealth(
-        header=Header(
-            version=ServiceHealth.VERSION,
-            source=service.name,
-            seq=seq,
-            stamp=service.clock.now_ns(),
-            correlation=f"{service.name}/health/{seq}",
-        ),
+        header=health_header(service.name, seq, service.clock.now_ns()),
         service=service.name,
         uptime_s=round(time.monotonic() - service.started_at, 3),
         messages_in=sum(s.received for s in subs),

@@ -56,6 +56,8 @@ class Service:
     subscribes: tuple[str, ...] | None = None  # stream names (schemas.keys.STREAMS)
     publishes: tuple[str, ...] | None = None
     serves: tuple[str, ...] | None = None  # queryable names (runtime.acl.QUERYABLES)
+    # one process may serve many robots, a run per robot (runtime.fleet): not a robot's source
+    fleet: bool = False
 
     def __init__(
         self,

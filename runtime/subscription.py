@@ -81,7 +81,10 @@ def _drain(
             return
         batch = [convert(sample, now())]
         while len(batch) < _BURST:
-            more = try_recv()
+            try:
+                more = try_recv()
+            except Exception:  # closed while draining a burst: deliver what came, then leave
+                more = None
             if more is None:
                 break
             batch.append(convert(more, now()))

@@ -17,6 +17,7 @@ from beyond_self.schemas.base import Message
 PREFIX = "beyond"
 DEFAULT_ROBOT = "robot"
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
+_PATTERN = re.compile(r"^(?:\$\*|[A-Za-z0-9_])(?:\$\*|[A-Za-z0-9_.-])*$")
 
 # stream name -> (key suffix after beyond/<robot>/, message type)
 STREAMS: dict[str, tuple[str, type[Message]]] = {
@@ -55,6 +56,26 @@ def check_name(kind: str, name: str) -> str:
             "(not starting with '-' or '.')"
         )
     return name
+
+
+def robot_pattern(text: str) -> str:
+    """The robots `text` names, as one key-expression chunk: a robot's name, `*` (every robot),
+    or a name with `*` standing for any characters (`lab-*`, written `lab-$*` in a key
+    expression, which also passes). Anything else is an InputError saying what is valid."""
+    chunk = text if text == "*" else re.sub(r"(?<!\$)\*", "$*", text)
+    chunk = "*" if chunk == "$*" else chunk
+    if chunk != "*" and (not _PATTERN.match(chunk) or "$*$*" in chunk):
+        raise InputError(
+            f"invalid robots pattern {text!r}; valid: a robot name, '*' (every robot), or a "
+            "name with '*' for any characters (lab-*), letters, digits, '_', '-', '.'"
+        )
+    return chunk
+
+
+def robot_matches(pattern: str, robot: str) -> bool:
+    """Whether robot name `robot` is one of the robots `pattern` (robot_pattern's) names."""
+    regex = ".*".join(re.escape(part) for part in pattern.split("$*"))
+    return pattern == "*" or re.fullmatch(regex, robot) is not None
 
 
 @dataclass(frozen=True)

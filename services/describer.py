@@ -19,6 +19,7 @@ class DescriptionGenerator(Service):
     subscribes = ("words",)
     publishes = ("description",)
     serves = ()
+    fleet = True  # a workstation may serve many robots with one process (runtime.fleet)
 
     def __init__(
         self, *, nbest: int = 5, legacy_offset: bool = False, unfolding: bool = False, **base: Any

@@ -28,12 +28,12 @@ import numpy as np
 from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
 from beyond_self.cognition.episodes.tracker import hand_position
 from beyond_self.cognition.gestures import GestureModels
-from beyond_self.cognition.gestures.default_models import pipeline_models
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.delivery import EVENTS, FRAMES, SKELETON
 from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
+from beyond_self.services import shared
 
 SEGMENT_KINDS = ("start", "end", "cancel")
 
@@ -43,6 +43,7 @@ class GestureStreamer(Service):
     subscribes = ("skeleton", "stream_end")
     publishes = ("gesture_posterior", "gesture_segment")
     serves = ()
+    fleet = True  # a workstation may serve many robots with one process (runtime.fleet)
 
     def __init__(
         self,
@@ -64,7 +65,7 @@ class GestureStreamer(Service):
         self.finished = False
 
     async def setup(self) -> None:
-        self.gesture_models: GestureModels = pipeline_models(self.models_path)
+        self.gesture_models: GestureModels = shared.gesture_models(self.models_path)
         # a restarted streamer rebuilds its predecessor's state from the checkpoint it left
         resume = self.ledgers.predecessor()
         self.resume_from = resume.get("stamp", -1)

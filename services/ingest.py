@@ -56,6 +56,7 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.accounting import bounded
 from beyond_self.runtime.clock import Clock, ClockTicks
 from beyond_self.runtime.delivery import CAMERA, EVENTS, SKELETON, STATUS
+from beyond_self.runtime.fleet_recording import recorded_robot
 from beyond_self.runtime.images import message_from_image
 from beyond_self.runtime.log import event
 from beyond_self.runtime.pacing import DEFAULT_WINDOW_S, Pacer
@@ -76,7 +77,7 @@ from beyond_self.schemas import (
     StreamClock,
     StreamEnd,
 )
-from beyond_self.schemas.keys import with_robot
+from beyond_self.schemas.keys import split_key, with_robot
 from beyond_self.services.pose_source import PersonFrame, PoseCounts, person_messages
 
 
@@ -270,7 +271,14 @@ class SensorIngest(Service):
             keys.person_pose: ("person_pose", self.person_pose),
         }
 
+        require_mcap(path)
+        info = inspect_recording(path)
+        source = recorded_robot(info, keys.robot)  # a fleet's recording: our robot's part
+
         def rename(key: str) -> str | None:  # our robot's sensor streams; nothing else
+            split = split_key(key)
+            if split is None or split[0] != source:
+                return None
             key = with_robot(key, keys.robot)
             return key if key in streams else None
 
@@ -279,8 +287,6 @@ class SensorIngest(Service):
             pub.put(cue.ours())
             self._sent(stream, cue.stamp)
 
-        require_mcap(path)
-        info = inspect_recording(path)
         passes = 0
 
         def one_pass() -> Iterator[Cue]:

@@ -38,7 +38,6 @@ import msgspec
 import numpy as np
 
 from beyond_self.cognition.episodes import GestureEffects, ObjectAtStart, ObjectWatch
-from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.images import CameraMessage, image_from_message
@@ -58,6 +57,7 @@ from beyond_self.schemas import (
     ServiceHealth,
     StreamEnd,
 )
+from beyond_self.services import shared
 from beyond_self.services.frame_describer import FrameDescriber
 
 _YIELDS_TO_EVENTS = 8  # turns of the event loop a camera frame gives waiting gesture events
@@ -69,6 +69,7 @@ class ObjectSegmenter(Service):
     subscribes = ("camera", "camera_compressed", "gesture_segment", "stream_end")
     publishes = ("objects", "gesture_object", "effects")
     serves = ()
+    fleet = True  # a workstation may serve many robots with one process (runtime.fleet)
 
     def __init__(
         self,
@@ -102,11 +103,11 @@ class ObjectSegmenter(Service):
 
     async def setup(self) -> None:
         self.watch: ObjectWatch[Header] = ObjectWatch(
-            ClusterModel.load(self.clusters_path), **self.watch_options
+            shared.clusters(self.clusters_path), **self.watch_options
         )
         # a live source's descriptions run at a lower priority than the gestures' work
         niceness = LIVE_NICENESS if self.skip_frames else 0
-        self.describer = FrameDescriber(self.clusters_path, niceness)
+        self.describer = shared.frame_describer(self.clusters_path, niceness)
         keys = self.bus.keys
         # restarted: the gestures whose effects every consumer has are not measured again, and
         # the camera history before the predecessor's restart point is not gone over again
@@ -202,7 +203,7 @@ class ObjectSegmenter(Service):
 
     async def teardown(self) -> None:
         if self.describer is not None:
-            self.describer.close()
+            shared.release_describer(self.describer)
 
     def health_report(self) -> ServiceHealth:
         return msgspec.structs.replace(super().health_report(), skipped=self.skipped)

@@ -13,10 +13,9 @@ not is waited out by `deadline_s` of skeleton stream time. It also answers ad-ho
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
-from beyond_self.cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
+from beyond_self.cognition.bn import BayesNet
 from beyond_self.cognition.bn.evidence import Evidence, build_evidence
 from beyond_self.cognition.episodes import Anticipation, FusionJoin, Outcome
 from beyond_self.cognition.episodes.fusion import Prediction
@@ -36,6 +35,7 @@ from beyond_self.schemas import (
     ObjectEffects,
     WordProbabilities,
 )
+from beyond_self.services import shared
 
 
 class AffordanceReasoner(Service):
@@ -43,6 +43,7 @@ class AffordanceReasoner(Service):
     subscribes = ("gesture_object", "gesture_posterior", "gesture_segment", "effects")
     publishes = ("affordance", "words")
     serves = ("ask",)
+    fleet = True  # a workstation may serve many robots with one process (runtime.fleet)
 
     def __init__(
         self,
@@ -58,11 +59,7 @@ class AffordanceReasoner(Service):
         self.deadline_s = deadline_s
 
     async def setup(self) -> None:
-        self.model: BayesNet = (
-            load_model(Path(self.model_path))
-            if self.model_path
-            else learn_network(synthetic_dataset())
-        )
+        self.model: BayesNet = shared.network(self.model_path)
         self.join: FusionJoin[Header] = FusionJoin(
             self.model, expect_objects=self.expect_objects, deadline_s=self.deadline_s
         )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 from typing import Any
 
 from beyond_self.core.errors import unknown
@@ -21,6 +22,15 @@ PROFILES: dict[str, tuple[str, ...]] = {
     "all": tuple(SERVICES),
     "robot": ("ingest", "gestures", "objects"),
     "workstation": ("reasoner", "describer", "speech"),
+    # a fleet: each robot its source and its voice, one workstation the rest for many robots
+    "fleet-robot": ("ingest", "speech"),
+    "fleet-workstation": ("gestures", "objects", "reasoner", "describer"),
+}
+# what may run on each side, in either layout: a robot with its own pipeline (PROFILES), or a
+# fleet's robot, whose gestures and objects are served by a workstation for many robots
+SIDES: dict[str, tuple[str, ...]] = {
+    "robot": ("ingest", "gestures", "objects", "speech"),
+    "workstation": ("gestures", "objects", "reasoner", "describer", "speech"),
 }
 
 
@@ -42,6 +52,11 @@ def identities() -> list[str]:
     return acl.identities(declarations())
 
 
-def access_rules() -> dict[str, Any]:
-    """The secure router's `access_control` block for these services and profiles."""
-    return acl.access_control(declarations(), PROFILES)
+def access_rules(keystore: Path | None = None) -> dict[str, Any]:
+    """The secure router's `access_control` block for these services, one subject per
+    certificate of `keystore`, each on the robots it is bound to (default: every identity for
+    the one robot `robot`)."""
+    from beyond_self.runtime.keystore import bindings
+
+    subjects = bindings(keystore) if keystore is not None else None
+    return acl.access_control(declarations(), SIDES, subjects)

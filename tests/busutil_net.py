@@ -7,6 +7,7 @@ tests never meet each other or other people's processes; multicast scouting is o
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import math
 import os
@@ -63,6 +64,26 @@ def env_for(config: BusConfig, **extra: str) -> dict[str, str]:
         **extra,
     )
     return env
+
+
+async def run_beyond(
+    args: list[str], *, env: dict[str, str], cwd: Path, timeout: float
+) -> tuple[int, str, str]:
+    """Exit status, stdout and stderr of `beyond ARGS` in its own process, without blocking the
+    event loop (a test's own subscriptions keep receiving meanwhile)."""
+    from beyond_self.services.launcher import BEYOND
+
+    proc = await asyncio.create_subprocess_exec(
+        *BEYOND,
+        *args,
+        env=env,
+        cwd=cwd,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    out, err = await asyncio.wait_for(proc.communicate(), timeout)
+    assert proc.returncode is not None
+    return proc.returncode, out.decode(), err.decode()
 
 
 def python() -> str:

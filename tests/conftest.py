@@ -90,10 +90,9 @@ def busy_machine() -> Iterator[None]:
 
 
 # -- figures a passing test shows in CI's log ---------------------------------------------------
-# Tests run in two pytest-xdist workers (Makefile): the container test and the event-time matrix
-# in one, everything else in the other, in file order. A worker's output never reaches the
-# terminal, so a figure a test wants seen in CI's log (build times, outage timelines) goes through
-# its report instead.
+# Tests run in two pytest-xdist workers (Makefile), a file at a time (pytest_collection_modifyitems
+# below). A worker's output never reaches the terminal, so a figure a test wants seen in CI's log
+# (build times, outage timelines) goes through its report instead.
 
 SHOWN = "shown"
 
@@ -108,24 +107,32 @@ def show(request: pytest.FixtureRequest) -> Callable[[str], None]:
     return add
 
 
-# mostly waiting on pip or on a paced replay, or on services starting again after a kill: they
-# run beside the rest, after the container test
+# The files that take longest (most of it waiting on podman, pip, paced replays at real time or
+# services starting again after a kill), longest first: xdist hands them out before the rest.
 LONG_FILES = (
+    "test_containers.py",
     "test_event_time.py",
     "test_package.py",
+    "test_secure_netns.py",
+    "test_deploy_netns.py",
+    "test_gesture_people.py",
+    "test_pipeline_up.py",
     "test_damaged_recordings.py",
+    "test_bus_fuzz.py",
+    "test_live_load.py",
     "test_soak.py",
 )
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The container test is mostly waiting on podman, leases and a replay in real time: it runs
-    beside the rest of the suite, in a worker of its own, followed by the event-time matrix (the
-    longest test, which loads the machine on purpose) so that the two workers take about as
-    long as each other."""
+    """One xdist group per file (a file's module fixtures are built once, in one worker), the
+    long files first: the two workers (Makefile) take files as they finish one, so the
+    container test (mostly waiting on podman) runs beside everything else and neither worker
+    is left with a long tail."""
+    rank = {name: i for i, name in enumerate(LONG_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(LONG_FILES)))  # stable: file order
     for item in items:
-        long = item.get_closest_marker("containers") or item.path.name in LONG_FILES
-        item.add_marker(pytest.mark.xdist_group("long" if long else "suite"))
+        item.add_marker(pytest.mark.xdist_group(item.path.name))
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:

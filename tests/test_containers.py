@@ -113,7 +113,6 @@ class Built:
     base_s: float | None  # None: the base was there already
     build_s: float  # the first build of this run
     steps_run: int  # of its steps, how many were not from the cache (all of them: cold)
-    cached_s: float  # a build with every step from the cache
     size_mb: float
     summary: str
 
@@ -152,8 +151,6 @@ def built() -> Built:
         if ran.returncode != 0 or ran.stdout.strip() != "1":
             pytest.skip(f"podman cannot run a container here: {ran.stderr.strip()[-500:]}")
     build_s, built_steps, steps = build_image()
-    cached_s, again, _ = build_image() if built_steps else (build_s, 0, steps)
-    assert again == 0, "a second build with nothing changed ran steps again"
     # earlier builds of this test that the new image replaced: with vfs, a GB each
     run(["podman", "image", "prune", "-f", "--filter", f"label={LABEL}"])
     size = int(run(["podman", "image", "inspect", "--format", "{{.Size}}", IMAGE]).stdout)
@@ -164,10 +161,29 @@ def built() -> Built:
     base = f"{base_s:.0f} s (built)" if base_s is not None else "cached"
     summary = (
         f"base image: {base}; image build {build_s:.0f} s "
-        f"({built_steps} of {steps - 1} steps built), cached build {cached_s:.0f} s; "
+        f"({built_steps} of {steps - 1} steps built); "
         f"image size {size / 1e6:.0f} MB"
     )
-    return Built(base_s, build_s, built_steps, cached_s, size / 1e6, summary)
+    return Built(base_s, build_s, built_steps, size / 1e6, summary)
+
+
+def test_a_code_change_reuses_the_dependency_layer() -> None:
+    """The dependencies are installed from pyproject.toml alone, before the code is copied in,
+    so a change to the code rebuilds only the layers after it. Read from the Dockerfile: a
+    second build to watch the cache at work took 303 s with podman's vfs storage, which copies
+    every layer again even when it is cached."""
+    text = (REPO / "Dockerfile").read_text().replace("\\\n", " ")  # one line per instruction
+    steps = [
+        line.split(maxsplit=1)
+        for line in text.splitlines()
+        if line.strip() and not line.startswith((" ", "#"))
+    ]
+    copies = [i for i, (op, *_rest) in enumerate(steps) if op == "COPY"]
+    deps = next(
+        i for i, (op, *rest) in enumerate(steps) if op == "RUN" and "requirements" in rest[0]
+    )
+    assert steps[copies[0]][1].split()[0] == "pyproject.toml"  # the first thing copied in
+    assert copies[0] < deps < copies[1], steps  # installed before the code is copied
 
 
 @dataclass

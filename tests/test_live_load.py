@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from busutil_net import REPO, env_for, private_config
+from busutil_net import REPO, env_for, private_config, run_beyond
 
 import beyond_self.schemas as s
 from beyond_self.cognition.bn import learn_network, synthetic_dataset
@@ -35,7 +35,6 @@ from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.delivery import EVENTS, FRAMES
 from beyond_self.runtime.images import image_from_message
 from beyond_self.runtime.subscription import Subscription
-from beyond_self.services.launcher import BEYOND
 
 SCENE = REPO / "recordings" / "touch-box.mcap"  # 4.8 s, a touch ending at 3.6 s
 TIMEOUT_S = 3
@@ -91,17 +90,10 @@ async def test_a_loaded_live_run_describes_every_gesture_once_and_counts_what_it
         "BEYOND_TEST_PAUSE": str(PAUSE_S),
         "PYTHONPATH": f"{REPO}:{Path(__file__).resolve().parent}",
     }
-    command = [*BEYOND, "up", "--live-source", "live_scene:scene", "--skip", "speech",
+    command = ["up", "--live-source", "live_scene:scene", "--without", "speech",
                "--no-live", "--timeout", str(TIMEOUT_S), "--wait-for", PROBE]  # fmt: skip
     try:
-        up = await asyncio.create_subprocess_exec(
-            *command,
-            env=env,
-            cwd=tmp_path,
-            stdout=asyncio.subprocess.PIPE,
-            stderr=asyncio.subprocess.PIPE,
-        )
-        out, err = await asyncio.wait_for(up.communicate(), 180)
+        code, stdout, err = await run_beyond(command, env=env, cwd=tmp_path, timeout=180)
         await asyncio.sleep(0.5)  # what is still on its way to this session
     finally:
         for task in tasks:
@@ -109,8 +101,7 @@ async def test_a_loaded_live_run_describes_every_gesture_once_and_counts_what_it
         with contextlib.suppress(asyncio.CancelledError):
             await asyncio.gather(*tasks)
         bus.close()
-    stdout = out.decode()
-    assert up.returncode == 0, stdout + err.decode()[-3000:]  # not "timed out" in the silence
+    assert code == 0, stdout + err[-3000:]  # not "timed out" in the silence
 
     printed = [line for line in stdout.splitlines() if line.startswith("gesture ")]
     expected = offline_lines(got["skeleton"], got["camera"])

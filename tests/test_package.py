@@ -49,7 +49,9 @@ def readme_demo_lines() -> list[str]:
     return [line for line in block.splitlines() if line.startswith("gesture ")]
 
 
-@pytest.fixture(scope="module")
+# session-scoped: under xdist a module-scoped fixture was built twice (160 and 141 s of pip),
+# torn down between two tests of the same worker
+@pytest.fixture(scope="session")
 def dist(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """sdist and wheel, as a release builds them (the wheel is built from the sdist)."""
     out = tmp_path_factory.mktemp("dist")
@@ -63,7 +65,7 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def installed(dist: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fresh virtual environment with the wheel and its dependencies, and nothing else."""
     env_dir = tmp_path_factory.mktemp("venv") / "env"

@@ -11,7 +11,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from busutil_net import REPO, env_for, private_config, skeleton_recording
+from busutil_net import REPO, env_for, private_config, run_beyond, skeleton_recording
 from third_party_readers import assert_trusted, doctor, js_reports, unsafe_integers
 
 import beyond_self.schemas as s
@@ -165,23 +165,18 @@ async def test_up_from_a_folder_of_decoys_prints_the_readme_and_records_on_one_c
     try:
         with Bus.open(config) as bus:  # the recorder listens once it matches a publisher
             await bus.publisher(bus.keys.stream_end, s.StreamEnd).wait_matching(timeout=30)
-        up = await asyncio.create_subprocess_exec(
-            *(*BEYOND, "up", "--no-live", "--rate", "0"),
-            env=env,
-            cwd=work,
-            stdout=asyncio.subprocess.PIPE,
-            stderr=asyncio.subprocess.PIPE,
+        code, printed, errors = await run_beyond(
+            ["up", "--no-live", "--rate", "0"], env=env, cwd=work, timeout=150
         )
-        printed, errors = await asyncio.wait_for(up.communicate(), 150)
-        assert up.returncode == 0, printed.decode() + errors.decode()[-3000:]
+        assert code == 0, printed + errors[-3000:]
         recorder.send_signal(signal.SIGINT)
         assert await asyncio.to_thread(recorder.wait, 30) == 0
     finally:
         if recorder.poll() is None:
             recorder.kill()
             recorder.wait()
-    assert "decoy" not in errors.decode()
-    gestures = [line for line in printed.decode().splitlines() if line.startswith("gesture ")]
+    assert "decoy" not in errors
+    gestures = [line for line in printed.splitlines() if line.startswith("gesture ")]
     assert gestures == readme_demo_lines()
     recorded, played = inspect_recording(out), inspect_recording(DEMO_RECORDING)
     assert (recorded.start, recorded.end) == (played.start, played.end)  # the stream's span

@@ -80,20 +80,22 @@ def test_rules_follow_the_declarations() -> None:
     assert rules["default_permission"] == "deny" and rules["enabled"] is True
     by_id = {r["id"]: r for r in rules["rules"]}
     describer_puts = by_id["describer-out-ingress"]["key_exprs"]
-    assert "beyond/*/language/description" in describer_puts
+    assert "beyond/robot/language/description" in describer_puts
     assert not any("sensors" in k or "affordance" in k for k in describer_puts)
+    # every rule names the robot the identity is bound to, never any robot
+    assert not [k for r in rules["rules"] for k in r["key_exprs"] if k.startswith("beyond/*")]
     assert by_id["describer-in-ingress"]["key_exprs"] == sorted(
         [
-            "beyond/*/language/words",
-            "beyond/*/language/words/@adv/**",
-            "beyond/*/progress/*",
-            "beyond/*/clock",  # a replay's stream clock, which every service may follow
-            "beyond/*/ledger/*",  # everyone's ledger, kept by every service (runtime.ledger)
+            "beyond/robot/language/words",
+            "beyond/robot/language/words/@adv/**",
+            "beyond/robot/progress/*",
+            "beyond/robot/clock",  # a replay's stream clock, which every service may follow
+            "beyond/robot/ledger/*",  # everyone's ledger, kept by every service (runtime.ledger)
         ]
     )
-    assert "beyond/*/clock" in by_id["ingest-out-ingress"]["key_exprs"]  # the player's
-    assert "beyond/*/clock" not in describer_puts
-    assert "beyond/*/affordance/ask" in by_id["reasoner-serve-ingress"]["key_exprs"]
+    assert "beyond/robot/clock" in by_id["ingest-out-ingress"]["key_exprs"]  # the player's
+    assert "beyond/robot/clock" not in describer_puts
+    assert "beyond/robot/affordance/ask" in by_id["reasoner-serve-ingress"]["key_exprs"]
     tools = [r for r in rules["rules"] if r["id"].startswith("tools-")]
     assert tools and not any(
         {"put", "delete", "declare_queryable", "liveliness_token"} & set(r["messages"])
@@ -103,8 +105,9 @@ def test_rules_follow_the_declarations() -> None:
     policies = {p["id"]: p for p in rules["policies"]}
     assert set(policies) == {*SERVICES, "tools", "robot", "workstation", "router"}
     # a side may do what its services may: the robot's router carries the robot's traffic
-    assert set(by_id) >= set(policies["robot"]["rules"]) >= set(policies["gestures"]["rules"])
-    assert not set(policies["robot"]["rules"]) & set(policies["describer"]["rules"])
+    robot_puts = set(by_id["robot-out-ingress"]["key_exprs"])
+    assert robot_puts >= set(by_id["gestures-out-ingress"]["key_exprs"])
+    assert not robot_puts & {"beyond/robot/language/description", "beyond/robot/language/words"}
 
 
 def test_a_rule_naming_an_undeclared_key_is_an_error() -> None:
@@ -114,7 +117,7 @@ def test_a_rule_naming_an_undeclared_key_is_an_error() -> None:
     orphan = [d for d in decls if d.name != "describer"]  # now nobody publishes descriptions
     speech_only = [*orphan, acl.Declaration("listener", subscribes=("description",))]
     with pytest.raises(InputError, match="subscribes to 'description', which no service"):
-        acl.access_control(speech_only, registry.PROFILES)
+        acl.access_control(speech_only, registry.SIDES)
 
 
 class Undeclared(Service):
@@ -208,7 +211,7 @@ def test_secure_deploy_files_load_and_refuse_plain_endpoints(store: Path) -> Non
     router = load_config({**env, "BEYOND_ZENOH_CONFIG": str(secure / "router.json5")})
     with pytest.raises(InputError, match="needs the deployment's access rules"):
         zenoh_config(router.with_(mode="router"))
-    zc = zenoh_config(router.with_(mode="router"), registry.access_rules())
+    zc = zenoh_config(router.with_(mode="router"), registry.access_rules(store))
     assert '"default_permission":"deny"' in zc.get_json("access_control").replace(" ", "")
     with pytest.raises(InputError, match="links only over TLS"):
         plain = load_config({**env, "BEYOND_ZENOH_CONFIG": str(REPO / "deploy/zenoh/router.json5")})

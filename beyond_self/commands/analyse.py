@@ -30,7 +30,9 @@ from beyond_self.cognition.episodes.offline import (
 from beyond_self.cognition.gestures.default_models import default_models, pipeline_models
 from beyond_self.cognition.gestures.logs import hand_log_stream
 from beyond_self.cognition.vision.clusters import ClusterModel
+from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
+from beyond_self.runtime.fleet_recording import recorded_robot
 from beyond_self.runtime.images import image_from_message
 from beyond_self.runtime.recording import inspect_recording, read_recording, require_mcap
 from beyond_self.runtime.recording_damage import Losses
@@ -49,16 +51,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--config", help="YAML/JSON file with per-service options (as for up)")
     parser.add_argument("--json", action="store_true", help="one JSON object per gesture")
+    parser.add_argument(
+        "--robot",
+        type=argtypes.robot_name,
+        help="the robot whose part of a fleet's recording to analyse (a recording of one robot "
+        "needs none)",
+    )
 
 
 def _inputs(
-    path: Path, hand: str, torso: str, losses: Losses | None = None
+    path: Path, hand: str, torso: str, losses: Losses | None = None, robot: str | None = None
 ) -> Iterator[SkeletonInput | CameraInput]:
     """The skeleton and camera frames of a recording, as the ingest plays them: what does not
     decode or does not move forward in time is dropped and counted in `losses`
-    (runtime.recording_damage), the same frames every command drops."""
+    (runtime.recording_damage), the same frames every command drops; of a fleet's recording,
+    robot `robot`'s (runtime.fleet.recorded_robot)."""
     tally = losses if losses is not None else Losses(str(path))
-    return inputs_of(recorded_cues(read_recording(path, losses=tally), None, tally), hand, torso)
+    source = recorded_robot(inspect_recording(path), robot)
+
+    def ours(key: str) -> str | None:
+        split = split_key(key)
+        return key if split is not None and split[0] == source else None
+
+    return inputs_of(recorded_cues(read_recording(path, losses=tally), ours, tally), hand, torso)
 
 
 def inputs_of(cues: Iterable[Cue], hand: str, torso: str) -> Iterator[SkeletonInput | CameraInput]:
@@ -145,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
             g.get("hand_joint", "right_hand"),
             g.get("torso_joint", "torso"),
             losses,
+            args.robot,
         )
     models = pipeline_models(g.get("models"))
     network = load_model(Path(r["model"])) if r.get("model") else learn_network(synthetic_dataset())

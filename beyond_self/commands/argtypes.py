@@ -255,3 +255,14 @@ def keyexpr(text: str) -> str:
             "'/', '*' or '**' as whole chunks, e.g. beyond/robot/sensors/skeleton"
         ) from None
     return text
+
+
+def robot_name(text: str) -> str:
+    """A robot's name, as the second chunk of its keys (schemas.keys.check_name)."""
+    from beyond_self.core.errors import InputError
+    from beyond_self.schemas.keys import check_name
+
+    try:
+        return check_name("robot", text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None

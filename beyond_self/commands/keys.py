@@ -1,13 +1,19 @@
 """`beyond keys`: the deployment's keystore and the router's access rules.
 
-    beyond keys init DIR [--days N]       a CA and a certificate + key per identity
-    beyond keys add NAME [--dir DIR]      one more identity (or a renewed one)
-    beyond keys show [--dir DIR]          every certificate and when it expires
-    beyond keys acl                       the router's access_control block (JSON)
+    beyond keys init DIR [--robots PATTERN] [--days N]   a CA and a certificate per identity
+    beyond keys add NAME [--robots PATTERN] [--dir DIR]  one more identity (or a renewed one)
+    beyond keys add ROBOT --robot                        a fleet robot's own certificate
+    beyond keys add NAME --workstation PATTERN           a workstation serving robots PATTERN
+    beyond keys show [--dir DIR]                         every certificate, its robots, expiry
+    beyond keys acl [--dir DIR]                          the router's access_control block
 
 Identities are the services' names, the sides' (`router`, `robot`, `workstation`) and `tools`
-(read-only: `echo`, `topics`, `ask`, `record`). DIR defaults to $BEYOND_ZENOH_SECURE. Use it with
-`--secure DIR` on `beyond up`, `router`, `service` and the tools.
+(read-only: `echo`, `topics`, `ask`, `record`), each bound to the robots it may act for (a robot
+name or a pattern such as 'lab-*'; default the one robot `robot`); a fleet adds one certificate
+per robot, bound to that robot alone, and one per workstation, bound to the robots it serves
+(runtime/keystore.py, runtime/acl.py). DIR defaults to $BEYOND_ZENOH_SECURE. Use it with
+`--secure DIR` on `beyond up`, `router`, `service` and the tools; a router's rules are made from
+the certificates in it, so restart the router after adding one.
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from pathlib import Path
 
 from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
+from beyond_self.schemas.keys import DEFAULT_ROBOT
 
 HELP = "make the secure bus's keystore (CA, certificates) and show its access rules"
 
@@ -30,16 +37,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     days = argtypes.count(1, 36500, "days")
     init.add_argument("--days", type=days, default=365, help="validity of the certificates")
     add = sub.add_parser("add", help="a certificate for one more identity (or renew one)")
-    add.add_argument("name", help="identity: a service name, a side, or tools")
+    add.add_argument("name", help="identity: a service name, a side, tools, or a fleet's robot")
     add.add_argument("--days", type=days, default=365, help="validity of the certificate")
-    show = sub.add_parser("show", help="the certificates in the keystore and their expiry")
-    for p in (add, show):
+    role = add.add_mutually_exclusive_group()
+    role.add_argument(
+        "--robot",
+        action="store_true",
+        help="NAME is a robot of a fleet: its certificate speaks for that robot alone",
+    )
+    role.add_argument(
+        "--workstation",
+        metavar="PATTERN",
+        help="NAME is a workstation serving the robots PATTERN matches (e.g. 'lab-*')",
+    )
+    for p in (init, add):
+        p.add_argument(
+            "--robots",
+            metavar="PATTERN",
+            default=DEFAULT_ROBOT,
+            help=f"the robots a service's or side's certificate acts for (default {DEFAULT_ROBOT}"
+            "; '*' every robot, 'lab-*' those named lab-...)",
+        )
+    show = sub.add_parser("show", help="the certificates in the keystore, their robots, expiry")
+    acl = sub.add_parser("acl", help="print the router's access_control block, generated")
+    for p in (add, show, acl):
         p.add_argument("--dir", type=Path, help="keystore directory ($BEYOND_ZENOH_SECURE)")
-    sub.add_parser("acl", help="print the router's access_control block, generated")
 
 
-def _directory(args: argparse.Namespace) -> Path:
+def _directory(args: argparse.Namespace, required: bool = True) -> Path | None:
     given = args.dir or os.environ.get("BEYOND_ZENOH_SECURE")
+    if not given and not required:
+        return None
     if not given:
         raise InputError("no keystore given; pass --dir DIR or set BEYOND_ZENOH_SECURE")
     return Path(given)
@@ -50,20 +78,42 @@ def run(args: argparse.Namespace) -> int:
     from beyond_self.services import registry
 
     if args.keys_command == "acl":
-        print(json.dumps(registry.access_rules(), indent=2))
+        print(json.dumps(registry.access_rules(_directory(args, required=False)), indent=2))
         return 0
     if args.keys_command == "init":
-        for path in keystore.init(args.dir, registry.identities(), days=args.days):
+        names = registry.identities()
+        for path in keystore.init(args.dir, names, days=args.days, robots=args.robots):
             print(path)
         return 0
     directory = _directory(args)
+    assert directory is not None
     if args.keys_command == "add":
-        print(keystore.add(directory, args.name, days=args.days))
+        role, robots = _binding(args)
+        print(keystore.add(directory, args.name, days=args.days, role=role, robots=robots))
         return 0
     for entry in keystore.show(directory):
         state = "EXPIRED" if entry.expired else "valid"
+        bound = f"{entry.binding.role} of {entry.binding.robots}" if entry.binding else "CA"
         print(
             f"{entry.name:<12} {state:<7} until {entry.not_after:%Y-%m-%d %H:%M} UTC  "
-            f"issuer {entry.issuer!r}  {entry.path}"
+            f"{bound:<28} issuer {entry.issuer!r}  {entry.path}"
         )
     return 0
+
+
+def _binding(args: argparse.Namespace) -> tuple[str | None, str]:
+    """The role and robots of a new certificate: a fleet's robot or workstation is named
+    freely, so its name must not be one the rules already give another role."""
+    from beyond_self.schemas.keys import check_name
+    from beyond_self.services import registry
+
+    if not (args.robot or args.workstation):
+        return None, args.robots
+    if args.name in registry.identities():
+        raise InputError(
+            f"{args.name!r} is the name of a service, a side or tools; a fleet's robot or "
+            f"workstation needs another ({', '.join(registry.identities())} are taken)"
+        )
+    if args.robot:
+        return "robot", check_name("robot", args.name)
+    return "workstation", args.workstation

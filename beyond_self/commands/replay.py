@@ -20,8 +20,9 @@ from beyond_self.commands.terminal import stop_on_signals
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.fleet_recording import recorded_robots
 from beyond_self.runtime.log import setup_logging
-from beyond_self.runtime.recording import RecordedMessage, require_mcap
+from beyond_self.runtime.recording import RecordedMessage, inspect_recording, require_mcap
 from beyond_self.runtime.replay import replay
 from beyond_self.runtime.replay_control import ReplayControl, rate_option, remapper
 from beyond_self.schemas.keys import check_name
@@ -183,7 +184,11 @@ def run(args: argparse.Namespace) -> int:
                 topics=args.topics,
                 start=args.start,
                 end=args.end,
-                robot=config.robot,  # $BEYOND_ROBOT too, as recordings/README.md says
+                # $BEYOND_ROBOT too, as recordings/README.md says; a fleet's recording plays
+                # every robot's keys as recorded (runtime.fleet_recording)
+                robot=config.robot
+                if len(recorded_robots(inspect_recording(args.file))) <= 1
+                else None,
                 stop=stop,
                 pace_for=pace_for,
                 remap=remap,

@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    rules = registry.access_rules() if config.secure is not None else None
+    rules = registry.access_rules(config.secure) if config.secure is not None else None
     with Bus.open(config, access_rules=rules) as bus:
         print(f"zenoh router {bus.zid} up: {describe(config)}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):

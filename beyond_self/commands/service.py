@@ -27,6 +27,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--set", action="append", default=[], metavar="OPTION=VALUE", help="override an option"
     )
+    parser.add_argument(
+        "--robots",
+        metavar="PATTERN",
+        help="serve every robot PATTERN matches, e.g. 'lab-*' (gestures, objects, reasoner, "
+        "describer; default: the one robot --robot), a run per robot while its ingest is alive "
+        "($BEYOND_ROBOTS)",
+    )
     add_bus_arguments(parser)
 
 
@@ -51,4 +58,14 @@ def service_options(name: str, config: str | None, sets: list[str]) -> dict[str,
 def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
-    exit_process(cls.main(config=config_from_args(args), **options))
+    config = config_from_args(args)
+    if args.robots is not None:
+        config = config.with_(robots=args.robots)
+    if config.robots is None:
+        exit_process(cls.main(config=config, **options))
+    if not cls.fleet:  # a robot's source or voice
+        raise InputError(f"service {args.name!r} serves one robot (its --robot), not a fleet")
+    from beyond_self.runtime.fleet import Fleet
+    from beyond_self.runtime.process import run_to_completion
+
+    exit_process(run_to_completion(lambda: Fleet(cls, config, options).run()))

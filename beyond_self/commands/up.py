@@ -2,7 +2,8 @@
 
     beyond up [--recording FILE | --log DIR | --live-source module:function | --video FILE |
                --camera INDEX] [--config FILE]
-              [--profile all|robot|workstation] [--rate R] [--no-live] [--timeout S]
+              [--profile all|robot|workstation|fleet-robot|fleet-workstation]
+              [--robots PATTERN] [--rate R] [--no-live] [--timeout S]
               [--skip NAME] [--without NAME] [--wait-for NAME,...] [--until-stream-end]
               [bus options]
 
@@ -35,6 +36,11 @@ may start first: the source waits only for this machine's services (plus `--wait
 cross-link streams are recovered from publisher caches when the other side joins late or a link
 fails. The workstation side runs until stopped, or with `--until-stream-end` until the robot's
 source has ended and every gesture it showed is described.
+
+A fleet (README, "A fleet"): `--profile fleet-workstation --robots 'lab-*' --robot ws-1` starts
+gestures, objects, reasoner and describer once each, serving every robot named lab-... whose
+source appears (runtime/fleet.py; the workstation's own name is `--robot`); each robot runs
+`--profile fleet-robot` (ingest and speech) with `--wait-for gestures,objects,reasoner,describer`.
 
 `--secure DIR` (README, "Securing a deployment"): every certificate the side needs is checked
 first, then the side starts its own router (TLS, the generated access rules; linked with the
@@ -148,6 +154,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="services elsewhere (e.g. the workstation's reasoner) the source waits for too",
     )
     parser.add_argument(
+        "--robots",
+        metavar="PATTERN",
+        help="serve every robot PATTERN matches, e.g. 'lab-*' (a fleet's workstation: "
+        "--profile fleet-workstation; default: the one robot --robot)",
+    )
+    parser.add_argument(
         "--until-stream-end",
         action="store_true",
         help="exit once the (remote) source has ended and every gesture is described",
@@ -157,10 +169,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
-    if args.profile == "workstation" and _mode_unset(args, config):
+    if args.robots is not None:
+        config = fleet_config(args, config)
+    if args.profile.endswith("workstation") and _mode_unset(args, config):
         config = config.with_(mode="client")
     if config.secure is not None and config.identity is None:  # the monitor is the side's
-        config = config.with_(identity="robot" if args.profile == "robot" else "workstation")
+        config = config.with_(identity=side_identity(args.profile))
     try:
         status = asyncio.run(up(args, local_group(config)))
     except InputError as exc:  # bad input (a damaged recording...): one line, as every command
@@ -181,13 +195,32 @@ def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str
 
     assert config.secure is not None
     remote = list(config.connect or ()) + list(config.routers)
-    identity = ("robot" if profile == "robot" else "workstation") if remote else "router"
+    identity = side_identity(profile) if remote else "router"
     for name in [*names, str(config.identity), identity]:
         keystore.check(config.secure, name)
     command = ["router", "--secure", str(config.secure), "--identity", identity]
     if remote:
         command += ["--listen", SECURE_LOCAL_ROUTER] + [a for e in remote for a in ("--connect", e)]
     return command
+
+
+def side_identity(profile: str) -> str:
+    """The certificate of a side's monitor and router: the robot's or the workstation's."""
+    return "robot" if profile.endswith("robot") else "workstation"
+
+
+def fleet_config(args: argparse.Namespace, config: BusConfig) -> BusConfig:
+    """A workstation's services for every robot `--robots` matches: only those that can serve
+    many robots from one process (not a robot's source or voice)."""
+    from beyond_self.services.registry import service_class
+
+    single = [n for n in PROFILES[args.profile] if not service_class(n).fleet]
+    if single:
+        raise InputError(
+            f"--robots: profile {args.profile} has {', '.join(single)}, which serve one robot; "
+            "use --profile fleet-workstation"
+        )
+    return config.with_(robots=args.robots)
 
 
 def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:

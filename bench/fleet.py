@@ -1,0 +1,199 @@
+"""How many robots one workstation serves: one process per service for a fleet (runtime/fleet.py)
+next to one process set per robot, measured in the same run.
+
+    .venv/bin/python bench/fleet.py [--max N] [--gestures G]
+
+Skeleton only (no vision: the gesture streamer, the affordance reasoner and the description
+generator; the reasoner told there is no object segmenter). Each round, N robots appear (this
+script declares each robot's source token and publishes its 30 Hz skeleton stream live, at real
+time, all N at once, phases spread over a frame), the workstation's fleet processes start a run
+for each, and per gesture the clock starts when the frame that lets the segmenter decide the
+gesture is over is published (found offline by the same segmenter, bench/pipeline.py) and stops
+when the gesture's final description arrives for that robot. Rounds double N (1, 2, 4, ...) until
+the description's p99 reaches 33 ms (a frame at 30 Hz) or N reaches --max; the robots of a round
+leave before the next (their runs are dropped).
+
+Costs: resident memory (VmRSS) of the processes, summed, and their CPU time over the round
+(cores); next to them the same three services as one process set for one robot (`beyond up`'s
+way before fleets), started and measured in the same run with one robot: N robots that way
+cost N of those. The camera at 15 fps is not measured here (bench/pipeline.py measures one
+robot's vision path). Ends with one line of JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))  # the pipeline bench's skeleton stream and figures
+
+from pipeline import QUIET, _p, stream_frames  # noqa: E402
+
+import beyond_self.schemas as s  # noqa: E402
+from beyond_self.runtime.bus import Bus  # noqa: E402
+from beyond_self.runtime.config import BusConfig  # noqa: E402
+from beyond_self.runtime.fleet import LEAVE_ENV  # noqa: E402
+from beyond_self.services.deployment import Deployment  # noqa: E402
+
+SERVICES = ["gestures", "reasoner", "describer"]
+OPTIONS = {"reasoner": {"objects": False}}
+FRAME_NS = 33_333_333
+BUDGET_MS = 1e3 / 30
+
+
+def process_cost(pids: list[int]) -> tuple[float, float]:
+    """(resident MB, CPU seconds so far) of processes `pids` and their children."""
+    rss_kb, ticks = 0, 0
+    for pid in _with_children(pids):
+        with contextlib.suppress(OSError):
+            status = Path(f"/proc/{pid}/status").read_text()
+            rss_kb += int(next(x for x in status.splitlines() if x.startswith("VmRSS")).split()[1])
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            ticks += int(fields[11]) + int(fields[12])  # utime, stime
+    return rss_kb / 1024, ticks / os.sysconf("SC_CLK_TCK")
+
+
+def _with_children(pids: list[int]) -> list[int]:
+    out = list(pids)
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            kids = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+            out += _with_children([int(k) for k in kids])
+    return out
+
+
+async def serve(bus: Bus, robots: list[str], gestures: int) -> dict[str, Any]:
+    """The robots' live skeleton streams at once; per gesture its description latency (ms)."""
+    frames, triggers = stream_frames(seed=7, gestures=gestures)
+    views = [bus.for_robot(r) for r in robots]
+    tokens = [v.declare_token(v.keys.alive("ingest")) for v in views]
+    latencies: list[float] = []
+    try:
+        for v in views:  # the robot's runs are there: its source may publish
+            for name in SERVICES:
+                await bus.wait_alive(v.keys.alive(name), timeout=60)
+        pubs = [v.publisher(v.keys.skeleton, s.SkeletonFrame) for v in views]
+        outs = [v.subscribe(v.keys.description, s.Description) for v in views]
+        for pub in pubs:
+            await pub.wait_matching(timeout=30)
+        trig = set(triggers)
+        # per robot, when each gesture's ending frame was sent: descriptions come in gesture
+        # order (the reasoner emits strictly in segment order), one per gesture
+        ended: list[list[float]] = [[] for _ in robots]
+
+        async def receive(k: int) -> None:
+            for n in range(len(triggers)):
+                await outs[k].recv(timeout=60)
+                latencies.append((time.perf_counter() - ended[k][n]) * 1e3)
+
+        loop = asyncio.get_running_loop()
+        receivers = [loop.create_task(receive(k)) for k in range(len(robots))]
+        begin_wall, begin_ns = loop.time(), time.time_ns()
+        for i, frame in enumerate(frames):
+            for k, pub in enumerate(pubs):  # phases spread over the frame interval
+                at = begin_wall + (i + k / len(robots)) * FRAME_NS / 1e9
+                delay = at - loop.time()
+                if delay > 0:
+                    await asyncio.sleep(delay)
+                stamp = begin_ns + i * FRAME_NS + k * FRAME_NS // len(robots)
+                header = s.Header(version=1, source="bench", seq=i, stamp=stamp)
+                pub.put(s.SkeletonFrame(header=header, frame=frame.frame, joints=frame.joints))
+                if i in trig:
+                    ended[k].append(time.perf_counter())
+        await asyncio.wait_for(asyncio.gather(*receivers), 120)
+        for view in views:
+            view.close()
+    finally:
+        for undeclare in tokens:
+            undeclare()
+    return {"latency_ms": latencies, "stream_s": len(frames) * FRAME_NS / 1e9}
+
+
+async def measure(config: BusConfig, robots: list[str], gestures: int) -> dict[str, Any]:
+    """The services on `config` (a fleet's, or one robot's own set) serving `robots`."""
+    side = Deployment(config, SERVICES, options=OPTIONS, env={**QUIET, LEAVE_ENV: "1"})
+    try:
+        bus = await side.open()
+        await side.start()
+        pids = [sp.process.pid for sp in side.processes]
+        _, cpu0 = process_cost(pids)
+        served = await serve(bus, robots, gestures)
+        rss, cpu1 = process_cost(pids)
+    finally:
+        await side.stop()
+    lat = served["latency_ms"]
+    return {
+        "robots": len(robots),
+        "gestures": len(lat),
+        "description_p50_ms": round(_p(lat, 50), 2),
+        "description_p99_ms": round(_p(lat, 99), 2),
+        "rss_mb": round(rss, 1),
+        "cores": round((cpu1 - cpu0) / served["stream_s"], 3),
+    }
+
+
+async def main_async(args: argparse.Namespace) -> dict[str, Any]:
+    port = 17900 + os.getpid() % 1000
+    print("one process set for one robot ...", file=sys.stderr, flush=True)
+    reference = await measure(BusConfig(robot="solo", port=port), ["solo"], args.gestures)
+    rounds = []
+    n = 1
+    while n <= args.max:
+        print(f"fleet: {n} robot(s) ...", file=sys.stderr, flush=True)
+        fleet = BusConfig(robot="ws", robots=f"r{n}-*", port=port)
+        robots = [f"r{n}-{k}" for k in range(n)]
+        result = await measure(fleet, robots, args.gestures)
+        rounds.append(result)
+        print(json.dumps(result), file=sys.stderr, flush=True)
+        if result["description_p99_ms"] >= BUDGET_MS:
+            break
+        n *= 2
+    within = [r["robots"] for r in rounds if r["description_p99_ms"] < BUDGET_MS]
+    return {"single": reference, "fleet": rounds, "robots_within_33ms": max(within, default=0)}
+
+
+def print_table(result: dict[str, Any]) -> None:
+    rows = [("one set, 1 robot", result["single"])] + [
+        (f"fleet, {r['robots']} robot(s)", r) for r in result["fleet"]
+    ]
+    print(f"{'':24} {'gestures':>8} {'p50 ms':>8} {'p99 ms':>8} {'RSS MB':>8} {'cores':>6}")
+    for name, r in rows:
+        print(
+            f"{name:24} {r['gestures']:>8} {r['description_p50_ms']:>8.1f} "
+            f"{r['description_p99_ms']:>8.1f} {r['rss_mb']:>8.0f} {r['cores']:>6.2f}"
+        )
+    single = result["single"]
+    best = max(result["fleet"], key=lambda r: r["robots"])
+    if best["robots"] > 1:
+        base = result["fleet"][0]
+        per_robot_mb = (best["rss_mb"] - base["rss_mb"]) / (best["robots"] - 1)
+        print(
+            f"each robot more: {per_robot_mb:.1f} MB in the fleet's processes, against "
+            f"{single['rss_mb']:.0f} MB for a process set of its own"
+        )
+    print(
+        f"robots served with description p99 < {BUDGET_MS:.0f} ms: {result['robots_within_33ms']}"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--max", type=int, default=64, help="most robots tried (default 64)")
+    parser.add_argument("--gestures", type=int, default=6, help="gestures per robot (default 6)")
+    args = parser.parse_args()
+    result = asyncio.run(main_async(args))
+    print_table(result)
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
