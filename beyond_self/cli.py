@@ -34,6 +34,7 @@ COMMANDS: dict[str, str] = {
     "learn": "learn",
     "segment": "segment",
     "simulate": "simulate",
+    "video": "video",
     "record": "record",
     "replay": "replay",
     "inspect": "inspect_cmd",

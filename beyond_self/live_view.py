@@ -1,6 +1,7 @@
 """The live terminal view of `beyond up`: service health (with how many times each service was
-restarted after dying), the action posterior as bars, the effect prediction and the last
-description, redrawn as messages arrive (rich)."""
+restarted after dying), a camera source's pose rate and the frames it shed, the action
+posterior as bars, the effect prediction and the last description, redrawn as messages arrive
+(rich)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from rich.console import Group, RenderableType
 from rich.panel import Panel
 from rich.table import Table
 
-from beyond_self.monitor import PipelineMonitor
+from beyond_self.monitor import POSE_WINDOW_S, PipelineMonitor
 
 BAR = 28
 
@@ -36,6 +37,13 @@ def render(monitor: PipelineMonitor, expected: list[str]) -> RenderableType:
             str(h.malformed), str(h.errors), str(h.restarts), h.last_error[:40],
         )  # fmt: skip
     parts: list[RenderableType] = [health]
+    if monitor.poses:  # a camera source: how fast its pose model goes, what it shed
+        ingest = monitor.health_reports.get("ingest")
+        shed = f", {ingest.skipped} frame(s) shed to keep up" if ingest else ""
+        parts.append(
+            f"pose: {monitor.pose_rate:.1f} Hz over the last {POSE_WINDOW_S:g} s, "
+            f"{monitor.poses} frame(s) with a person{shed}"
+        )
     post = monitor.posterior
     if post is not None:
         t = Table.grid(padding=(0, 1))

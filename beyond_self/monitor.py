@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -28,6 +29,7 @@ from beyond_self.schemas import (
     DetectedObjects,
     GestureSegment,
     Message,
+    PersonPose,
     Progress,
     ServiceHealth,
     StreamEnd,
@@ -35,6 +37,7 @@ from beyond_self.schemas import (
 from beyond_self.schemas.identity import identify
 
 log = logging.getLogger("beyond.monitor")
+POSE_WINDOW_S = 2.0  # a camera source's pose rate is taken over this much of its stream
 
 
 class PipelineMonitor:
@@ -54,6 +57,8 @@ class PipelineMonitor:
         self.stream_end: StreamEnd | None = None
         self.frames_described = 0  # camera frames whose objects were published
         self.frames_skipped = 0  # and those a live source's object segmenter skipped
+        self.poses = 0  # frames a camera source's pose model saw a person in
+        self._pose_stamps: deque[int] = deque()  # those of the last POSE_WINDOW_S of stream
         self.changed = asyncio.Event()
         self.last_message = time.monotonic()
         self.moving = False  # a service has handled a sensor message, or published
@@ -70,6 +75,7 @@ class PipelineMonitor:
             (keys.affordance, AffordancePrediction, self.on_prediction),
             (keys.description, Description, self.on_description),
             (keys.objects, DetectedObjects, self.on_objects),
+            (keys.person_pose, PersonPose, self.on_pose),
             (keys.stream_end, StreamEnd, self.on_end),
             (keys.health(), ServiceHealth, self.on_health),
             (keys.progress(), Progress, self.on_progress),
@@ -110,6 +116,19 @@ class PipelineMonitor:
             self.emit(line)
 
     # -- handlers ------------------------------------------------------------------------
+
+    def on_pose(self, msg: PersonPose) -> None:
+        self.poses += 1
+        self._pose_stamps.append(msg.header.stamp)
+        while msg.header.stamp - self._pose_stamps[0] > POSE_WINDOW_S * 1e9:
+            self._pose_stamps.popleft()
+
+    @property
+    def pose_rate(self) -> float:
+        """Poses per second over the last POSE_WINDOW_S of their stamps (0: too few yet)."""
+        stamps = self._pose_stamps
+        span = (stamps[-1] - stamps[0]) / 1e9 if len(stamps) > 1 else 0.0
+        return (len(stamps) - 1) / span if span > 0 else 0.0
 
     def on_segment(self, msg: GestureSegment) -> None:
         if msg.event == "start":

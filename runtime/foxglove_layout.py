@@ -1,6 +1,7 @@
-"""The Foxglove layout shipped in deploy/foxglove/ (camera with object annotations and the
-description log, the 3D skeleton, the action posterior and the effect predictions on one
-screen), built with foxglove-sdk's layout types so it follows the SDK's layout schema.
+"""The Foxglove layout shipped in deploy/foxglove/ (camera with object annotations, the person's
+camera with their pose over it, the description log, the 3D skeleton, the action posterior and
+the effect predictions on one screen), built with foxglove-sdk's layout types so it follows the
+SDK's layout schema.
 
 `beyond foxglove --layout FILE --robot NAME` writes it for another robot (topics name it);
 `tests/test_foxglove_layout.py` checks that the shipped file is what this builds, and that
@@ -24,18 +25,23 @@ def _path(topic: str, field: str) -> str:
     return f'"{topic}".{field}'
 
 
-def layout(robot: str = "robot") -> fl.Layout:
-    keys = Keys(robot)
-    view = {v.name: v.topic(keys.root) for v in VIEWS}
-    image = fl.ImagePanel(
-        title="camera + detected objects",
+def _image_panel(title: str, image: str, annotations: str) -> fl.ImagePanel:
+    return fl.ImagePanel(
+        title=title,
         config=fl.ImageConfig(
             image_mode=fl.ImageModeConfig(
-                image_topic=keys.camera_compressed,
-                annotations={view["objects"]: fl.ImageAnnotationSettings(visible=True)},
+                image_topic=image,
+                annotations={annotations: fl.ImageAnnotationSettings(visible=True)},
             )
         ),
     )
+
+
+def layout(robot: str = "robot") -> fl.Layout:
+    keys = Keys(robot)
+    view = {v.name: v.topic(keys.root) for v in VIEWS}
+    image = _image_panel("camera + detected objects", keys.camera_compressed, view["objects"])
+    person = _image_panel("person + pose (a camera source)", keys.person_camera, view["pose"])
     scene = fl.ThreeDeePanel(
         title="skeleton",
         config=fl.ThreeDeeConfig(
@@ -82,11 +88,12 @@ def layout(robot: str = "robot") -> fl.Layout:
             ],
         )
 
+    cameras = column(image, person, descriptions, weights=(3, 3, 1))
     return fl.Layout(
         content=fl.SplitContainer(
             direction="row",
             items=[
-                fl.SplitItem(proportion=1.2, content=column(image, descriptions, weights=(3, 1))),
+                fl.SplitItem(proportion=1.2, content=cameras),
                 fl.SplitItem(proportion=1.0, content=scene),
                 fl.SplitItem(proportion=1.0, content=column(posterior, effects, weights=(1, 1))),
             ],

@@ -3,6 +3,8 @@ messages themselves, so Foxglove's stock panels show them without a plug-in.
 
 - `beyond/<robot>/foxglove/scene`: the skeleton as a `foxglove.SceneUpdate` (a sphere per joint,
   coloured by tracking confidence, and a line list of bones) for the 3D panel;
+- `.../foxglove/pose`: a person's pose in the image it was estimated from (cognition.pose) as
+  `foxglove.ImageAnnotations` (joints coloured by confidence, and the bones) over that image;
 - `.../foxglove/objects`: detected objects as `foxglove.ImageAnnotations` (a circle of the
   object's area at its centroid and its Color/Shape/Size labels) for the Image panel, stamped
   like the camera frame they were found in, so Foxglove draws them over that frame;
@@ -21,10 +23,29 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import msgspec
 
+from beyond_self.runtime.foxglove_types import (
+    AffordanceView,
+    CircleAnnotation,
+    Color,
+    ImageAnnotations,
+    KeyValuePair,
+    LinePrimitive,
+    Log,
+    Point2,
+    PointsAnnotation,
+    Pose,
+    PosteriorView,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    TextAnnotation,
+    Vector3,
+    ViewStruct,
+)
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import self_contained_schema
 from beyond_self.schemas.keys import split_key
@@ -33,178 +54,12 @@ from beyond_self.schemas.messages import (
     AffordancePrediction,
     Description,
     DetectedObjects,
+    PersonPose,
     SkeletonFrame,
     Time,
 )
 
 VIEW_PREFIX = "foxglove"  # beyond/<robot>/foxglove/<view>: never a bus key
-
-
-class _View(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    SCHEMA_NAME: ClassVar[str] = ""
-
-
-class Vector3(msgspec.Struct, frozen=True):
-    x: float
-    y: float
-    z: float
-
-
-class Quaternion(msgspec.Struct, frozen=True):
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    w: float = 1.0
-
-
-class Pose(msgspec.Struct, frozen=True):
-    position: Vector3
-    orientation: Quaternion = Quaternion()
-
-
-class Color(msgspec.Struct, frozen=True):
-    r: float
-    g: float
-    b: float
-    a: float = 1.0
-
-
-class Point2(msgspec.Struct, frozen=True):
-    x: float
-    y: float
-
-
-class KeyValuePair(msgspec.Struct, frozen=True):
-    key: str
-    value: str
-
-
-class SpherePrimitive(msgspec.Struct, frozen=True):
-    pose: Pose
-    size: Vector3
-    color: Color
-
-
-class LinePrimitive(msgspec.Struct, frozen=True):
-    type: int  # 0 line strip, 1 line loop, 2 line list
-    pose: Pose
-    thickness: float
-    scale_invariant: bool
-    points: list[Vector3]
-    color: Color
-    colors: list[Color] = msgspec.field(default_factory=list)
-    indices: list[int] = msgspec.field(default_factory=list)
-
-
-class TextPrimitive(msgspec.Struct, frozen=True):
-    pose: Pose
-    billboard: bool
-    font_size: float
-    scale_invariant: bool
-    color: Color
-    text: str
-
-
-class SceneEntity(msgspec.Struct, frozen=True):
-    timestamp: Time
-    frame_id: str
-    id: str
-    lifetime: Time  # a Duration: 0 = until replaced by an entity of the same id
-    frame_locked: bool
-    metadata: list[KeyValuePair]
-    spheres: list[SpherePrimitive]
-    lines: list[LinePrimitive]
-    texts: list[TextPrimitive]
-    # primitives we never draw; present because Foxglove's schema requires every list
-    arrows: list[Any] = msgspec.field(default_factory=list)
-    cubes: list[Any] = msgspec.field(default_factory=list)
-    cylinders: list[Any] = msgspec.field(default_factory=list)
-    triangles: list[Any] = msgspec.field(default_factory=list)
-    models: list[Any] = msgspec.field(default_factory=list)
-
-
-class SceneUpdate(_View, frozen=True):
-    SCHEMA_NAME: ClassVar[str] = "foxglove.SceneUpdate"
-
-    deletions: list[Any]
-    entities: list[SceneEntity]
-
-
-class CircleAnnotation(msgspec.Struct, frozen=True):
-    timestamp: Time
-    position: Point2
-    diameter: float
-    thickness: float
-    fill_color: Color
-    outline_color: Color
-
-
-class PointsAnnotation(msgspec.Struct, frozen=True):
-    timestamp: Time
-    type: int  # 1 points, 2 line loop, 3 line strip, 4 line list
-    points: list[Point2]
-    outline_color: Color
-    outline_colors: list[Color]
-    fill_color: Color
-    thickness: float
-
-
-class TextAnnotation(msgspec.Struct, frozen=True):
-    timestamp: Time
-    position: Point2
-    text: str
-    font_size: float
-    text_color: Color
-    background_color: Color
-
-
-class ImageAnnotations(_View, frozen=True):
-    SCHEMA_NAME: ClassVar[str] = "foxglove.ImageAnnotations"
-
-    circles: list[CircleAnnotation]
-    points: list[PointsAnnotation]
-    texts: list[TextAnnotation]
-
-
-class Log(_View, frozen=True):
-    SCHEMA_NAME: ClassVar[str] = "foxglove.Log"
-
-    timestamp: Time
-    level: int  # 1 debug, 2 info, 3 warning, 4 error, 5 fatal
-    message: str
-    name: str
-    file: str
-    line: int
-
-
-class _GestureView(_View, frozen=True):
-    """What a plot of a gesture's beliefs keys on: when, which gesture, which skeleton frame, and
-    whether it is the gesture's last word (the fields come first in every such view)."""
-
-    timestamp: Time
-    segment_id: int
-    frame: int
-    final: bool
-
-
-class PosteriorView(_GestureView, frozen=True):
-    """The streaming action posterior by action name (plottable: `.posterior.tap`)."""
-
-    SCHEMA_NAME: ClassVar[str] = "beyond.view.ActionPosterior"
-
-    posterior: dict[str, float]
-    normalised_log_likelihood: dict[str, float]
-    best: str
-
-
-class AffordanceView(_GestureView, frozen=True):
-    """Predicted effects as nested maps (plottable: `.effects.ObjVel.fast`) and their argmax."""
-
-    SCHEMA_NAME: ClassVar[str] = "beyond.view.AffordancePrediction"
-
-    action_belief: dict[str, float]
-    effects: dict[str, dict[str, float]]
-    most_likely: dict[str, str]
 
 
 # --- skeleton -> scene ---------------------------------------------------------------------
@@ -218,6 +73,13 @@ BONES: tuple[tuple[str, str], ...] = (
     ("neck", "right_shoulder"),
     ("right_shoulder", "right_elbow"),
     ("right_elbow", "right_hand"),
+    # a pose model's skeleton has legs too (cognition.pose)
+    ("torso", "left_hip"),
+    ("left_hip", "left_knee"),
+    ("left_knee", "left_foot"),
+    ("torso", "right_hip"),
+    ("right_hip", "right_knee"),
+    ("right_knee", "right_foot"),
 )
 JOINT_SIZE = 0.06  # m
 BONE = Color(0.85, 0.85, 0.9)
@@ -306,6 +168,42 @@ def image_annotations(objects: DetectedObjects) -> ImageAnnotations:
     return ImageAnnotations(circles=circles, points=[], texts=texts)
 
 
+# --- a person's pose -> image annotations --------------------------------------------------
+
+KEYPOINT_SIZE = 6.0  # px
+
+
+def pose_annotations(pose: PersonPose) -> ImageAnnotations:
+    """The pose over the image it was estimated from: a dot per joint, coloured by confidence
+    (green seen, red guessed), and the skeleton's bones; stamped like that image."""
+    stamp = Time.from_ns(pose.header.stamp)
+    points = pose.keypoints
+    joints = PointsAnnotation(
+        timestamp=stamp,
+        type=1,
+        points=[Point2(*k.position) for k in points.values()],
+        outline_color=BONE,
+        outline_colors=[_confidence_colour(k.confidence) for k in points.values()],
+        fill_color=BONE,
+        thickness=KEYPOINT_SIZE,
+    )
+    bones = PointsAnnotation(
+        timestamp=stamp,
+        type=4,
+        points=[
+            Point2(*points[end].position)
+            for a, b in BONES
+            if a in points and b in points
+            for end in (a, b)
+        ],
+        outline_color=BONE,
+        outline_colors=[],
+        fill_color=CLEAR,
+        thickness=2.0,
+    )
+    return ImageAnnotations(circles=[], points=[bones, joints], texts=[])
+
+
 # --- beliefs -> plottable fields; descriptions -> log --------------------------------------
 
 
@@ -355,8 +253,8 @@ def log_line(d: Description) -> Log:
 class View:
     name: str  # last key chunk: beyond/<robot>/foxglove/<name>
     source: type[Message]
-    struct: type[_View]
-    make: Callable[[Any], _View]
+    struct: type[ViewStruct]
+    make: Callable[[Any], ViewStruct]
 
     @property
     def schema_name(self) -> str:
@@ -374,6 +272,7 @@ class View:
 VIEWS: tuple[View, ...] = (
     View("scene", SkeletonFrame, SceneUpdate, scene),
     View("objects", DetectedObjects, ImageAnnotations, image_annotations),
+    View("pose", PersonPose, ImageAnnotations, pose_annotations),
     View("posterior", ActionPosterior, PosteriorView, posterior),
     View("affordance", AffordancePrediction, AffordanceView, affordance),
     View("log", Description, Log, log_line),

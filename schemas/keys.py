@@ -24,6 +24,11 @@ STREAMS: dict[str, tuple[str, type[Message]]] = {
     "skeleton": ("sensors/skeleton", m.SkeletonFrame),
     "camera": ("sensors/camera/raw", m.CameraFrame),
     "camera_compressed": ("sensors/camera/compressed", m.CompressedCameraFrame),
+    # the images a skeleton was estimated from (a camera watching the person, cognition.pose):
+    # for people to see, never the tabletop camera the object segmenter reads
+    "person_camera": ("sensors/person/compressed", m.CompressedCameraFrame),
+    # where the skeleton's joints are in those images (pixels), to draw the pose over them
+    "person_pose": ("sensors/person/pose", m.PersonPose),
     "objects": ("vision/objects", m.DetectedObjects),
     "effects": ("vision/effects", m.ObjectEffects),
     "gesture_object": ("vision/gesture_object", m.GestureObject),
@@ -110,6 +115,14 @@ class Keys:
         return self.stream("camera_compressed")
 
     @property
+    def person_camera(self) -> str:
+        return self.stream("person_camera")
+
+    @property
+    def person_pose(self) -> str:
+        return self.stream("person_pose")
+
+    @property
     def objects(self) -> str:
         return self.stream("objects")
 
@@ -185,7 +198,14 @@ def split_key(key: str) -> tuple[str, str] | None:
 # streams whose stamps only move forward: a sensor frame stamped at or before the previous one
 # is refused by every consumer (they pace on them). Other keys may repeat a stamp: a gesture's
 # start and first belief share its frame's, health on a paused replay's clock stands still.
-FORWARD_ONLY = frozenset(STREAMS[name][0] for name in ("skeleton", "camera", "camera_compressed"))
+FORWARD_ONLY = frozenset(
+    STREAMS[name][0]
+    for name in ("skeleton", "camera", "camera_compressed", "person_camera", "person_pose")
+)
+
+
+# the tabletop camera the object segmenter reads; a person's camera (person_camera) never is
+TABLETOP_CAMERA = frozenset(STREAMS[name][0] for name in ("camera", "camera_compressed"))
 
 
 def forward_only(key: str) -> bool:

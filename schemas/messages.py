@@ -205,6 +205,26 @@ class CompressedCameraFrame(Message, frozen=True):
             )
 
 
+class Keypoint(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """A joint in an image: pixels from the image's top-left corner (x right, y down; outside
+    the image for a joint the model guessed), and the model's confidence in [0, 1]."""
+
+    position: tuple[Coordinate, Coordinate]
+    confidence: Probability = 1.0
+
+
+class PersonPose(Message, frozen=True):
+    """Where a person's joints are in the image their skeleton was estimated from (a pose model
+    on a camera, cognition.pose): the skeleton frame of the same stamp holds them in metres,
+    this in that image's pixels, so a viewer draws the pose over the picture."""
+
+    frame: FrameIndex
+    width: Annotated[int, msgspec.Meta(ge=1, le=IMAGE_SIDE_MAX)]
+    height: Annotated[int, msgspec.Meta(ge=1, le=IMAGE_SIDE_MAX)]
+    keypoints: Annotated[dict[Name, Keypoint], msgspec.Meta(max_length=JOINTS_MAX)]
+    frame_id: Name = "person_camera"
+
+
 class DetectedObject(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """One segmented object: continuous features and the cluster labels they fall in
     (the network's Color, Shape and Size values)."""
@@ -520,6 +540,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     SkeletonFrame,
     CameraFrame,
     CompressedCameraFrame,
+    PersonPose,
     DetectedObjects,
     ObjectEffects,
     GestureObject,

@@ -9,9 +9,14 @@ source plug-in.
   joint, the hand, in metres (`scale`), stamped with the log's own times and played by the same
   engine, at the same rate.
 - plug-in (`module:function`): the function returns an async iterator of `("skeleton", {joint:
-  (x, y, z)})` or `("camera", rgb_uint8_array)` items; ingest stamps them with the clock and
-  numbers them. A bounded queue sits between the plug-in and the bus: when the bus cannot keep up
-  the oldest item is dropped and counted, never silently.
+  (x, y, z)})` (or `(x, y, z, confidence)`), `("camera", rgb_uint8_array)` (the tabletop camera)
+  or `("person", services.pose_source.PersonFrame)` (a frame through the pose model: its image,
+  skeleton and pose in the image, one stamp for the three) items; ingest stamps them with the
+  clock and numbers them.
+- video file or camera (`video=FILE`, `camera=INDEX`): the pose source (services.pose_source),
+  a plug-in of that shape run here, so the pose model runs where the camera is.
+A bounded queue sits between a live source and the bus: when the bus cannot keep up the oldest
+item is dropped and counted, never silently.
 When the source is exhausted a `StreamEnd` message says how many messages were published and the
 last stamp of each stream, so consumers know when they have seen everything, and what a damaged
 recording lost, in the one line every command says (runtime.recording_damage: every intact chunk is
@@ -37,11 +42,14 @@ oldest item and counts it.
 from __future__ import annotations
 
 import asyncio
+import functools
 import importlib
 import logging
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
+
+import msgspec
 
 from beyond_self.cognition.gestures.logs import hand_log_stream
 from beyond_self.core.errors import InputError
@@ -63,17 +71,28 @@ from beyond_self.schemas import (
     CompressedCameraFrame,
     Header,
     Joint,
+    PersonPose,
+    ServiceHealth,
     SkeletonFrame,
     StreamClock,
     StreamEnd,
 )
 from beyond_self.schemas.keys import split_key, with_robot
+from beyond_self.services.pose_source import PersonFrame, PoseCounts, person_messages
 
 
 class SensorIngest(Service):
     name = "ingest"
     subscribes = ()
-    publishes = ("skeleton", "camera", "camera_compressed", "stream_end", "clock")
+    publishes = (
+        "skeleton",
+        "camera",
+        "camera_compressed",
+        "person_camera",
+        "person_pose",
+        "stream_end",
+        "clock",
+    )
     serves = ()
 
     def __init__(
@@ -82,6 +101,8 @@ class SensorIngest(Service):
         recording: str | None = None,
         log: str | None = None,
         plugin: str | None = None,
+        video: str | None = None,
+        camera: int | None = None,
         rate: float = 1.0,
         loop: bool = False,
         scale: float = 0.001,
@@ -94,14 +115,19 @@ class SensorIngest(Service):
         **base: Any,
     ) -> None:
         super().__init__(**base)
-        given = [n for n, v in (("recording", recording), ("log", log), ("plugin", plugin)) if v]
+        sources = (("recording", recording), ("log", log), ("plugin", plugin), ("video", video))
+        given = [n for n, v in sources if v] + (["camera"] if camera is not None else [])
         if len(given) != 1:
             raise InputError(
                 f"sensor ingest needs exactly one source; got {', '.join(given) or 'none'}; "
-                "valid: recording=FILE.mcap, log=DIR_OR_DATA_LOG, plugin=module:function"
+                "valid: recording=FILE.mcap, log=DIR_OR_DATA_LOG, plugin=module:function, "
+                "video=FILE, camera=INDEX"
             )
         self.recording, self.log_path, self.plugin = recording, log, plugin
-        if plugin is None and "clock" not in base:  # a replay: on the stream's clock, always
+        self.video, self.camera_index = video, camera
+        self.live = plugin is not None or video is not None or camera is not None
+        self.source_name = str(recording or log or plugin or video or f"camera {camera}")
+        if not self.live and "clock" not in base:  # a replay: on the stream's clock, always
             self.clock = Clock("recording")
         self.rate = rate_option(rate)  # None: as fast as possible
         self.loop = loop
@@ -115,9 +141,10 @@ class SensorIngest(Service):
             raise InputError(f"window_s {window_s} must be a positive number of seconds")
         self.window_s = window_s
         self.last_stamps: dict[str, int] = {}
-        self.losses = Losses(str(recording or log or plugin))
+        self.losses = Losses(self.source_name)
         self.resume: dict[str, int] = {}
         self.failure = ""
+        self.pose_counts: PoseCounts | None = None  # a video or camera: what its pose model did
         self.published = 0
         self.dropped_items = 0
         self.finished = asyncio.Event()
@@ -129,9 +156,23 @@ class SensorIngest(Service):
         self.skeleton = self.publisher(keys.skeleton, SkeletonFrame, SKELETON)
         self.camera = self.publisher(keys.camera, CameraFrame, CAMERA)
         self.compressed = self.publisher(keys.camera_compressed, CompressedCameraFrame, CAMERA)
+        self.person_camera = self.publisher(keys.person_camera, CompressedCameraFrame, CAMERA)
+        self.person_pose = self.publisher(keys.person_pose, PersonPose, SKELETON)
+        self.person_streams: dict[str, Publisher[Any]] = {
+            "person_camera": self.person_camera,
+            "skeleton": self.skeleton,
+            "person_pose": self.person_pose,
+        }
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
         self.stream_clock = self.publisher(keys.clock, StreamClock, STATUS)
         self.spawn(self._play(), "source")
+
+    def health_report(self) -> ServiceHealth:
+        """With a camera source, `skipped` counts the frames whose pose was shed to keep up."""
+        report = super().health_report()
+        if self.pose_counts is None:
+            return report
+        return msgspec.structs.replace(report, skipped=self.pose_counts.shed)
 
     def _tick(self, stamp: int) -> None:
         """The stream's time, for this service's own clock and everyone's (runtime.clock)."""
@@ -153,7 +194,7 @@ class SensorIngest(Service):
         await self.pacer.start()
         # where the consumers are: a restarted source goes on from there, not from the start
         self.resume = self.pacer.handled_by_all()
-        ticks = ClockTicks(self._tick) if self.plugin is None else None  # live: the wall's
+        ticks = None if self.live else ClockTicks(self._tick)  # live: the wall's
         self.player = Player(rate=self.rate, pacer=self.pacer, ticks=ticks)
         if self.start_delay_s:
             await asyncio.sleep(self.start_delay_s)
@@ -164,7 +205,7 @@ class SensorIngest(Service):
                 await self._play_log(Path(self.log_path))
             else:
                 while True:  # a live source is not restamped: it has its own clock
-                    await self._play_plugin(str(self.plugin))
+                    await self._play_live()
                     if not self.loop:
                         break
         except InputError as exc:  # nothing playable (a file that is no recording...)
@@ -175,7 +216,7 @@ class SensorIngest(Service):
         damage = self.failure or (self.losses.line() if self.losses.any else "")
         end = StreamEnd(
             header=self.header(StreamEnd),
-            source=bounded(str(self.recording or self.log_path or self.plugin), 256),
+            source=bounded(self.source_name, 256),
             messages=self.published,
             dropped=self.dropped_items,
             last_stamps=dict(self.last_stamps),
@@ -192,6 +233,8 @@ class SensorIngest(Service):
             lost=self.losses.lost if damage else 0,  # the line itself is in StreamEnd.damage
             held_back_s=round(self.pacer.waited_s, 3),
         )
+        if self.pose_counts is not None:  # per-frame work a live video shed is said, counted
+            event(self.log, logging.INFO, "pose", **vars(self.pose_counts))
 
     def _sent(self, stream: str, stamp: int) -> None:
         self.published += 1
@@ -224,6 +267,8 @@ class SensorIngest(Service):
             keys.skeleton: ("skeleton", self.skeleton),
             keys.camera: ("camera", self.camera),
             keys.camera_compressed: ("camera_compressed", self.compressed),
+            keys.person_camera: ("person_camera", self.person_camera),
+            keys.person_pose: ("person_pose", self.person_pose),
         }
 
         require_mcap(path)
@@ -279,8 +324,16 @@ class SensorIngest(Service):
         span = (int(stamps[0]), int(stamps[-1])) if len(stamps) else None
         await self._play_cues(cues, span, send, {key: "skeleton"})
 
-    async def _play_plugin(self, spec: str) -> None:
-        source = load_plugin(spec)()
+    async def _play_live(self) -> None:
+        source: AsyncIterator[tuple[str, Any]]
+        if self.plugin is not None:
+            source = load_plugin(self.plugin)()
+        else:
+            from beyond_self.services.pose_source import PoseSource
+
+            pose = PoseSource(video=self.video, camera=self.camera_index)
+            self.pose_counts = pose.counts
+            source = aiter(pose)
         queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue(self.queue_size)
         done = object()
 
@@ -301,18 +354,33 @@ class SensorIngest(Service):
                     break
                 frame += 1
                 if kind == "skeleton":
-                    joints = {n: Joint(position=tuple(map(float, p))) for n, p in payload.items()}  # type: ignore[arg-type]
                     header = self.header(SkeletonFrame)
+                    joints = joints_of(payload)
                     self.skeleton.put(SkeletonFrame(header=header, frame=frame, joints=joints))
                     self._sent("skeleton", header.stamp)
                 elif kind == "camera":
                     header = self.header(CameraFrame)
                     self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
                     self._sent("camera", header.stamp)
+                elif kind == "person" and isinstance(payload, PersonFrame):
+                    stamp = self.clock.now_ns()  # one stamp: image, skeleton, pose in the image
+                    stamped = functools.partial(self.header, stamp=stamp)
+                    for stream, msg in person_messages(stamped, payload):
+                        self.person_streams[stream].put(msg)
+                        self._sent(stream, stamp)
                 else:
-                    raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera")
+                    raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera, person")
         finally:
             task.cancel()
+
+
+def joints_of(items: Mapping[str, Sequence[float]]) -> dict[str, Joint]:
+    """Skeleton joints from a plug-in's `joint -> (x, y, z)` or `(x, y, z, confidence)`."""
+    joints = {}
+    for name, p in items.items():
+        x, y, z = (float(v) for v in p[:3])
+        joints[name] = Joint(position=(x, y, z), confidence=float(p[3]) if len(p) > 3 else 1.0)
+    return joints
 
 
 def load_plugin(spec: str) -> Callable[[], AsyncIterator[tuple[str, Any]]]:

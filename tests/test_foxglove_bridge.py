@@ -20,6 +20,7 @@ from typing import Any
 
 import jsonschema
 from busutil_net import REPO, env_for, free_port, private_config
+from third_party_readers import official_schemas
 from websockets.asyncio.client import connect
 
 import beyond_self.schemas as s
@@ -30,20 +31,6 @@ from beyond_self.services.launcher import BEYOND
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 RECORDING = REPO / "recordings" / "touch-box.mcap"
 NPM_CLIENT = REPO / "tests" / "js" / "foxglove_client.js"
-
-
-def official_schemas(node_modules: Path) -> dict[str, Any]:
-    script = 'console.log(JSON.stringify(require("@foxglove/schemas/jsonschema")))'
-    done = subprocess.run(
-        ["node", "-e", script],
-        env={**os.environ, "NODE_PATH": str(node_modules)},
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=True,
-    )
-    schemas: dict[str, Any] = json.loads(done.stdout)
-    return schemas
 
 
 async def connect_when_up(port: int, proc: asyncio.subprocess.Process) -> Any:

@@ -29,7 +29,7 @@ def test_layout_shows_served_topics_of_its_robot() -> None:
     json.loads(text)
     shown = set(re.findall(r"beyond/[A-Za-z0-9_.-]+/[A-Za-z0-9_/]+", text))
     assert shown and shown <= served, shown - served
-    for view in ("scene", "objects", "posterior", "affordance", "log"):
+    for view in ("scene", "objects", "pose", "posterior", "affordance", "log"):
         assert f"{keys.root}/foxglove/{view}" in shown
-    assert keys.camera_compressed in shown
+    assert keys.camera_compressed in shown and keys.person_camera in shown
     assert "beyond/robot/" not in text

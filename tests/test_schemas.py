@@ -36,6 +36,16 @@ def examples() -> list[s.Message]:
             format="png",
             data=b"\x89PNG",
         ),
+        s.PersonPose(
+            header=H,
+            frame=3,
+            width=176,
+            height=144,
+            keypoints={
+                "head": s.Keypoint(position=(88.5, 40.25), confidence=0.99),
+                "right_hand": s.Keypoint(position=(60.0, 250.0), confidence=0.1),
+            },
+        ),
         s.DetectedObjects(
             header=_h(s.DetectedObjects),
             frame=3,

@@ -75,7 +75,11 @@ def test_the_live_view_shows_restarts() -> None:
         malformed=0, errors=0, restarts=3,
     )  # fmt: skip
     monitor = SimpleNamespace(
-        health_reports={"gestures": health}, posterior=None, prediction=None, description=None
+        health_reports={"gestures": health},
+        posterior=None,
+        prediction=None,
+        description=None,
+        poses=0,
     )
     console = Console(width=120, record=True)
     console.print(render(monitor, ["gestures", "reasoner"]))  # type: ignore[arg-type]

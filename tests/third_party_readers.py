@@ -89,3 +89,18 @@ def assert_trusted(report: dict[str, Any], path: Path) -> None:
     found = doctor(path)
     errors = [f for f in found["findings"] if f["severity"] in ("error", "warning")]
     assert found["errors"] == 0 and errors == [] and found["returncode"] == 0, found
+
+
+def official_schemas(node_modules: Path) -> dict[str, Any]:
+    """Foxglove's own JSON Schemas of its message types (@foxglove/schemas), by name."""
+    script = 'console.log(JSON.stringify(require("@foxglove/schemas/jsonschema")))'
+    done = subprocess.run(
+        ["node", "-e", script],
+        env={**os.environ, "NODE_PATH": str(node_modules)},
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    schemas: dict[str, Any] = json.loads(done.stdout)
+    return schemas

@@ -38,7 +38,7 @@ from beyond_self.runtime.recording import inspect_recording, read_recording, req
 from beyond_self.runtime.recording_damage import Losses
 from beyond_self.runtime.replay import Cue, looped, recorded_cues
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
-from beyond_self.schemas.keys import split_key
+from beyond_self.schemas.keys import TABLETOP_CAMERA, split_key
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import service_class
 
@@ -94,7 +94,7 @@ def inputs_of(cues: Iterable[Cue], hand: str, torso: str) -> Iterator[SkeletonIn
             yield SkeletonInput(
                 msg.header.stamp, msg.frame, joint.position, body.position if body else None
             )
-        elif isinstance(msg, CameraFrame | CompressedCameraFrame):
+        elif isinstance(msg, CameraFrame | CompressedCameraFrame) and split[1] in TABLETOP_CAMERA:
             yield CameraInput(msg.header.stamp, msg.header.seq, image_from_message(msg))
 
 

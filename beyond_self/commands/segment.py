@@ -173,13 +173,18 @@ def _print_table(report: dict[str, Any]) -> None:
 
 
 def camera_frames(path: Path) -> Iterator[tuple[int, np.ndarray]]:
-    """(stamp ns, RGB frame) of every camera message (raw or compressed) in a recording."""
+    """(stamp ns, RGB frame) of every tabletop camera message (raw or compressed) in a
+    recording (not a person's camera, schemas.keys.TABLETOP_CAMERA)."""
     from beyond_self.runtime.images import image_from_message
     from beyond_self.runtime.recording import read_recording
+    from beyond_self.schemas.keys import TABLETOP_CAMERA, split_key
     from beyond_self.schemas.messages import CameraFrame, CompressedCameraFrame
 
     for item in read_recording(path):
-        if item.cls not in (CameraFrame, CompressedCameraFrame):
+        split = split_key(item.key)
+        if item.cls not in (CameraFrame, CompressedCameraFrame) or split is None:
+            continue
+        if split[1] not in TABLETOP_CAMERA:
             continue
         msg = item.message()
         assert isinstance(msg, CameraFrame | CompressedCameraFrame)

@@ -1,6 +1,7 @@
 """`beyond up`: the whole pipeline, every service in its own process, on one machine.
 
-    beyond up [--recording FILE | --log DIR | --live-source module:function] [--config FILE]
+    beyond up [--recording FILE | --log DIR | --live-source module:function | --video FILE |
+               --camera INDEX] [--config FILE]
               [--profile all|robot|workstation|fleet-robot|fleet-workstation]
               [--robots PATTERN] [--rate R] [--no-live] [--timeout S]
               [--skip NAME] [--without NAME] [--wait-for NAME,...] [--until-stream-end]
@@ -61,6 +62,7 @@ from rich.console import Console
 from rich.live import Live
 
 from beyond_self.cognition.paths import DEMO_RECORDING
+from beyond_self.cognition.pose.video import CAMERA_INDEX_MAX, Video
 from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError, unknown
 from beyond_self.live_view import render
@@ -84,6 +86,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     source.add_argument("--recording", type=Path, help="MCAP recording to replay into the pipeline")
     source.add_argument("--log", type=Path, help="YARP hand log (the article's data.log)")
     source.add_argument("--live-source", metavar="MODULE:FUNCTION", help="live source plug-in")
+    source.add_argument(
+        "--video",
+        type=Path,
+        metavar="FILE",
+        help="watch a person in a video file, live at its own pace, through the pose model "
+        "(the camera extra); ends with the file",
+    )
+    source.add_argument(
+        "--camera",
+        type=argtypes.count(0, CAMERA_INDEX_MAX, "camera index"),
+        metavar="INDEX",
+        help="watch a person through a camera (OpenCV's index: 0 is /dev/video0) with the pose "
+        "model (the camera extra)",
+    )
     parser.add_argument("--config", help="YAML/JSON file with per-service options")
     parser.add_argument(
         "--profile",
@@ -410,7 +426,7 @@ async def watch(
     return ending
 
 
-def _source(args: argparse.Namespace) -> dict[str, str]:
+def _source(args: argparse.Namespace) -> dict[str, Any]:
     if args.recording is not None:
         require_mcap(args.recording)  # refused here, on one line, before anything starts
         return {"recording": str(args.recording)}
@@ -418,4 +434,9 @@ def _source(args: argparse.Namespace) -> dict[str, str]:
         return {"log": str(args.log)}
     if args.live_source is not None:
         return {"plugin": args.live_source}
+    if args.video is not None or args.camera is not None:
+        # refused here, on one line, before anything starts: a file that is no video, a
+        # camera that does not open (the ingest opens it again once the pipeline is up)
+        Video(args.video, camera=args.camera).close()
+        return {"video": str(args.video)} if args.video is not None else {"camera": args.camera}
     return {}

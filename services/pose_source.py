@@ -1,0 +1,147 @@
+"""A camera watching a person, as the ingest's live source: frames from a video file or a camera
+go through the pose model (cognition.pose) and become, with one stamp per frame, the person's
+image (`person_camera`, JPEG), their skeleton (`skeleton`, the joints the gesture models read)
+and where its joints are in the image (`person_pose`, to draw the pose over it). It has the
+shape of an ingest plug-in (an async iterator of `("person", PersonFrame)` items), run by the
+ingest itself, so the model runs where the camera is: on the robot's side. `beyond video` makes
+the same messages with `person_messages`, stamped with the video's frame times instead.
+
+A video file is watched as a camera would show it, at its own pace (its frame times against
+the wall clock); when the model is slower than the video, a frame more than one interval late
+is not estimated (shed, counted: its image is still published), so the pose keeps up with the
+picture instead of falling further behind. A frame with nobody in it gives no skeleton
+(counted).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from beyond_self.cognition.pose.skeleton import PoseEstimate, kinect_joints, pixel_joints
+from beyond_self.cognition.pose.video import Video
+from beyond_self.runtime.images import message_from_image
+from beyond_self.schemas import (
+    CompressedCameraFrame,
+    Header,
+    Joint,
+    Keypoint,
+    Message,
+    PersonPose,
+    SkeletonFrame,
+)
+
+PERSON_CAMERA_FRAME = "person_camera"  # the frame id of the person's images
+SKELETON_FRAME = "person"  # the skeleton's frame: the torso at the origin, OpenNI's axes
+JPEG_QUALITY = 80  # as the shipped recordings' camera
+
+
+@dataclass(frozen=True, eq=False)
+class PersonFrame:
+    """One frame of a pose source: frame `index` (0-based), its image, its pose if one was
+    estimated (None: nobody there, or shed)."""
+
+    index: int
+    rgb: np.ndarray
+    pose: PoseEstimate | None
+
+
+def person_messages(
+    header: Callable[[type[Message]], Header], frame: PersonFrame
+) -> list[tuple[str, Message]]:
+    """One frame's messages, each with its stream name (schemas.keys.STREAMS): the image, then
+    the skeleton and the pose in the image if a person was seen. `header(cls)` gives each its
+    header (one stamp for all three)."""
+    image = message_from_image(
+        header(CompressedCameraFrame),
+        frame.rgb,
+        fmt="jpeg",
+        quality=JPEG_QUALITY,
+        frame_id=PERSON_CAMERA_FRAME,
+    )
+    out: list[tuple[str, Message]] = [("person_camera", image)]
+    pose = frame.pose
+    if pose is None:
+        return out
+    joints = {
+        name: Joint(position=xyz, confidence=c) for name, (xyz, c) in kinect_joints(pose).items()
+    }
+    skeleton = SkeletonFrame(
+        header=header(SkeletonFrame),
+        frame=frame.index + 1,
+        joints=joints,
+        frame_id=SKELETON_FRAME,
+    )
+    keypoints = {
+        name: Keypoint(position=uv, confidence=joints[name].confidence)
+        for name, uv in pixel_joints(pose).items()
+    }
+    in_image = PersonPose(
+        header=header(PersonPose),
+        frame=frame.index + 1,
+        width=pose.width,
+        height=pose.height,
+        keypoints=keypoints,
+        frame_id=PERSON_CAMERA_FRAME,
+    )
+    return [*out, ("skeleton", skeleton), ("person_pose", in_image)]
+
+
+@dataclass
+class PoseCounts:
+    frames: int = 0  # read from the video or camera
+    skeletons: int = 0  # frames a person was seen in
+    no_person: int = 0  # estimated, nobody there
+    shed: int = 0  # not estimated: the model was more than a frame behind the video
+
+
+class PoseSource:
+    """`async for kind, payload in PoseSource(video=...)`: a video file or a camera, live."""
+
+    def __init__(self, *, video: str | None = None, camera: int | None = None) -> None:
+        self.video_path, self.camera = video, camera
+        self.counts = PoseCounts()
+
+    def __aiter__(self) -> AsyncIterator[tuple[str, Any]]:
+        return self._items()
+
+    async def _items(self) -> AsyncIterator[tuple[str, Any]]:
+        from beyond_self.cognition.pose.estimator import PoseEstimator
+
+        video = await asyncio.to_thread(Video, self.video_path, camera=self.camera)
+        try:
+            estimator = await asyncio.to_thread(PoseEstimator, video=True)
+            try:
+                frames = video.frames()
+                interval = 1e9 / video.fps
+                start: int | None = None
+                while True:
+                    frame = await asyncio.to_thread(next, frames, None)
+                    if frame is None:
+                        break
+                    self.counts.frames += 1
+                    if not video.is_camera:  # a file: shown at its own pace
+                        now = time.monotonic_ns()
+                        start = now - frame.time_ns if start is None else start
+                        due = start + frame.time_ns
+                        if now < due:
+                            await asyncio.sleep((due - now) / 1e9)
+                        elif now - due > interval:
+                            self.counts.shed += 1
+                            yield ("person", PersonFrame(frame.index, frame.rgb, None))
+                            continue
+                    pose = await asyncio.to_thread(estimator.estimate, frame.rgb)
+                    if pose is None:
+                        self.counts.no_person += 1
+                    else:
+                        self.counts.skeletons += 1
+                    yield ("person", PersonFrame(frame.index, frame.rgb, pose))
+            finally:
+                estimator.close()
+        finally:
+            video.close()
