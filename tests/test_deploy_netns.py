@@ -261,7 +261,10 @@ def test_split_deployment_survives_a_cut_link(
     recovered = sorted(recovering - live)
     every = set(range(1, len(ACTIONS) + 1))
     assert recovering == every
-    assert len(during) >= 2 and set(during) <= set(recovered), (during, recovered, live)
+    # a gesture the robot ended as the link went down may still have gone out live (the probe
+    # saw its end a moment after the cut); the others of the outage came from the cache only
+    assert len(during) >= 2 and set(during) <= set(recovered) | live, (during, recovered, live)
+    assert set(during) & set(recovered), (during, recovered, live)
 
     described_at = {e["segment"]: t for t, e in ws_events.where(event="described")}
     assert set(described_at) == every
