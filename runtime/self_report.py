@@ -27,13 +27,7 @@ def restarts() -> int:
 
 def health_header(name: str, seq: int, stamp: int) -> Header:
     """The header of service `name`'s `seq`-th health report, stamped `stamp`."""
-    return Header(
-        version=ServiceHealth.VERSION,
-        source=name,
-        seq=seq,
-        stamp=stamp,
-        correlation=f"{name}/health/{seq}",
-    )
+    return ServiceHealth.original_header(name, seq, stamp, chain="health")
 
 
 def health_of(service: Service, seq: int) -> ServiceHealth:

@@ -245,13 +245,7 @@ class Service:
         """Header of an original `cls` message (a sensor): own sequence, clock stamp."""
         seq = self._seq
         self._seq += 1
-        return Header(
-            version=cls.VERSION,
-            source=self.name,
-            seq=seq,
-            stamp=self.clock.now_ns() if stamp is None else stamp,
-            correlation=f"{self.name}/{seq}",
-        )
+        return cls.original_header(self.name, seq, self.clock.now_ns() if stamp is None else stamp)
 
     # --- health and progress -------------------------------------------------------------
 

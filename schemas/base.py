@@ -63,5 +63,15 @@ class Message(
         return cls.__name__
 
     @classmethod
+    def original_header(cls, source: str, seq: int, stamp: int, chain: str = "") -> Header:
+        """The header of a message that starts a chain (a sensor's, a health report): numbered
+        by its source, and its own correlation ("<source>[/<chain>]/<seq>"), which derived
+        messages copy along."""
+        correlation = f"{source}/{chain}/{seq}" if chain else f"{source}/{seq}"
+        return Header(
+            version=cls.VERSION, source=source, seq=seq, stamp=stamp, correlation=correlation
+        )
+
+    @classmethod
     def schema_name(cls) -> str:
         return cls.SCHEMA_NAME or f"beyond.{cls.__name__}"

@@ -52,14 +52,7 @@ def run(args: argparse.Namespace) -> int:
     def header_at(stamp: int) -> Callable[[type[Message]], Header]:
         def header(cls: type[Message]) -> Header:
             seq = seqs[cls] = seqs.get(cls, -1) + 1
-            stream = cls.type_name()
-            return Header(
-                version=cls.VERSION,
-                source=SOURCE,
-                seq=seq,
-                stamp=stamp,
-                correlation=f"{SOURCE}/{stream}/{seq}",
-            )
+            return cls.original_header(SOURCE, seq, stamp, chain=cls.type_name())
 
         return header
 
