@@ -44,6 +44,22 @@ async def collect(sub: RawSubscription, want: dict[str, int], timeout: float = 2
     return got
 
 
+async def health_once_all_handled(
+    bus: Bus, keys: s.Keys, timeout: float = 30
+) -> dict[str, s.ServiceHealth]:
+    """Both services' health once each has taken all N frames in: the last segment event can
+    come out before the segmenter has read the quiet frames after it."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        replies = await bus.query(keys.health(), s.ServiceHealth, timeout=5, every=True)
+        health = {r.message.service: r.message for r in replies}
+        handled = [h.messages_in for h in health.values()]
+        if (len(handled) == 2 and min(handled) >= N) or loop.time() > deadline:
+            return health
+        await asyncio.sleep(0.05)
+
+
 async def test_two_services_replay_twice_identical(tmp_path: Path) -> None:
     config = private_config()
     frames = skeleton_frames(N)
@@ -97,10 +113,7 @@ async def test_two_services_replay_twice_identical(tmp_path: Path) -> None:
                 else:
                     await replay(bus, recording, rate=None)
                     runs.append(await collect(sub, want))
-                health = {
-                    r.message.service: r.message
-                    for r in await bus.query(keys.health(), s.ServiceHealth, timeout=5)
-                }
+                health = await health_once_all_handled(bus, keys)
                 assert health["doubler"].malformed == 1
                 assert health["doubler"].messages_in == N
                 assert health["doubler"].messages_out == N
