@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from beyond_self.cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
 from beyond_self.cognition.gestures import GestureModels
 from beyond_self.cognition.gestures.default_models import pipeline_models
-from beyond_self.cognition.vision.clusters import ClusterModel
-from beyond_self.services.frame_describer import FrameDescriber
+
+if TYPE_CHECKING:  # the object segmenter's alone: imported when it first asks
+    from beyond_self.cognition.vision.clusters import ClusterModel
+    from beyond_self.services.frame_describer import FrameDescriber
 
 
 @functools.cache
@@ -32,6 +35,8 @@ def gesture_models(path: str | None) -> GestureModels:
 
 @functools.cache
 def clusters(path: str | None) -> ClusterModel:
+    from beyond_self.cognition.vision.clusters import ClusterModel
+
     return ClusterModel.load(path)
 
 
@@ -41,6 +46,8 @@ _describers: dict[tuple[str | None, int], tuple[FrameDescriber, int]] = {}
 def frame_describer(clusters: str | None, niceness: int) -> FrameDescriber:
     """The process's describer for these clusters and priority, started by the first run that
     asks; give it back with `release_describer` (the last one out stops it)."""
+    from beyond_self.services.frame_describer import FrameDescriber
+
     key = (clusters, niceness)
     describer, users = _describers.get(key) or (FrameDescriber(clusters, niceness), 0)
     _describers[key] = (describer, users + 1)

@@ -9,15 +9,45 @@ stream) or from a deadline in stream time. `analyse_recording` runs them offline
 recording, which is the specification a run on the bus must equal.
 """
 
-from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
-from beyond_self.cognition.episodes.objects import (
-    FrameObjects,
-    GestureEffects,
-    ObjectAtStart,
-    ObjectWatch,
-)
-from beyond_self.cognition.episodes.report import GestureReport
-from beyond_self.cognition.episodes.tracker import Belief, Cancelled, Ended, GestureTracker, Started
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
+    from beyond_self.cognition.episodes.objects import (
+        FrameObjects,
+        GestureEffects,
+        ObjectAtStart,
+        ObjectWatch,
+    )
+    from beyond_self.cognition.episodes.report import GestureReport
+    from beyond_self.cognition.episodes.tracker import (
+        Belief,
+        Cancelled,
+        Ended,
+        GestureTracker,
+        Started,
+    )
+
+# name -> the module holding it, imported on first use: the object watch pulls in SciPy's
+# image and clustering modules (about a CPU-second per process), which the gesture streamer
+# and the reasoner never use
+_HOMES = {
+    **dict.fromkeys(("Anticipation", "FusionJoin", "Outcome"), "fusion"),
+    **dict.fromkeys(("FrameObjects", "GestureEffects", "ObjectAtStart", "ObjectWatch"), "objects"),
+    "GestureReport": "report",
+    **dict.fromkeys(("Belief", "Cancelled", "Ended", "GestureTracker", "Started"), "tracker"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
+
 
 __all__ = [
     "Anticipation",

@@ -32,8 +32,6 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
-from scipy.cluster.vq import kmeans2
-from scipy.optimize import linear_sum_assignment
 
 from beyond_self.cognition.variables import AFFORDANCE_VARIABLES
 from beyond_self.core.errors import InputError, unknown
@@ -175,6 +173,9 @@ def learn_discretiser(
     scale = z.std(axis=0) if standardize else np.ones(z.shape[1])
     scale = np.where(scale > 1e-12, scale, 1.0)
     zs = (z - offset) / scale
+    from scipy.cluster.vq import kmeans2  # learning only: a service that applies clusters
+    # never pays for SciPy's clustering modules at start-up
+
     rng = np.random.default_rng(seed)
     best: tuple[float, np.ndarray, np.ndarray] | None = None
     for _ in range(restarts):
@@ -216,6 +217,8 @@ def name_by_majority(
         if t not in index:
             raise unknown("ground-truth value", t, list(values))
         table[a, index[t]] += 1
+    from scipy.optimize import linear_sum_assignment  # learning only, as kmeans2
+
     rows, cols = linear_sum_assignment(-table)
     names = [""] * k
     for r, c in zip(rows, cols, strict=True):
