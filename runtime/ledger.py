@@ -27,6 +27,7 @@ copies others kept) are merged, since what a service has handled only grows. A s
 
 from __future__ import annotations
 
+import asyncio
 import bisect
 import contextlib
 import logging
@@ -167,6 +168,12 @@ class LedgerBook:
 # busy on a loaded machine may take seconds, and its answer is what keeps a sentence from being
 # said twice (the query ends as soon as every service has answered)
 ASK_TIMEOUT_S = 10.0
+# a restarted service asks again until its predecessor's record is among the answers: a session
+# just opened may not know the others' queryables yet, and its first query then ends at once
+# with no answer at all (seen under load: a restarted reasoner took itself for a first one and
+# waited for a gesture its predecessor had finished, the pipeline stalled; a restarted speech
+# service said a sentence again)
+ASK_AGAIN_S = 0.1
 
 
 class Keeper:
@@ -185,17 +192,30 @@ class Keeper:
         self._pub: Publisher[Ledger] | None = None
         self._dirty = False
 
-    async def ask(self, bus: Bus, log: logging.Logger) -> None:
+    async def ask(self, bus: Bus, log: logging.Logger, *, restarted: bool = False) -> None:
         """What the others know (their ledgers, and the copies they kept of everyone's, this
-        service's predecessor's among them): called before the service opens its streams."""
+        service's predecessor's among them): called before the service opens its streams.
+        `restarted` (its supervisor says so): ask until the predecessor's record is among the
+        answers, for at most ASK_TIMEOUT_S; it is somewhere unless the predecessor died before
+        its first ledger went out."""
         began = time.monotonic()
-        with contextlib.suppress(InputError, TimeoutError):  # a malformed one: no ledgers
-            replies = await bus.query(bus.keys.ledger(), Ledger, timeout=ASK_TIMEOUT_S, every=True)
-            for reply in replies:
-                self.book.heard(reply.message)
+        while True:
+            left = ASK_TIMEOUT_S - (time.monotonic() - began)
+            with contextlib.suppress(InputError, TimeoutError):  # a malformed one: no ledgers
+                replies = await bus.query(
+                    bus.keys.ledger(), Ledger, timeout=max(left, ASK_AGAIN_S), every=True
+                )
+                for reply in replies:
+                    self.book.heard(reply.message)
+            if not restarted or self.name in self.book.handled or left <= ASK_AGAIN_S:
+                break
+            await asyncio.sleep(ASK_AGAIN_S)
+        took = round(time.monotonic() - began, 3)
         if self.name in self.book.handled:
-            took = round(time.monotonic() - began, 3)
             event(log, logging.INFO, "resuming after a previous instance", asked_s=took)
+        elif restarted:
+            event(log, logging.WARNING, "restarted, but no service kept a record of the "
+                  "previous instance: starting afresh", asked_s=took)  # fmt: skip
 
     def predecessor(self) -> dict[str, int]:
         """The numbers the previous instance of this service left to resume from ({} if none)."""

@@ -36,7 +36,13 @@ from beyond_self.runtime.log import event
 from beyond_self.runtime.progress import ProgressReport
 from beyond_self.runtime.publisher import Publisher
 from beyond_self.runtime.queries import PlainQueryHandler, QueryHandler
-from beyond_self.runtime.self_report import health_of, log_recovery, recovery_of, stop_counts
+from beyond_self.runtime.self_report import (
+    health_of,
+    log_recovery,
+    recovery_of,
+    restarts,
+    stop_counts,
+)
 from beyond_self.runtime.subscription import Handler, Received, Subscription, consume
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
@@ -347,7 +353,8 @@ class Service:
         installed = process.install_signals(self.stop) if install_signals else []
         undeclare_token: Callable[[], None] | None = None
         try:
-            await self.ledgers.ask(self.bus, self.log)  # before setup: a restarted one resumes
+            # before setup: a restarted one resumes
+            await self.ledgers.ask(self.bus, self.log, restarted=restarts() > 0)
             await self.setup()
             self.ledgers.adopt(self._once)
             self.spawn(self.ledgers.open(self.bus, self.report_error), "ledger")
