@@ -210,7 +210,8 @@ def _service_grants(d: Declaration, robots: str) -> list[Grant]:
         ("in", _IN_EG, "egress", inputs),
         ("serve", ["declare_queryable", "reply"], "ingress", serves),
         ("serve", ["query"], "egress", serves),
-        ("alive", ["liveliness_token"], "ingress", [key(f"{ALIVE}/{d.name}")]),
+        # its own token, and as a fleet's process the token saying which host serves a robot
+        ("alive", ["liveliness_token"], "ingress", [key(f"{ALIVE}/{d.name}/**")]),
         ("watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", alive),
         ("watch", ["liveliness_token"], "egress", alive),
     ]

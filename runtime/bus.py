@@ -74,7 +74,11 @@ class Bus:
         """The same session seen as robot `robot`'s bus (its keys), for one robot a fleet's
         service serves (runtime.fleet): closing it undeclares what was opened through it, and
         leaves the session open (the caller closes it when the robot leaves)."""
-        view = Bus(self.session, self.config.with_(robot=robot, robots=None), owns_session=False)
+        view = Bus(
+            self.session,
+            self.config.with_(robot=robot, robots=None, standby=None),
+            owns_session=False,
+        )
         return view
 
     @classmethod

@@ -54,6 +54,8 @@ ENV_VARS: dict[str, str] = {
     "BEYOND_ROBOT": "robot name, the second chunk of every key (default 'robot')",
     "BEYOND_ROBOTS": "the robots a workstation's services serve, a pattern such as 'lab-*' "
     "(default: the one robot BEYOND_ROBOT)",
+    "BEYOND_STANDBY": "robots a fleet workstation serves only while no other host does, a "
+    "pattern such as 'lab-b*': it takes over another workstation's robots when it dies",
     "BEYOND_ZENOH_CONFIG": "path of a Zenoh JSON5 config file used as the base",
     "BEYOND_ZENOH_MODE": "peer | client | router (default peer)",
     "BEYOND_ZENOH_CONNECT": "comma-separated endpoints to connect to, e.g. tcp/10.0.0.2:7447",
@@ -75,6 +77,8 @@ class BusConfig:
     # the robots a fleet's workstation services serve (schemas.keys.robot_pattern; None: the
     # one robot `robot`); the workstation's own presence is then under `robot`
     robots: str | None = None
+    # robots served only while no other workstation serves them (runtime.fleet: failover)
+    standby: str | None = None
     mode: str = "peer"
     connect: tuple[str, ...] | None = None
     listen: tuple[str, ...] | None = None
@@ -92,6 +96,10 @@ class BusConfig:
         check_name("robot", self.robot)
         if self.robots is not None:
             object.__setattr__(self, "robots", robot_pattern(self.robots))
+        if self.standby is not None:
+            object.__setattr__(self, "standby", robot_pattern(self.standby))
+            if self.robots is None:
+                raise InputError("a standby workstation serves robots of its own too: --robots")
         if self.mode not in MODES:
             raise InputError(f"unknown Zenoh mode {self.mode!r}; valid: {', '.join(MODES)}")
         if self.secure is not None and self.mode == "peer":
@@ -131,6 +139,8 @@ class BusConfig:
             env["BEYOND_ZENOH_IDENTITY"] = self.identity
         if self.robots is not None:
             env["BEYOND_ROBOTS"] = self.robots
+        if self.standby is not None:
+            env["BEYOND_STANDBY"] = self.standby
         return env
 
     def endpoints(self) -> tuple[list[str], list[str]]:
@@ -180,6 +190,7 @@ def load_config(
     *,
     robot: str | None = None,
     robots: str | None = None,
+    standby: str | None = None,
     mode: str | None = None,
     connect: list[str] | None = None,
     listen: list[str] | None = None,
@@ -208,6 +219,7 @@ def load_config(
     return BusConfig(
         robot=robot or env.get("BEYOND_ROBOT") or DEFAULT_ROBOT,
         robots=robots or env.get("BEYOND_ROBOTS") or None,
+        standby=standby or env.get("BEYOND_STANDBY") or None,
         mode=mode or env.get("BEYOND_ZENOH_MODE") or ("client" if keystore else "peer"),
         secure=Path(keystore) if keystore else None,
         identity=identity or env.get("BEYOND_ZENOH_IDENTITY") or None,

@@ -18,6 +18,15 @@ business: a restarted ingest, back within seconds, keeps its robot's run, and so
 robot back after that starts afresh, as a new stream of its own). The host itself is alive under
 the workstation's own name (`beyond/<robot>/alive/<service>` of its config's `robot`), which
 must not be one of the robots it serves.
+
+Partitioning and failover: one robot's service is served by exactly one workstation. A run
+holds a token saying which host serves it (`Keys.server`); a workstation serves the robots of
+its `robots` pattern at once and those of its `standby` pattern (another workstation's) only
+once no host has served them for `takeover_after_s` (3 s, or $BEYOND_TAKEOVER_S), and never a
+robot another host serves. A workstation SIGKILLed mid-gesture loses its tokens with its
+session; its standby's new run is a restarted service (runtime.ledger): it asks the robot's
+ledgers, resumes from the checkpoints and caches, and describes what is left, once. Two hosts
+that both serve a robot (started together, a link back) settle it by name: the greater yields.
 """
 
 from __future__ import annotations
@@ -36,7 +45,7 @@ from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.config import BusConfig
 from beyond_self.runtime.log import event
 from beyond_self.runtime.self_report import health_header, restarts
-from beyond_self.schemas.keys import ALIVE, PREFIX, Keys, robot_matches, split_key
+from beyond_self.schemas.keys import Keys, for_robots, robot_matches, split_key
 from beyond_self.schemas.messages import ServiceHealth
 
 if TYPE_CHECKING:
@@ -45,17 +54,26 @@ if TYPE_CHECKING:
 PRESENCE = "ingest"  # a robot is there while its source is
 LEAVE_AFTER_S = 30.0
 LEAVE_ENV = "BEYOND_ROBOT_LEAVE_S"  # another wait (s): a test's robots leave and come back
+# a standby waits this long with a robot unserved before it serves it: longer than a host's own
+# runs take to declare their tokens, so a standby never races a workstation starting up
+TAKEOVER_AFTER_S = 3.0
+TAKEOVER_ENV = "BEYOND_TAKEOVER_S"
 
 
-def leave_after_s_env() -> float:
-    text = os.environ.get(LEAVE_ENV)
+def seconds_env(name: str, default: float) -> float:
+    """A wall-clock wait from the environment (the machine's business, never an output's)."""
+    text = os.environ.get(name)
     try:
-        value = float(text) if text else LEAVE_AFTER_S
+        value = float(text) if text else default
     except ValueError:
         value = -1.0
     if not 0 <= value < float("inf"):
-        raise InputError(f"{LEAVE_ENV}={text!r}; valid: a number of seconds >= 0")
+        raise InputError(f"{name}={text!r}; valid: a number of seconds >= 0")
     return value
+
+
+def leave_after_s_env() -> float:
+    return seconds_env(LEAVE_ENV, LEAVE_AFTER_S)
 
 
 @dataclass
@@ -78,24 +96,38 @@ class Fleet:
         *,
         bus: Bus | None = None,
         leave_after_s: float | None = None,
+        takeover_after_s: float | None = None,
     ) -> None:
         if config.robots is None:
             raise InputError("a fleet's service needs the robots it serves (--robots PATTERN)")
-        if robot_matches(config.robots, config.robot):
-            raise InputError(
-                f"the workstation's own name {config.robot!r} is one of the robots it serves "
-                f"({config.robots}); give it another with --robot"
-            )
+        for pattern in (config.robots, config.standby):
+            if pattern is not None and robot_matches(pattern, config.robot):
+                raise InputError(
+                    f"the workstation's own name {config.robot!r} is one of the robots it "
+                    f"serves ({pattern}); give it another with --robot"
+                )
         self.cls = cls
         self.name: str = cls.name
         self.config = config
         self.pattern = config.robots
+        self.standby = config.standby
+        self.host = config.robot  # the workstation's own name: its runs' server tokens say it
         self.options = dict(options or {})
         self.leave_after_s = leave_after_s if leave_after_s is not None else leave_after_s_env()
+        self.takeover_after_s = (
+            takeover_after_s
+            if takeover_after_s is not None
+            else seconds_env(TAKEOVER_ENV, TAKEOVER_AFTER_S)
+        )
         self.runs: dict[str, Run] = {}
         self.failed: dict[str, str] = {}  # robot -> why its run ended on its own
+        self.present: set[str] = set()  # robots whose source is there
+        self.served_by: dict[str, set[str]] = {}  # robot -> the other hosts serving it
+        self.takeovers = 0  # robots this host began serving after no other host did
         self._bus = bus
         self._leaving: dict[str, asyncio.TimerHandle] = {}
+        self._takeover: dict[str, asyncio.TimerHandle] = {}
+        self._server_tokens: dict[str, Callable[[], None]] = {}
         self._stop = asyncio.Event()
         self._health_seq = 0
         self.started_at = time.monotonic()
@@ -116,7 +148,10 @@ class Fleet:
         bus = self._bus
         installed = process.install_signals(self.stop) if install_signals else []
         try:
-            bus.watch_tokens(f"{PREFIX}/{self.pattern}/{ALIVE}/{PRESENCE}", self._presence)
+            for pattern in self._patterns:
+                keys = Keys()  # any robot's: for_robots puts the pattern in its place
+                bus.watch_tokens(for_robots(pattern, keys.alive(PRESENCE)), self._presence)
+                bus.watch_tokens(for_robots(pattern, keys.server(self.name)), self._server)
             own = Keys(self.config.robot)
 
             async def answer_health(_key: str, _request: None) -> ServiceHealth:
@@ -127,7 +162,7 @@ class Fleet:
             event(self.log, logging.INFO, "serving robots", service=self.name, robots=self.pattern)
             await self._stop.wait()
         finally:
-            for handle in self._leaving.values():
+            for handle in [*self._leaving.values(), *self._takeover.values()]:
                 handle.cancel()
             await asyncio.gather(*(self._drop(robot) for robot in list(self.runs)))
             for sig in installed:
@@ -156,20 +191,73 @@ class Fleet:
             restarts=restarts(),
         )
 
+    @property
+    def _patterns(self) -> list[str]:
+        assert self.pattern is not None  # checked at construction
+        return [self.pattern] + ([self.standby] if self.standby is not None else [])
+
+    def _primary(self, robot: str) -> bool:
+        return self.pattern is not None and robot_matches(self.pattern, robot)
+
     def _presence(self, key: str, present: bool) -> None:
         split = split_key(key)
         if split is None or self._stop.is_set():
             return
         robot = split[0]
         if present:
+            self.present.add(robot)
             pending = self._leaving.pop(robot, None)
             if pending is not None:
                 pending.cancel()
-            if robot not in self.runs:
-                self._start(robot)
-        elif robot in self.runs and robot not in self._leaving:
+            self._review(robot)
+        else:
+            self.present.discard(robot)
+            self._review(robot)
+            if robot in self.runs and robot not in self._leaving:
+                loop = asyncio.get_running_loop()
+                self._leaving[robot] = loop.call_later(self.leave_after_s, self._left, robot)
+
+    def _server(self, key: str, present: bool) -> None:
+        """Another host's run began or stopped serving a robot's service."""
+        split = split_key(key)
+        if split is None or self._stop.is_set():
+            return
+        robot, host = split[0], key.rsplit("/", 1)[1]
+        if host == self.host:
+            return  # this host's own runs
+        hosts = self.served_by.setdefault(robot, set())
+        (hosts.add if present else hosts.discard)(host)
+        self._review(robot)
+
+    def _review(self, robot: str) -> None:
+        """Serve `robot` if it is there and no other host does; yield it to a host whose
+        name sorts first if both do."""
+        others = self.served_by.get(robot, set())
+        if robot in self.runs:
+            if any(host < self.host for host in others):
+                event(self.log, logging.INFO, "robot served elsewhere: yielding",
+                      service=self.name, robot=robot, to=min(others))  # fmt: skip
+                asyncio.get_running_loop().create_task(self._drop(robot))
+            return
+        if robot not in self.present or others:
+            pending = self._takeover.pop(robot, None)
+            if pending is not None:
+                pending.cancel()
+            return
+        if self._primary(robot):
+            self._start(robot)
+        elif robot not in self._takeover:
             loop = asyncio.get_running_loop()
-            self._leaving[robot] = loop.call_later(self.leave_after_s, self._left, robot)
+            self._takeover[robot] = loop.call_later(self.takeover_after_s, self._take, robot)
+
+    def _take(self, robot: str) -> None:
+        """A standby's wait is over: the robot is still there and served by no host."""
+        self._takeover.pop(robot, None)
+        if robot in self.present and not self.served_by.get(robot) and robot not in self.runs:
+            self.takeovers += 1
+            event(self.log, logging.WARNING, "serving a robot no host serves",
+                  service=self.name, robot=robot, waited_s=self.takeover_after_s)  # fmt: skip
+            self._start(robot)
 
     def _left(self, robot: str) -> None:
         self._leaving.pop(robot, None)
@@ -178,12 +266,15 @@ class Fleet:
 
     def _start(self, robot: str) -> None:
         bus = self._host_bus().for_robot(robot)
-        config = self.config.with_(robot=robot, robots=None)
+        config = self.config.with_(robot=robot, robots=None, standby=None)
         service = self.cls(config=config, bus=bus, **self.options)
         task = asyncio.get_running_loop().create_task(
             service.run(install_signals=False), name=f"{self.name}: {robot}"
         )
         self.runs[robot] = Run(service, task, bus)
+        self._server_tokens[robot] = self._host_bus().declare_token(
+            Keys(robot).server(self.name, self.host)
+        )
         task.add_done_callback(self._ended(robot))
         event(self.log, logging.INFO, "robot joined", service=self.name, robot=robot)
 
@@ -196,6 +287,7 @@ class Fleet:
             self.log.error("robot %s: %s", robot, why)  # that robot's run only; others go on
             run = self.runs.pop(robot, None)
             if run is not None:
+                self._no_longer_serving(robot)
                 run.bus.close()
 
         return ended
@@ -206,7 +298,13 @@ class Fleet:
             return
         run.service.stop()
         await asyncio.gather(run.task, return_exceptions=True)
+        self._no_longer_serving(robot)
         run.bus.close()
+
+    def _no_longer_serving(self, robot: str) -> None:
+        undeclare = self._server_tokens.pop(robot, None)
+        if undeclare is not None:
+            undeclare()
 
     def _host_bus(self) -> Bus:
         if self._bus is None:

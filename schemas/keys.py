@@ -72,6 +72,13 @@ def robot_pattern(text: str) -> str:
     return chunk
 
 
+def for_robots(pattern: str, key: str) -> str:
+    """`key` (of any one robot, e.g. `Keys().alive("ingest")`) for every robot `pattern`
+    (robot_pattern's) names: its robot chunk replaced, the rest as `Keys` made it."""
+    prefix, _robot, rest = key.split("/", 2)
+    return f"{prefix}/{pattern}/{rest}"
+
+
 def robot_matches(pattern: str, robot: str) -> bool:
     """Whether robot name `robot` is one of the robots `pattern` (robot_pattern's) names."""
     regex = ".*".join(re.escape(part) for part in pattern.split("$*"))
@@ -181,6 +188,12 @@ class Keys:
     def alive(self, service: str = "*") -> str:
         """Liveliness token key of one service, or of all with the default "*"."""
         return f"{self.root}/{ALIVE}/{_service_chunk(service)}"
+
+    def server(self, service: str, host: str = "*") -> str:
+        """Liveliness token of the fleet workstation `host` serving this robot's `service`
+        (runtime.fleet), or of any with the default "*": who serves it, so that exactly one
+        does. Under the service's own token (`alive/<service>/**` in the access rules)."""
+        return f"{self.alive(service)}/{_service_chunk(host)}"
 
 
 def _service_chunk(service: str) -> str:

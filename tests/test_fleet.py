@@ -124,6 +124,106 @@ async def test_a_run_per_robot_that_comes_dropped_when_it_leaves() -> None:
         Fleet(Echo, BusConfig(robot="lab-9", robots="lab-*"))
 
 
+class Voice(Service):
+    """A robot's voice, as the speech service: says each description once (by identity),
+    and keeps the robot's ledgers (a workstation that takes over resumes from them)."""
+
+    name = "voice"
+    subscribes = ("description",)
+    publishes = ()
+    serves = ()
+
+    async def setup(self) -> None:
+        self.said: list[int] = []
+        keys = self.bus.keys
+        self.subscribe(keys.description, Description, self.on_description, EVENTS, once=True)
+
+    def on_description(self, msg: Description) -> None:
+        self.said.append(msg.segment_id)
+
+
+TAKEOVER_S = 1.0  # the standby's wait: far above a token's way across one machine
+
+
+async def test_a_standby_takes_over_a_dead_workstations_robots_and_repeats_nothing() -> None:
+    """ws-a serves lab-a*, ws-b lab-b*, each the other's standby. ws-a dies (its session goes,
+    tokens and all): ws-b serves lab-a1 too, from the robot's ledgers, and each gesture of
+    each robot is said once. ws-a back: still exactly one host per robot."""
+    config = private_config()
+    a_config = config.with_(robot="ws-a", robots="lab-a*", standby="lab-b*")
+    b_config = config.with_(robot="ws-b", robots="lab-b*", standby="lab-a*")
+    loop = asyncio.get_running_loop()
+
+    def start(fleet: Fleet) -> asyncio.Task[None]:
+        return loop.create_task(fleet.run(install_signals=False))
+
+    with Bus.open(config) as robots, Bus.open(config) as b_bus:
+        a_bus = Bus.open(config)
+        a = Fleet(Echo, a_config, bus=a_bus, takeover_after_s=TAKEOVER_S)
+        b = Fleet(Echo, b_config, bus=b_bus, takeover_after_s=TAKEOVER_S)
+        tasks = [start(a), start(b)]
+        voices, words = {}, {}
+        for name in ("lab-a1", "lab-b1"):
+            robot = robots.for_robot(name)
+            voices[name] = Voice(bus=robot, health_period=0.05)
+            tasks.append(start_service(voices[name]))
+            robot.declare_token(robot.keys.alive("ingest"))
+            words[name] = robot.publisher(robot.keys.words, WordProbabilities, EVENTS)
+        try:
+            await wait_until(
+                "each its own", lambda: (a.robots, b.robots) == (["lab-a1"], ["lab-b1"])
+            )
+            for seg in (1, 2):
+                for name in voices:
+                    words[name].put(final_words(seg))
+            await wait_until("two each", lambda: all(len(v.said) == 2 for v in voices.values()))
+
+            tasks[0].cancel()  # ws-a dies: its runs stop, its session closes with its tokens
+            a_bus.close()
+            await wait_until("ws-b serving both", lambda: b.robots == ["lab-a1", "lab-b1"])
+            assert b.takeovers == 1 and a.takeovers == 0
+            for name in voices:
+                words[name].put(final_words(3))
+            await wait_until("three each", lambda: all(3 in v.said for v in voices.values()))
+
+            a_bus = Bus.open(config)  # ws-a back, as its supervisor would start it
+            a = Fleet(Echo, a_config, bus=a_bus, takeover_after_s=TAKEOVER_S)
+            tasks[0] = start(a)
+            await wait_until(
+                "ws-a knows who serves lab-a1",
+                lambda: bool(a.served_by.get("lab-a1") or b.served_by.get("lab-a1")),
+            )
+            await wait_until(
+                "one host per robot",
+                lambda: (
+                    len([f for f in (a, b) if "lab-a1" in f.robots]) == 1
+                    and len([f for f in (a, b) if "lab-b1" in f.robots]) == 1
+                ),
+            )
+            for name in voices:
+                words[name].put(final_words(4))
+            await wait_until("four each", lambda: all(4 in v.said for v in voices.values()))
+        finally:
+            for fleet in (a, b):
+                fleet.stop()
+            for voice in voices.values():
+                voice.stop()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            a_bus.close()
+        for name, voice in voices.items():
+            assert voice.said == [1, 2, 3, 4], (name, voice.said)  # each once, none lost
+
+
+def start_service(service: Service) -> asyncio.Task[None]:
+    return asyncio.get_running_loop().create_task(service.run(install_signals=False))
+
+
+def final_words(seg: int) -> WordProbabilities:
+    return WordProbabilities(
+        header=_header(seg), segment_id=seg, words={}, evidence={}, action_belief={}, final=True
+    )
+
+
 def _header(seq: int) -> Header:
     return Header(version=1, source="test", seq=seq, stamp=10**18 + seq, correlation="t")
 

@@ -34,6 +34,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "describer; default: the one robot --robot), a run per robot while its ingest is alive "
         "($BEYOND_ROBOTS)",
     )
+    parser.add_argument(
+        "--standby",
+        metavar="PATTERN",
+        help="with --robots: also serve the robots PATTERN matches while no other workstation "
+        "does, taking over a dead workstation's robots ($BEYOND_STANDBY)",
+    )
     add_bus_arguments(parser)
 
 
@@ -59,8 +65,10 @@ def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
     config = config_from_args(args)
-    if args.robots is not None:
-        config = config.with_(robots=args.robots)
+    if args.robots is not None or args.standby is not None:
+        config = config.with_(
+            robots=args.robots or config.robots, standby=args.standby or config.standby
+        )
     if config.robots is None:
         exit_process(cls.main(config=config, **options))
     if not cls.fleet:  # a robot's source or voice

@@ -3,7 +3,7 @@
     beyond up [--recording FILE | --log DIR | --live-source module:function | --video FILE |
                --camera INDEX] [--config FILE]
               [--profile all|robot|workstation|fleet-robot|fleet-workstation]
-              [--robots PATTERN] [--rate R] [--no-live] [--timeout S]
+              [--robots PATTERN [--standby PATTERN]] [--rate R] [--no-live] [--timeout S]
               [--skip NAME] [--without NAME] [--wait-for NAME,...] [--until-stream-end]
               [bus options]
 
@@ -41,6 +41,8 @@ A fleet (README, "A fleet"): `--profile fleet-workstation --robots 'lab-*' --rob
 gestures, objects, reasoner and describer once each, serving every robot named lab-... whose
 source appears (runtime/fleet.py; the workstation's own name is `--robot`); each robot runs
 `--profile fleet-robot` (ingest and speech) with `--wait-for gestures,objects,reasoner,describer`.
+Failover: a second workstation `--robots 'lab-b*' --standby 'lab-a*'` serves lab-b... and takes
+over lab-a... when the first one dies (each robot's service served by exactly one workstation).
 
 `--secure DIR` (README, "Securing a deployment"): every certificate the side needs is checked
 first, then the side starts its own router (TLS, the generated access rules; linked with the
@@ -160,6 +162,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--profile fleet-workstation; default: the one robot --robot)",
     )
     parser.add_argument(
+        "--standby",
+        metavar="PATTERN",
+        help="also serve the robots PATTERN matches, but only while no other workstation "
+        "does (failover: takes over another workstation's robots when it dies); with --robots",
+    )
+    parser.add_argument(
         "--until-stream-end",
         action="store_true",
         help="exit once the (remote) source has ended and every gesture is described",
@@ -169,7 +177,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
-    if args.robots is not None:
+    if args.robots is not None or args.standby is not None:
         config = fleet_config(args, config)
     if args.profile.endswith("workstation") and _mode_unset(args, config):
         config = config.with_(mode="client")
@@ -220,7 +228,7 @@ def fleet_config(args: argparse.Namespace, config: BusConfig) -> BusConfig:
             f"--robots: profile {args.profile} has {', '.join(single)}, which serve one robot; "
             "use --profile fleet-workstation"
         )
-    return config.with_(robots=args.robots)
+    return config.with_(robots=args.robots or config.robots, standby=args.standby or config.standby)
 
 
 def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:
