@@ -58,6 +58,15 @@ LEAVE_ENV = "BEYOND_ROBOT_LEAVE_S"  # another wait (s): a test's robots leave an
 # runs take to declare their tokens, so a standby never races a workstation starting up
 TAKEOVER_AFTER_S = 3.0
 TAKEOVER_ENV = "BEYOND_TAKEOVER_S"
+# and this much longer per stage after it in the pipeline: the sink takes over first, so that a
+# producer's new run finds its consumers' new instances (which have handled nothing yet) and
+# sends them what they need to rebuild, rather than withholding it on the word of the dead ones
+TAKEOVER_STEP_S = 1.5
+
+
+def takeover_after_s(stages_after: int) -> float:
+    """The standby's wait for a service with `stages_after` services after it."""
+    return seconds_env(TAKEOVER_ENV, TAKEOVER_AFTER_S) + TAKEOVER_STEP_S * stages_after
 
 
 def seconds_env(name: str, default: float) -> float:

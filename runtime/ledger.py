@@ -15,13 +15,17 @@ killed and restarted service neither stall nor repeat anything:
    republish a whole run of predictions: it sends what its consumers lack, and only that. It
    suppresses only what consumers *handled* (never what its predecessor merely put: a put can
    die in the process's send queue), so nothing is lost, and what goes out twice (a message
-   still in a consumer's queue when it asked) is skipped there by rule 1.
+   still in a consumer's queue when it asked) is skipped there by rule 1. Handled by the
+   consumer's instance alive now: one replaced with the producer (a workstation taken over,
+   runtime.fleet) has handled nothing yet and gets what it needs to rebuild its state.
 3. A service whose handling is a side effect (speech: a sentence said; the describer: a
    description made) takes its predecessor's `Handled` for those inputs (`once`), from the
    copies the others kept, and does not act again on what its predecessor acted on.
 
 The book answers per service; several copies of one service's ledger (its own answer, the
-copies others kept) are merged, since what a service has handled only grows. A service's
+copies others kept) are merged, since what a service has handled only grows; each ledger says
+which instance of its service wrote it (the predecessor's plus one), and the newest instance's
+is also kept apart (rule 2). A service's
 `resume` numbers (its checkpoint) are taken from whichever copy is newest by stamp.
 """
 
@@ -126,29 +130,43 @@ class Handled:
 
 class LedgerBook:
     """The last word of every service of a robot on what it handled (its own `Ledger`s, heard
-    or asked), merged per service."""
+    or asked): merged over its instances (what was done, what a successor takes over), and
+    that of its newest instance alone (what the one alive now has)."""
 
     def __init__(self) -> None:
         self.handled: dict[str, Handled] = {}
+        self.current: dict[str, tuple[int, Handled]] = {}  # service -> (instance, its handled)
         self.resume: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, numbers)
         self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
 
     def heard(self, ledger: Ledger) -> None:
         name = ledger.service
         self.handled.setdefault(name, Handled()).merge(ledger.handled)
+        instance, handled = self.current.get(name, (-1, Handled()))
+        if ledger.instance > instance:
+            instance, handled = ledger.instance, Handled()
+            self.current[name] = (instance, handled)
+        if ledger.instance == instance:
+            handled.merge(ledger.handled)
+            self.last[name] = ledger
         stamp, _ = self.resume.get(name, (-1, {}))
         numbers = {**ledger.resume, **ledger.resume_stamps}
         if numbers and ledger.header.stamp >= stamp:
             self.resume[name] = (ledger.header.stamp, numbers)
-        self.last[name] = ledger
+
+    def instance_of(self, service: str) -> int:
+        """The newest instance of `service` heard of (-1: none)."""
+        return self.current.get(service, (-1, Handled()))[0]
 
     def resume_of(self, service: str) -> dict[str, int]:
         return dict(self.resume.get(service, (-1, {}))[1])
 
     def consumers_have(self, key: str, ident: Identity, producer: str) -> bool:
-        """Every service (but `producer`) that takes `key` has handled `ident`, and there is at
-        least one: what a restarted producer need not send again."""
-        takers = [h for n, h in self.handled.items() if n != producer and key in h.keys]
+        """Every service (but `producer`) that takes `key` has handled `ident` in its instance
+        alive now, and there is at least one: what a restarted producer need not send again.
+        A consumer restarted too has handled none of it yet, and may need it to rebuild its
+        state (the object segmenter, a gesture under way)."""
+        takers = [h for n, (_, h) in self.current.items() if n != producer and key in h.keys]
         return bool(takers) and all(h.has(key, ident) for h in takers)
 
     def done(self, key: str, kind: str, producer: str) -> set[int]:
@@ -184,6 +202,7 @@ class Keeper:
         self.name = name
         self.handled = Handled()
         self.book = LedgerBook()
+        self.instance = 0  # its predecessor's plus one, once it has asked
         self.duplicates = 0  # messages skipped: their identity was handled already
         # what this service's next instance resumes from (its checkpoint)
         self.resume: dict[str, int] = {}
@@ -210,6 +229,7 @@ class Keeper:
             if not restarted or self.name in self.book.handled or left <= ASK_AGAIN_S:
                 break
             await asyncio.sleep(ASK_AGAIN_S)
+        self.instance = self.book.instance_of(self.name) + 1
         took = round(time.monotonic() - began, 3)
         if self.name in self.book.handled:
             event(log, logging.INFO, "resuming after a previous instance", asked_s=took)
@@ -253,6 +273,7 @@ class Keeper:
         return Ledger(
             header=self._header(Ledger, None),
             service=self.name,
+            instance=self.instance,
             handled=self.handled.wire(),
             resume=dict(self.resume),
             resume_stamps=dict(self.resume_stamps),

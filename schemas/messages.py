@@ -489,9 +489,15 @@ class Ledger(Message, frozen=True):
     exceed 2^53, and the JSON form writes them as times.
     Every service publishes its own on `ledger/<service>` when it changes, keeps the last one
     of every other service of its robot, and answers for all of them on query, so a service's
-    record outlives the service."""
+    record outlives the service.
+    Version 2: `instance`, which instance of the service this is (its predecessor's plus one):
+    a producer withholds only what the consumer's instance alive now has handled, so a
+    consumer replaced with it (a workstation taken over) gets what it needs to rebuild."""
+
+    VERSION: ClassVar[int] = 2
 
     service: Name
+    instance: Count = 0
     handled: Annotated[
         dict[
             Text,

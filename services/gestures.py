@@ -36,6 +36,8 @@ from beyond_self.schemas import ActionPosterior, GestureSegment, Header, Skeleto
 from beyond_self.services import shared
 
 SEGMENT_KINDS = ("start", "end", "cancel")
+# checkpoints kept, one per gesture count: how many gestures back a successor can go
+CHECKPOINTS_KEPT = 8
 
 
 class GestureStreamer(Service):
@@ -66,17 +68,15 @@ class GestureStreamer(Service):
 
     async def setup(self) -> None:
         self.gesture_models: GestureModels = shared.gesture_models(self.models_path)
-        # a restarted streamer rebuilds its predecessor's state from the checkpoint it left
-        resume = self.ledgers.predecessor()
-        self.resume_from = resume.get("stamp", -1)
-        self.events = resume.get("events", 0)
+        # a restarted streamer rebuilds its predecessor's state from a checkpoint it left
+        self.history: dict[int, tuple[int, int]] = {}  # segments told -> (stamp, events)
+        self.resume_from, segments, self.events = self._resume_point(self.ledgers.predecessor())
         self.tracker: GestureTracker[Header] = GestureTracker(
-            self.gesture_models,
-            buffer_frames=self.buffer_frames,
-            first_segment_id=resume.get("segments", 0),
+            self.gesture_models, buffer_frames=self.buffer_frames, first_segment_id=segments
         )
         if self.resume_from >= 0:
-            event(self.log, logging.INFO, "resuming from a checkpoint", **resume)
+            event(self.log, logging.INFO, "resuming from a checkpoint",
+                  stamp=self.resume_from, segments=segments, events=self.events)  # fmt: skip
         self.actions = list(self.gesture_models.actions)
         keys = self.bus.keys
         self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, FRAMES)
@@ -122,10 +122,43 @@ class GestureStreamer(Service):
             # a checkpoint moves only on a frame with no event (or is the first frame): the
             # events counted before this frame are those before the checkpoint's
             self.checkpoint = checkpoint
-            at, segments = checkpoint
-            self.ledgers.checkpoint({"stamp": at}, {"segments": segments, "events": events})
+            self._tell_checkpoint(*checkpoint, events)
         if self.end_at is not None and stamp >= self.end_at:
             self.finish()
+
+    def _tell_checkpoint(self, at: int, segments: int, events: int) -> None:
+        """The newest checkpoint, and the newest one at each of the last gesture counts: a
+        successor goes back to the one before the oldest gesture not yet said (its outputs
+        may have died with the workstation that was working on them, caches and all)."""
+        self.history[segments] = (at, events)
+        for old in sorted(self.history)[:-CHECKPOINTS_KEPT]:
+            del self.history[old]
+        stamps = {"stamp": at, **{f"stamp@{n}": a for n, (a, _) in self.history.items()}}
+        counts = {"segments": segments, "events": events}
+        counts |= {f"events@{n}": e for n, (_, e) in self.history.items()}
+        self.ledgers.checkpoint(stamps, counts)
+
+    def _resume_point(self, resume: dict[str, int]) -> tuple[int, int, int]:
+        """(stamp, segments, events) to start from: the newest checkpoint left, or, when the
+        gestures it has told are not all said yet (a workstation taken over: the outputs in
+        between are gone), the newest one before the oldest gesture not said. -1: none."""
+        latest = (resume.get("stamp", -1), resume.get("segments", 0), resume.get("events", 0))
+        points = {
+            int(name.split("@")[1]): (stamp, resume.get(f"events@{name.split('@')[1]}", 0))
+            for name, stamp in resume.items()
+            if name.startswith("stamp@")
+        }
+        self.history.update(points)
+        said_key = self.bus.keys.description
+        if not points or not self.ledgers.book.taken(said_key, self.name):
+            return latest
+        said = self.ledgers.book.done(said_key, "description", self.name)
+        unsaid = [n for n in range(1, latest[1] + 1) if n not in said]
+        if not unsaid:
+            return latest
+        before = [n for n in points if n < min(unsaid)] or [min(points)]
+        stamp, events = points[max(before)]
+        return stamp, max(before), events
 
     def published_counts(self) -> dict[str, int]:
         # events carry their running count (event_seq), which a restarted streamer continues:

@@ -47,6 +47,20 @@ def declarations() -> list[acl.Declaration]:
     return [acl.declaration_of(n, service_class(n)) for n in SERVICES]
 
 
+def stages_after(name: str) -> int:
+    """How many services deep the chain fed by service `name` goes (the describer 1: speech
+    takes its descriptions; speech 0). A standby workstation takes a dead one's robots over
+    sink first (runtime.fleet), so a producer's new run finds its consumers' new instances."""
+    by_name = {d.name: d for d in declarations()}
+
+    def depth(service: str, seen: frozenset[str]) -> int:
+        outputs = set(by_name[service].publishes)
+        fed = [d.name for d in by_name.values() if outputs & set(d.subscribes)]
+        return max((1 + depth(c, seen | {c}) for c in fed if c not in seen), default=0)
+
+    return depth(name, frozenset({name}))
+
+
 def identities() -> list[str]:
     """Every identity a secure deployment's keystore needs a certificate for."""
     return acl.identities(declarations())

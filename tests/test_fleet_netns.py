@@ -135,7 +135,7 @@ def test_a_standby_workstation_takes_over_and_every_robot_is_described_once(
     killed = kill_workstation(ws["ws-a"])
     assert killed >= 4, "ws-a's up and its four services"
     for robot, proc in robots.items():
-        code = proc.popen.wait(180)
+        code = proc.popen.wait(90)
         assert code == 0, (robot, proc.text()[-4000:], ws["ws-b"].text()[-3000:])
     for robot, proc in robots.items():
         printed = gesture_lines(proc.text())

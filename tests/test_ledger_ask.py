@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from beyond_self.runtime import ledger
-from beyond_self.runtime.ledger import Keeper
+from beyond_self.runtime.ledger import Keeper, LedgerBook
 from beyond_self.runtime.subscription import Received
 from beyond_self.schemas import Header, Keys, Ledger
 from beyond_self.schemas.identity import Identity
@@ -20,7 +20,7 @@ from beyond_self.schemas.identity import Identity
 def kept(service: str, handled: int) -> Ledger:
     """A ledger of `service` as another service kept it: gesture `handled` said."""
     key = Keys().description
-    header = Header(version=1, source=service, seq=1, stamp=1)
+    header = Ledger.original_header(service, 1, 1)
     return Ledger(header=header, service=service, handled={key: {"description": [(handled, 0, 0)]}})
 
 
@@ -72,3 +72,25 @@ async def test_a_restart_with_no_record_anywhere_starts_afresh_and_says_so(
 
 def _said(gesture: int) -> Identity:
     return Identity(Keys().robot, gesture, "description")
+
+
+def test_a_producer_withholds_only_what_the_consumer_alive_now_has() -> None:
+    """The object segmenter's instance 0 handled gesture 3's start; instance 1 (replaced with
+    the producer, a workstation taken over) has not, and needs it to rebuild its state."""
+    key = Keys().gesture_segment
+    start = Identity(Keys().robot, 3, "start")
+
+    def objects(instance: int, handled: list[tuple[int, int, int]]) -> Ledger:
+        header = Ledger.original_header("objects", instance, 1)
+        wire = {key: {"start": handled}}
+        return Ledger(header=header, service="objects", instance=instance, handled=wire)
+
+    book = LedgerBook()
+    book.heard(objects(0, [(3, 0, 0)]))
+    assert book.consumers_have(key, start, "gestures")
+    book.heard(objects(1, []))
+    assert not book.consumers_have(key, start, "gestures")
+    assert book.done(key, "start", "gestures") == {3}, "what was done stays known"
+    book.heard(objects(0, [(3, 0, 0)]))  # a copy of the old instance's, kept by another
+    assert not book.consumers_have(key, start, "gestures")
+    assert book.last["objects"].instance == 1 and book.instance_of("objects") == 1

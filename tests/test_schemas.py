@@ -133,8 +133,9 @@ def examples() -> list[s.Message]:
             damage="demo.mcap is damaged: truncated at byte 9 of 10 (ends inside a record)",
         ),
         s.Ledger(
-            header=H,
+            header=_h(s.Ledger),
             service="describer",
+            instance=1,
             handled={"beyond/robot/language/words": {"words": [(1, 0, 0), (2, 0, 0)]}},
             resume={"segments": 2, "events": 4},
             resume_stamps={"stamp": 1_700_000_000_123_456_789},  # above 2**53: a time in JSON

@@ -85,7 +85,7 @@ async def test_a_restarted_speech_service_does_not_repeat_what_its_log_says_was_
     log.write_text("1\t0\t-\tan earlier run, before this run's first speech service\n")
     start = log.stat().st_size
     log.write_text(log.read_text() + "1001\t1\t-\tone\n1002\t2\t-\ttwo\n")
-    header = s.Header(version=1, source="speech", seq=3, stamp=1_001)
+    header = s.Ledger.original_header("speech", 3, 1_001)
     config = private_config()
     key = Keys(robot=config.robot).description
     stale = s.Ledger(

@@ -73,7 +73,11 @@ def run(args: argparse.Namespace) -> int:
         exit_process(cls.main(config=config, **options))
     if not cls.fleet:  # a robot's source or voice
         raise InputError(f"service {args.name!r} serves one robot (its --robot), not a fleet")
-    from beyond_self.runtime.fleet import Fleet
+    from beyond_self.runtime.fleet import Fleet, takeover_after_s
     from beyond_self.runtime.process import run_to_completion
+    from beyond_self.services.registry import stages_after
 
-    exit_process(run_to_completion(lambda: Fleet(cls, config, options).run()))
+    wait = takeover_after_s(stages_after(args.name))
+    exit_process(
+        run_to_completion(lambda: Fleet(cls, config, options, takeover_after_s=wait).run())
+    )
