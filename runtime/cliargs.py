@@ -59,6 +59,8 @@ def config_from_args(args: argparse.Namespace) -> BusConfig:
     for `--duration` seconds waits no longer than that for a router to connect to."""
     config = load_config(
         robot=getattr(args, "robot", None),
+        robots=getattr(args, "robots", None),
+        standby=getattr(args, "standby", None),
         mode=getattr(args, "mode", None),
         connect=getattr(args, "connect", None),
         listen=getattr(args, "listen", None),

@@ -25,8 +25,8 @@ killed and restarted service neither stall nor repeat anything:
 The book answers per service; several copies of one service's ledger (its own answer, the
 copies others kept) are merged, since what a service has handled only grows; each ledger says
 which instance of its service wrote it (the predecessor's plus one), and the newest instance's
-is also kept apart (rule 2). A service's
-`resume` numbers (its checkpoint) are taken from whichever copy is newest by stamp.
+is also kept apart (rule 2). A service's `resume` numbers (its checkpoint) are taken from
+whichever copy is newest by stamp.
 """
 
 from __future__ import annotations

@@ -40,6 +40,17 @@ SEGMENT_KINDS = ("start", "end", "cancel")
 CHECKPOINTS_KEPT = 8
 
 
+def checkpoints_in(resume: dict[str, int]) -> dict[int, tuple[int, int]]:
+    """The checkpoint per gesture count a predecessor left (`_tell_checkpoint` writes them as
+    "stamp@N" and "events@N"): N -> (stamp, events)."""
+    told: dict[int, tuple[int, int]] = {}
+    for name, stamp in resume.items():
+        if name.startswith("stamp@"):
+            n = name.removeprefix("stamp@")
+            told[int(n)] = (stamp, resume.get(f"events@{n}", 0))
+    return told
+
+
 class GestureStreamer(Service):
     name = "gestures"
     subscribes = ("skeleton", "stream_end")
@@ -69,8 +80,9 @@ class GestureStreamer(Service):
     async def setup(self) -> None:
         self.gesture_models: GestureModels = shared.gesture_models(self.models_path)
         # a restarted streamer rebuilds its predecessor's state from a checkpoint it left
-        self.history: dict[int, tuple[int, int]] = {}  # segments told -> (stamp, events)
-        self.resume_from, segments, self.events = self._resume_point(self.ledgers.predecessor())
+        resume = self.ledgers.predecessor()
+        self.history = checkpoints_in(resume)  # segments told -> (stamp, events)
+        self.resume_from, segments, self.events = self._resume_point(resume)
         self.tracker: GestureTracker[Header] = GestureTracker(
             self.gesture_models, buffer_frames=self.buffer_frames, first_segment_id=segments
         )
@@ -133,7 +145,7 @@ class GestureStreamer(Service):
         self.history[segments] = (at, events)
         for old in sorted(self.history)[:-CHECKPOINTS_KEPT]:
             del self.history[old]
-        stamps = {"stamp": at, **{f"stamp@{n}": a for n, (a, _) in self.history.items()}}
+        stamps = {"stamp": at} | {f"stamp@{n}": a for n, (a, _) in self.history.items()}
         counts = {"segments": segments, "events": events}
         counts |= {f"events@{n}": e for n, (_, e) in self.history.items()}
         self.ledgers.checkpoint(stamps, counts)
@@ -143,12 +155,7 @@ class GestureStreamer(Service):
         gestures it has told are not all said yet (a workstation taken over: the outputs in
         between are gone), the newest one before the oldest gesture not said. -1: none."""
         latest = (resume.get("stamp", -1), resume.get("segments", 0), resume.get("events", 0))
-        points = {
-            int(name.split("@")[1]): (stamp, resume.get(f"events@{name.split('@')[1]}", 0))
-            for name, stamp in resume.items()
-            if name.startswith("stamp@")
-        }
-        self.history.update(points)
+        points = self.history
         said_key = self.bus.keys.description
         if not points or not self.ledgers.book.taken(said_key, self.name):
             return latest

@@ -65,10 +65,6 @@ def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
     config = config_from_args(args)
-    if args.robots is not None or args.standby is not None:
-        config = config.with_(
-            robots=args.robots or config.robots, standby=args.standby or config.standby
-        )
     if config.robots is None:
         exit_process(cls.main(config=config, **options))
     if not cls.fleet:  # a robot's source or voice

@@ -178,7 +178,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.robots is not None or args.standby is not None:
-        config = fleet_config(args, config)
+        check_fleet_profile(args.profile)
     if args.profile.endswith("workstation") and _mode_unset(args, config):
         config = config.with_(mode="client")
     if config.secure is not None and config.identity is None:  # the monitor is the side's
@@ -217,18 +217,17 @@ def side_identity(profile: str) -> str:
     return "robot" if profile.endswith("robot") else "workstation"
 
 
-def fleet_config(args: argparse.Namespace, config: BusConfig) -> BusConfig:
+def check_fleet_profile(profile: str) -> None:
     """A workstation's services for every robot `--robots` matches: only those that can serve
     many robots from one process (not a robot's source or voice)."""
     from beyond_self.services.registry import service_class
 
-    single = [n for n in PROFILES[args.profile] if not service_class(n).fleet]
+    single = [n for n in PROFILES[profile] if not service_class(n).fleet]
     if single:
         raise InputError(
-            f"--robots: profile {args.profile} has {', '.join(single)}, which serve one robot; "
+            f"--robots: profile {profile} has {', '.join(single)}, which serve one robot; "
             "use --profile fleet-workstation"
         )
-    return config.with_(robots=args.robots or config.robots, standby=args.standby or config.standby)
 
 
 def _mode_unset(args: argparse.Namespace, config: BusConfig) -> bool:

@@ -173,8 +173,8 @@ def learn_discretiser(
     scale = z.std(axis=0) if standardize else np.ones(z.shape[1])
     scale = np.where(scale > 1e-12, scale, 1.0)
     zs = (z - offset) / scale
-    from scipy.cluster.vq import kmeans2  # learning only: a service that applies clusters
-    # never pays for SciPy's clustering modules at start-up
+    # imported here: a service that only applies clusters never loads SciPy's clustering
+    from scipy.cluster.vq import kmeans2
 
     rng = np.random.default_rng(seed)
     best: tuple[float, np.ndarray, np.ndarray] | None = None
