@@ -103,6 +103,7 @@ def test_up_log_prints_what_analyse_prints(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)  # six folds of HMM training: 95 s idle, past 300 s beside busy loops
 def test_leave_one_recording_out_with_the_robots_own_experience(shared_data: Path) -> None:
     """No model sees the recording it is tested on; every fold also trains on synthetic
     gestures (the robot's own experience), as `beyond gesture train --data synthetic --data
