@@ -9,8 +9,8 @@
 ARG BASE=python:3.11-slim
 FROM ${BASE}
 
-# The image's settings come first: with podman's vfs storage every step after a big layer
-# copies that layer again, even when cached.
+# The image's settings come first: with podman's vfs storage (deploy/podman/storage-vfs.conf)
+# every step after a big layer copies that layer again, even when cached.
 ENV PYTHONUNBUFFERED=1 \
     BEYOND_LOG_FORMAT=json
 EXPOSE 7447

@@ -67,12 +67,15 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def installed(dist: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A fresh virtual environment with the wheel and its dependencies, and nothing else."""
+    """A fresh virtual environment with the wheel and its dependencies, and nothing else.
+    Without byte-compiling every module of every dependency (84 s of pip instead of 33 s):
+    the tests import a small part, compiled as it is imported."""
     env_dir = tmp_path_factory.mktemp("venv") / "env"
     venv.create(env_dir, with_pip=True, clear=True)
     wheel = next(dist.glob("*.whl"))
+    pip = [str(env_dir / "bin" / "python"), "-m", "pip", "install", "--quiet", "--no-compile"]
     done = subprocess.run(
-        [str(env_dir / "bin" / "python"), "-m", "pip", "install", "--quiet", str(wheel)],
+        [*pip, str(wheel)],
         capture_output=True,
         text=True,
         timeout=900,
