@@ -28,10 +28,14 @@ from typing import cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from beyond_self.cognition.gestures.hmm import FloatArray, GestureModels, log_prior
+from beyond_self.cognition.gestures.hmm import (
+    LOG_2PI,
+    FloatArray,
+    GestureModels,
+    log_prior,
+    logsumexp_last,
+)
 from beyond_self.core.errors import InputError
-
-_LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 class CompiledModels:
@@ -66,7 +70,7 @@ class CompiledModels:
             mpm = np.einsum("qmi,qmi->qm", lin, h.means)
             with np.errstate(divide="ignore"):
                 logw = np.log(h.weights)
-            const[a, :qa, :ma] = logw - 0.5 * (d * _LOG_2PI + logdet + mpm)
+            const[a, :qa, :ma] = logw - 0.5 * (d * LOG_2PI + logdet + mpm)
             start[a, :qa] = h.startprob
             trans[a, :qa, :qa] = h.transmat
         self.coef = coef.reshape(n_quad + d, k * q * m)
@@ -88,11 +92,7 @@ class CompiledModels:
 
     def log_emission(self, x: FloatArray) -> FloatArray:
         """State log emission densities (..., D) -> (..., K, Q)."""
-        lg = self.log_gauss(x)
-        top = lg.max(axis=-1, keepdims=True)
-        top = np.where(np.isfinite(top), top, 0.0)
-        with np.errstate(divide="ignore"):
-            return cast(np.ndarray, np.log(np.exp(lg - top).sum(axis=-1)) + top[..., 0])
+        return logsumexp_last(self.log_gauss(x))
 
 
 def _check_frames(x: ArrayLike, d: int, n: int | None) -> FloatArray:
