@@ -24,8 +24,9 @@ from functools import lru_cache
 from typing import cast
 
 import numpy as np
-from scipy import ndimage
 
+# scipy is imported in the functions that use it: a process that only needs this module's types
+# (`beyond up` checking the object segmenter's options) then does not load it (1.3 s of CPU)
 from beyond_self.cognition.vision.images import as_frame
 from beyond_self.core.errors import InputError
 
@@ -128,6 +129,8 @@ class BackgroundModel:
     @classmethod
     def from_frame(cls, frame: np.ndarray, block: int | None = None) -> BackgroundModel:
         """Estimate the table under and around the objects from the frame itself."""
+        from scipy import ndimage
+
         img = as_frame(frame)
         h, w = img.shape[:2]
         b = block or max(4, round(min(h, w) / 30))

@@ -25,8 +25,9 @@ from dataclasses import asdict, dataclass
 from typing import cast
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
+# scipy is imported in the functions that use it: a process that only needs this module's types
+# (`beyond up` checking the object segmenter's options) then does not load it (1.3 s of CPU)
 from beyond_self.cognition.vision.color import rgb_to_lab
 from beyond_self.cognition.vision.segmentation import Blob, Segmentation
 from beyond_self.cognition.vision.tabletop import Camera
@@ -121,6 +122,8 @@ def _boundary_points(mask: np.ndarray) -> np.ndarray:
 
 def hull_and_rectangle(mask: np.ndarray) -> tuple[float, float, float]:
     """(hull area, hull perimeter, minimum enclosing rectangle area), each grown by half a pixel."""
+    from scipy.spatial import ConvexHull, QhullError
+
     pts = _boundary_points(mask)
     try:
         hull = ConvexHull(pts)

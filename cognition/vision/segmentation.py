@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 from typing import cast
 
 import numpy as np
-from scipy import ndimage
 
+# scipy is imported in the functions that use it: a process that only needs this module's types
+# (`beyond up` checking the object segmenter's options) then does not load it (1.3 s of CPU)
 from beyond_self.cognition.vision.background import BackgroundModel
 from beyond_self.cognition.vision.images import as_frame
 from beyond_self.core.errors import InputError
@@ -123,6 +124,8 @@ class Segmentation:
 
     def touching(self, obj: Blob, gap_px: int = 2) -> bool:
         """Whether the hand is within `gap_px` pixels of the object (contact)."""
+        from scipy import ndimage
+
         if self.hand is None:
             return False
         x0, y0, x1, y1 = obj.bbox
@@ -140,6 +143,8 @@ class Segmentation:
 def _open(mask: np.ndarray) -> np.ndarray:
     """Opening by reconstruction: removes specks and threads thinner than 3 px but, unlike a plain
     opening, gives back the corners of what remains (a rotated box keeps its sharp corners)."""
+    from scipy import ndimage
+
     opened = ndimage.binary_opening(mask, structure=_OPEN)
     if not opened.any():
         return cast(np.ndarray, opened)
@@ -147,6 +152,8 @@ def _open(mask: np.ndarray) -> np.ndarray:
 
 
 def _components(mask: np.ndarray) -> tuple[np.ndarray, list[tuple[slice, slice]]]:
+    from scipy import ndimage
+
     labels, n = ndimage.label(mask, structure=_EIGHT)
     return labels, [s for s in ndimage.find_objects(labels) if s is not None] if n else []
 
@@ -173,6 +180,8 @@ def segment(
 
     `background`: the table model (estimated from this frame when None). `hand_px`: where the
     skeleton says the hand is (pixels); the hand blob is then the skin region nearest to it."""
+    from scipy import ndimage
+
     p = params or SegmentParams()
     img = as_frame(frame)
     shape = (int(img.shape[0]), int(img.shape[1]))
@@ -273,6 +282,8 @@ def _refine(
     pixels: np.ndarray, table: np.ndarray, mask: np.ndarray, core: np.ndarray, strong: np.ndarray
 ) -> np.ndarray:
     """Keep the pixels of `mask` whose chromaticity is nearer the core's than the table's."""
+    from scipy import ndimage
+
     if (core & ~strong).sum() < 4:
         return mask  # dark/bright object: chromaticity says nothing useful
     chroma = _chromaticity(pixels.astype(np.float32))
@@ -297,5 +308,7 @@ def _refine(
 
 def _thickness(mask: np.ndarray) -> float:
     """Radius of the largest disc inside the mask (px)."""
+    from scipy import ndimage
+
     padded = np.pad(mask, 1)
     return float(ndimage.distance_transform_cdt(padded, metric="chessboard").max())

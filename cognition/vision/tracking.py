@@ -13,8 +13,9 @@ from dataclasses import dataclass, field
 from typing import cast
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
+# scipy is imported in the functions that use it: a process that only needs this module's types
+# (`beyond up` checking the object segmenter's options) then does not load it (1.3 s of CPU)
 from beyond_self.core.errors import InputError
 
 
@@ -58,6 +59,8 @@ class Tracker:
         self, frame: int, centroids: list[tuple[float, float]], areas: list[int] | None = None
     ) -> list[int]:
         """Match this frame's detections to tracks; returns the track id of each detection."""
+        from scipy.optimize import linear_sum_assignment
+
         sizes = areas if areas is not None else [0] * len(centroids)
         live = self.active
         ids = [-1] * len(centroids)
