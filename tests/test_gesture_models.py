@@ -176,3 +176,47 @@ def test_malformed_matlab_files_are_input_errors(tmp_path: Path) -> None:
     (tmp_path / "junk.mat").write_bytes(b"not a mat file at all")
     with pytest.raises(InputError):
         load_matlab_models(tmp_path / "junk.mat")
+
+
+def test_training_equals_hmmlearns_own_em() -> None:
+    """Training computes every state's mixture densities in one pass (hmm._Densities) instead
+    of hmmlearn's per-state Cholesky factorisations: the same EM, so the same parameters as
+    hmmlearn's GMMHMM started from the same point, to rounding."""
+    from unittest import mock
+
+    from hmmlearn.hmm import GMMHMM
+
+    from beyond_self.cognition.gestures import hmm
+
+    def hmmlearn_em() -> type:
+        class Plain(GMMHMM):  # type: ignore[misc]  # hmmlearn has no type hints
+            def _init(self, X: np.ndarray, lengths: object = None) -> None:
+                self._check_and_set_n_features(X)
+                self._init_covar_priors()
+                self._fix_priors_shape()
+
+        return Plain
+
+    rng = np.random.default_rng(5)
+    seqs = [
+        np.concatenate([rng.normal(c, 0.3, size=(int(rng.integers(8, 15)), 3)) for c in (-1, 1, 0)])
+        for _ in range(12)
+    ]
+    config = TrainingConfig(n_states=4, n_mix=2, n_iter=8)
+    ours = train_hmm(seqs, config)
+    with mock.patch.object(hmm, "_preinitialised_gmmhmm", hmmlearn_em):
+        reference = train_hmm(seqs, config)
+    for name in ("transmat", "weights", "means", "covars"):
+        np.testing.assert_allclose(
+            getattr(ours, name), getattr(reference, name), rtol=1e-9, atol=1e-12, err_msg=name
+        )
+    # and the densities themselves, component by component, against hmmlearn's
+    model = hmm._preinitialised_gmmhmm()(n_components=4, n_mix=2, covariance_type="full")
+    model.weights_, model.means_, model.covars_ = ours.weights, ours.means, ours.covars
+    x = seqs[0]
+    for state in range(4):
+        np.testing.assert_allclose(
+            model._compute_log_weighted_gaussian_densities(x, state),
+            GMMHMM._compute_log_weighted_gaussian_densities(model, x, state),
+            rtol=1e-10,
+        )

@@ -546,7 +546,7 @@ class _Densities:
         mu = self.params[1]
         centred = X[:, None, None, :] - mu  # (T, Q, M, D)
         white = np.einsum("qmij,tqmj->tqmi", self.inv_chol, centred)
-        out = self.const - 0.5 * np.einsum("tqmi,tqmi->tqm", white, white)
+        out: FloatArray = self.const - 0.5 * np.einsum("tqmi,tqmi->tqm", white, white)
         self.last = (X, out)
         return out
 
