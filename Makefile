@@ -29,7 +29,7 @@ typecheck: $(STAMP)
 # Two workers, a test file at a time, the longest files first (tests/conftest.py): the container
 # test, mostly waiting on podman, runs beside the rest.
 pytest: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
+	$(BIN)/python -m pytest -q -n 3 --dist loadfile --no-loadscope-reorder
 
 bench: $(STAMP)
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done

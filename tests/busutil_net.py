@@ -33,17 +33,24 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def busy_loops(n: int) -> Iterator[None]:
+def busy_loops(n: int, cpu: int | None = None) -> Iterator[None]:
     """`n` processes spinning on the CPU (`while True: pass`) while the block runs: on a 2-core
-    machine, three leave the pipeline a fraction of a core per service."""
+    machine, three leave the pipeline a fraction of a core per service. `cpu`: the spinners,
+    and every process this thread starts meanwhile, confined to that core."""
+    before = os.sched_getaffinity(0)
+    if cpu is not None:
+        os.sched_setaffinity(0, {cpu})  # this thread: inherited by what it starts
     spin = [sys.executable, "-P", "-c", "while True: pass"]
-    spinners = [subprocess.Popen(spin) for _ in range(n)]
     try:
-        yield
+        spinners = [subprocess.Popen(spin) for _ in range(n)]
+        try:
+            yield
+        finally:
+            for p in spinners:
+                p.kill()
+                p.wait()
     finally:
-        for p in spinners:
-            p.kill()
-            p.wait()
+        os.sched_setaffinity(0, before)
 
 
 def private_config() -> BusConfig:

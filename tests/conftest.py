@@ -82,17 +82,27 @@ def node_modules(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def busy_machine() -> Iterator[None]:
-    """Three processes spinning on the CPU for as long as the module's tests run (a loaded
-    2-core machine: the services get a fraction of a core each)."""
-    with busy_loops(3):
-        yield
+def busy_machine() -> Iterator[str]:
+    """A loaded machine for the module's tests, said in words for their reports. With two cores
+    or more: everything the tests start confined to one core (the worker's own) beside a
+    process spinning on it, so their services get a fraction of a core each and are preempted
+    at any instruction, as on a loaded machine, while the suite's other worker keeps its core.
+    On one core: three spinners."""
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        with busy_loops(3):
+            yield "3 busy loops"
+        return
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+    cpu = cpus[int(worker) % len(cpus) if worker.isdigit() else 0]
+    with busy_loops(1, cpu=cpu):
+        yield f"confined to core {cpu} beside a busy loop"
 
 
 # -- figures a passing test shows in CI's log ---------------------------------------------------
-# Tests run in two pytest-xdist workers (Makefile), a file at a time (pytest_collection_modifyitems
-# below). A worker's output never reaches the terminal, so a figure a test wants seen in CI's log
-# (build times, outage timelines) goes through its report instead.
+# Tests run in pytest-xdist workers (Makefile), a file at a time. A worker's output never
+# reaches the terminal, so a figure a test wants seen in CI's log (build times, outage
+# timelines) goes through its report instead.
 
 SHOWN = "shown"
 
@@ -125,14 +135,11 @@ LONG_FILES = (
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """One xdist group per file (a file's module fixtures are built once, in one worker), the
-    long files first: the two workers (Makefile) take files as they finish one, so the
-    container test (mostly waiting on podman) runs beside everything else and neither worker
-    is left with a long tail."""
+    """The long files first. The workers (Makefile: `--dist loadfile`, a file's tests in one
+    worker, its module fixtures built once) take files in this order as they finish one, so
+    the long ones start at once and neither worker is left with a long tail."""
     rank = {name: i for i, name in enumerate(LONG_FILES)}
     items.sort(key=lambda item: rank.get(item.path.name, len(LONG_FILES)))  # stable: file order
-    for item in items:
-        item.add_marker(pytest.mark.xdist_group(item.path.name))
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:

@@ -245,7 +245,7 @@ LANES = 2  # runs at once, each on a bus of its own: twice the pipelines competi
 @pytest.mark.slow
 @pytest.mark.timeout(900)
 async def test_replays_equal_the_offline_analysis_at_any_rate_under_load(
-    busy_machine: None, show: Callable[[str], None]
+    busy_machine: str, show: Callable[[str], None]
 ) -> None:
     expected = {name: offline_lines(name) for name in SHIPPED}
     results: dict[int, tuple[list[str], dict[str, list[bytes]]]] = {}
@@ -269,4 +269,5 @@ async def test_replays_equal_the_offline_analysis_at_any_rate_under_load(
         table.append((name, rate or "max", len(lines), count, same))
         assert same, (name, rate, {k: (len(captured[k]), len(reference[k])) for k in DERIVED})
     assert all(expected[n] for n in SHIPPED)  # every recording has described gestures
-    show("\n".join(" ".join(["event-time matrix:", *map(str, row)]) for row in table))
+    title = f"event-time matrix ({busy_machine}):"
+    show("\n".join(" ".join([title, *map(str, row)]) for row in table))

@@ -67,7 +67,7 @@ def offline_lines(skeleton: list[s.SkeletonFrame], camera: list[s.CameraFrame]) 
 @pytest.mark.slow
 @pytest.mark.timeout(240)
 async def test_a_loaded_live_run_describes_every_gesture_once_and_counts_what_it_skipped(
-    busy_machine: None, tmp_path: Path, show: Callable[[str], None]
+    busy_machine: str, tmp_path: Path, show: Callable[[str], None]
 ) -> None:
     config = private_config()
     bus = Bus.open(config)
@@ -120,7 +120,7 @@ async def test_a_loaded_live_run_describes_every_gesture_once_and_counts_what_it
     summary = f"{skipped} of {frames} camera frames not described"
     assert (summary in stdout) == (skipped > 0), stdout.splitlines()[-3:]
     show(
-        f"live run, 3 busy loops, source silent {PAUSE_S} s (up's timeout "
+        f"live run {busy_machine}, source silent {PAUSE_S} s (up's timeout "
         f"{TIMEOUT_S} s): {len(ids)} gestures described once each, {frames} camera frames, "
         f"{skipped} not described (newest frame first), per-gesture lines equal the offline "
         "analysis"
