@@ -26,8 +26,8 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-# Two workers, a test file at a time, the longest files first (tests/conftest.py): the container
-# test, mostly waiting on podman, runs beside the rest.
+# Three workers on two cores (much of the suite waits on services starting, podman and paced
+# replays), a test file at a time in the order tests/conftest.py gives: the longest files first.
 pytest: $(STAMP)
 	$(BIN)/python -m pytest -q -n 3 --dist loadfile --no-loadscope-reorder
 
