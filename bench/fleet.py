@@ -16,8 +16,11 @@ leave before the next (their runs are dropped).
 Costs: resident memory (VmRSS) of the processes, summed, and their CPU time over the round
 (cores); next to them the same three services as one process set for one robot (`beyond up`'s
 way before fleets), started and measured in the same run with one robot: N robots that way
-cost N of those. The camera at 15 fps is not measured here (bench/pipeline.py measures one
-robot's vision path). Ends with one line of JSON.
+cost N of those. Where the time goes: per stage, the p99 of the time from the gesture's deciding
+frame to its end event leaving the gesture streamer, from there to its words leaving the
+reasoner, and from there to the description (each message's arrival taken off Zenoh, wall
+clock). The camera at 15 fps is not measured here (bench/pipeline.py measures one robot's
+vision path). Ends with one line of JSON.
 """
 
 from __future__ import annotations
@@ -77,26 +80,55 @@ async def serve(bus: Bus, robots: list[str], gestures: int) -> dict[str, Any]:
     views = [bus.for_robot(r) for r in robots]
     tokens = [v.declare_token(v.keys.alive("ingest")) for v in views]
     latencies: list[float] = []
+    stages: dict[str, list[float]] = {"gestures": [], "reasoner": [], "describer": []}
     try:
         for v in views:  # the robot's runs are there: its source may publish
             for name in SERVICES:
                 await bus.wait_alive(v.keys.alive(name), timeout=60)
         pubs = [v.publisher(v.keys.skeleton, s.SkeletonFrame) for v in views]
         outs = [v.subscribe(v.keys.description, s.Description) for v in views]
+        # where the time goes: when each gesture's end left the gesture streamer and its words
+        # left the reasoner, per robot (the description's own arrival closes the last stage)
+        segs = [v.subscribe(v.keys.gesture_segment, s.GestureSegment) for v in views]
+        words = [v.subscribe(v.keys.words, s.WordProbabilities) for v in views]
+        seen: dict[str, list[dict[int, int]]] = {
+            "segment": [{} for _ in robots],
+            "words": [{} for _ in robots],
+        }
         for pub in pubs:
             await pub.wait_matching(timeout=30)
         trig = set(triggers)
         # per robot, when each gesture's ending frame was sent: descriptions come in gesture
         # order (the reasoner emits strictly in segment order), one per gesture
         ended: list[list[float]] = [[] for _ in robots]
+        ended_ns: list[list[int]] = [[] for _ in robots]
 
         async def receive(k: int) -> None:
             for n in range(len(triggers)):
-                await outs[k].recv(timeout=60)
+                got = await outs[k].recv(timeout=60)
                 latencies.append((time.perf_counter() - ended[k][n]) * 1e3)
+                # the stages on one clock: when each message was taken off Zenoh (wall, ns)
+                end = ended_ns[k][n]
+                seg = seen["segment"][k].get(got.message.segment_id, end)
+                word = seen["words"][k].get(got.message.segment_id, seg)
+                stages["gestures"].append((seg - end) / 1e6)
+                stages["reasoner"].append((word - seg) / 1e6)
+                stages["describer"].append((got.received_ns - word) / 1e6)
+
+        async def watch(sub: Any, into: dict[int, int], ends_only: bool) -> None:
+            with contextlib.suppress(asyncio.CancelledError):
+                while True:
+                    got = await sub.recv(timeout=None)
+                    if not ends_only or got.message.event == "end":
+                        into.setdefault(got.message.segment_id, got.received_ns)
 
         loop = asyncio.get_running_loop()
         receivers = [loop.create_task(receive(k)) for k in range(len(robots))]
+        watchers = [
+            loop.create_task(watch(sub, seen[name][k], name == "segment"))
+            for name, subs in (("segment", segs), ("words", words))
+            for k, sub in enumerate(subs)
+        ]
         begin_wall, begin_ns = loop.time(), time.time_ns()
         for i, frame in enumerate(frames):
             for k, pub in enumerate(pubs):  # phases spread over the frame interval
@@ -109,13 +141,16 @@ async def serve(bus: Bus, robots: list[str], gestures: int) -> dict[str, Any]:
                 pub.put(s.SkeletonFrame(header=header, frame=frame.frame, joints=frame.joints))
                 if i in trig:
                     ended[k].append(time.perf_counter())
+                    ended_ns[k].append(time.time_ns())
         await asyncio.wait_for(asyncio.gather(*receivers), 120)
+        for task in watchers:
+            task.cancel()
         for view in views:
             view.close()
     finally:
         for undeclare in tokens:
             undeclare()
-    return {"latency_ms": latencies, "stream_s": len(frames) * FRAME_NS / 1e9}
+    return {"latency_ms": latencies, "stages_ms": stages, "stream_s": len(frames) * FRAME_NS / 1e9}
 
 
 async def measure(config: BusConfig, robots: list[str], gestures: int) -> dict[str, Any]:
@@ -136,6 +171,7 @@ async def measure(config: BusConfig, robots: list[str], gestures: int) -> dict[s
         "gestures": len(lat),
         "description_p50_ms": round(_p(lat, 50), 2),
         "description_p99_ms": round(_p(lat, 99), 2),
+        "stage_p99_ms": {k: round(_p(v, 99), 2) for k, v in served["stages_ms"].items()},
         "rss_mb": round(rss, 1),
         "cores": round((cpu1 - cpu0) / served["stream_s"], 3),
     }
@@ -165,11 +201,16 @@ def print_table(result: dict[str, Any]) -> None:
     rows = [("one set, 1 robot", result["single"])] + [
         (f"fleet, {r['robots']} robot(s)", r) for r in result["fleet"]
     ]
-    print(f"{'':24} {'gestures':>8} {'p50 ms':>8} {'p99 ms':>8} {'RSS MB':>8} {'cores':>6}")
+    print(
+        f"{'':24} {'gestures':>8} {'p50 ms':>8} {'p99 ms':>8} {'RSS MB':>8} {'cores':>6}"
+        "   p99 ms per stage: gestures reasoner describer"
+    )
     for name, r in rows:
+        st = r["stage_p99_ms"]
         print(
             f"{name:24} {r['gestures']:>8} {r['description_p50_ms']:>8.1f} "
             f"{r['description_p99_ms']:>8.1f} {r['rss_mb']:>8.0f} {r['cores']:>6.2f}"
+            f"   {st['gestures']:>27.1f} {st['reasoner']:>8.1f} {st['describer']:>9.1f}"
         )
     single = result["single"]
     best = max(result["fleet"], key=lambda r: r["robots"])
