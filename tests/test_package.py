@@ -39,7 +39,9 @@ BUNDLED = (
     "beyond_self/py.typed",
 )
 
-pytestmark = pytest.mark.slow  # tests/conftest.py runs this file beside the rest of the suite
+# pytest-timeout counts the fixtures too: building and installing the distribution took 262 s
+# of the 300 s default in a run of three workers beside three busy loops, leaving the demo 38 s
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
 
 def readme_demo_lines() -> list[str]:
