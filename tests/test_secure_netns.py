@@ -14,6 +14,7 @@ import os
 import re
 import subprocess
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -114,12 +115,16 @@ def test_router_rules_hold(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
     hosts.stop(router)
 
 
-def wait_for(what: str, condition: Any, timeout: float, procs: list[Any]) -> None:
+def wait_for(
+    what: str, condition: Any, timeout: float, procs: list[Any], shown: Sequence[Any] = ()
+) -> None:
+    """Wait for `condition`; fail with every process's log tail (`procs` must not exit first,
+    `shown` may) so a failure says which end of the split stopped where."""
     deadline = time.monotonic() + timeout
     while not condition():
         dead = [p.name for p in procs if p.popen.poll() is not None]
         if dead or time.monotonic() > deadline:
-            logs = "\n".join(f"--- {p.name}\n{p.text()[-2500:]}" for p in procs)
+            logs = "\n".join(f"--- {p.name}\n{p.text()[-2500:]}" for p in [*procs, *shown])
             raise AssertionError(f"waiting for {what}: {dead or 'timed out'}\n{logs}")
         time.sleep(0.1)
 
@@ -187,8 +192,10 @@ def test_secure_split_survives_a_cut_link(
     )  # fmt: skip
     hosts.link(up=True)
     print(f"link down {time.monotonic() - t_down:.1f} s ({before} gesture end(s) probed before)")
-    assert wait_exit(ws, 90) == 0, ws.text()[-4000:]
-    assert wait_exit(robot, 60) == 0, robot.text()[-4000:]
+    wait_for("both ends of the split to finish", lambda: ws.popen.poll() is not None
+             and robot.popen.poll() is not None, 90, [watcher, seen], [ws, robot])  # fmt: skip
+    assert wait_exit(ws, 1) == 0, ws.text()[-4000:]
+    assert wait_exit(robot, 1) == 0, robot.text()[-4000:]
     text = ws.text()
     assert "6 of 6 gesture(s) described" in text, text[-4000:]
     described = dict(re.findall(r'^gesture (\d+): "(.*)"$', text, re.M))
