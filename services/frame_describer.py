@@ -46,7 +46,10 @@ class FrameDescriber:
         return await loop.run_in_executor(self._pool, _describe, image)
 
     def close(self) -> None:
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """Stop the worker and wait for it (at most the frame it is on): a pool left to the
+        interpreter's exit kept its queues' semaphores, and every `beyond demo` ended with
+        multiprocessing's "leaked semaphore objects" warning from the object segmenter."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _start(clusters: str | None, niceness: int, parent: int) -> None:
