@@ -322,3 +322,32 @@ def test_a_long_run_keeps_a_bounded_record_of_the_gestures_it_told() -> None:
     for n in range(10):
         recent.add(n)
     assert [n in recent for n in (6, 7, 8, 9)] == [False, True, True, True]
+
+
+def test_a_late_reasoner_gets_the_posterior_history_before_the_segment_history(
+    network: Any,
+) -> None:
+    """A workstation started late gets each stream's history as a batch of its own, in no fixed
+    order. Two gestures 40 s of stream time apart: every posterior (up to the second gesture's
+    final one) before any start or end event. The first gesture's end event is only late, not
+    lost: both are described (the join dropped the first once the posteriors had run 30 s past
+    it, whatever the segment stream said)."""
+    join: FusionJoin[int] = FusionJoin(network, expect_objects=False)
+    second = 40 * 10**9
+    belief = {"tap": 0.9, "grasp": 0.05, "touch": 0.05}
+    out: list[Any] = []
+    for segment_id, start in ((1, 0), (2, second)):
+        for frame in range(3):
+            stamp = start + frame * 33_333_333
+            out += join.belief(segment_id, frame, stamp, belief, frame, final=frame == 2)
+    for segment_id, start in ((1, 0), (2, second)):
+        out += join.started(segment_id, start)
+        out += join.ended(segment_id, start, start + 2 * 33_333_333)
+    assert [o.segment_id for o in out if isinstance(o, Outcome)] == [1, 2]
+    # a gesture whose end never comes is still given up once the segment stream moves on
+    lost: FusionJoin[int] = FusionJoin(network, expect_objects=False)
+    lost.started(1, 0)
+    lost.belief(1, 0, 0, belief, 0, final=True)
+    outcomes = lost.started(2, second) + lost.belief(2, 0, second, belief, 0, final=True)
+    outcomes += lost.ended(2, second, second + 1)
+    assert [o.segment_id for o in outcomes if isinstance(o, Outcome)] == [2]

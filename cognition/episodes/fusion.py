@@ -88,6 +88,10 @@ class FusionJoin(Generic[R]):
         self.gestures: dict[int, _Gesture[R]] = {}
         self.finished = Recent()  # gestures told or given up: a repeat about them is ignored
         self.skeleton_time = -1
+        # each input stream's own time: a gesture waits for a missing piece until the stream
+        # that carries it has moved on (`_abandoned`), whatever the other streams have shown
+        self.segment_time = -1  # starts and ends (one publisher, in order)
+        self.belief_time = -1  # posteriors (another publisher, in order)
         self.objects_present = False  # the object segmenter is alive (told by the caller)
 
     # -- inputs ---------------------------------------------------------------------------
@@ -96,6 +100,7 @@ class FusionJoin(Generic[R]):
         g = self._gesture(segment_id, start_stamp)
         if g is not None:
             g.start_stamp = start_stamp
+        self.segment_time = max(self.segment_time, start_stamp)
         return self._advance(start_stamp)
 
     def object_seen(self, segment_id: int, labels: Mapping[str, str]) -> list[Output[R]]:
@@ -115,6 +120,7 @@ class FusionJoin(Generic[R]):
                 g.final = item
             else:
                 g.pending.append(item)
+        self.belief_time = max(self.belief_time, stamp)
         return self._advance(stamp)
 
     def ended(self, segment_id: int, start_stamp: int, end_stamp: int) -> list[Output[R]]:
@@ -122,6 +128,7 @@ class FusionJoin(Generic[R]):
         if g is not None:
             g.start_stamp = start_stamp if g.start_stamp is None else g.start_stamp
             g.end_stamp = end_stamp
+        self.segment_time = max(self.segment_time, end_stamp)
         return self._advance(end_stamp)
 
     def cancelled(self, segment_id: int) -> list[Output[R]]:
@@ -179,9 +186,18 @@ class FusionJoin(Generic[R]):
         return stamp is not None and self.skeleton_time >= stamp + self.deadline_ns
 
     def _abandoned(self, g: _Gesture[R]) -> bool:
+        """Incomplete, and the stream that would complete it has moved on by the deadline: the
+        piece is lost. Not any stream's time: a late reasoner gets each stream's history as a
+        batch of its own, in no fixed order, and a posterior history running 30 s past a gesture
+        whose end event was still to come dropped it (a workstation started late lost gesture 1)."""
         if g.final is not None and g.end_stamp is not None:
             return False  # complete but for the camera, which `_waited_out` handles
-        return g.last_seen >= 0 and self.skeleton_time >= g.last_seen + self.deadline_ns
+        if g.last_seen < 0:
+            return False
+        after = g.last_seen + self.deadline_ns
+        return (g.end_stamp is None and self.segment_time >= after) or (
+            g.final is None and self.belief_time >= after
+        )
 
     def _flush(self) -> list[Output[R]]:
         outputs: list[Output[R]] = []
