@@ -112,13 +112,17 @@ class BackgroundModel:
     def shape(self) -> tuple[int, int]:
         return int(self.mean.shape[0]), int(self.mean.shape[1])
 
-    def compare(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(alpha, chromaticity distortion) of a frame against this table."""
+    def compare(self, frame: np.ndarray, every: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """(alpha, chromaticity distortion) of a frame against this table; with `every` > 1,
+        of every `every`-th pixel in each direction only (both are per pixel)."""
         if frame.shape[:2] != self.shape:
             raise InputError(
                 f"frame is {frame.shape[1]}x{frame.shape[0]} but the background model is "
                 f"{self.shape[1]}x{self.shape[0]}; valid: frames of the model's size"
             )
+        if every > 1:
+            grid = (slice(None, None, every), slice(None, None, every))
+            return distortions(frame[grid], self.mean[grid], self._bb[grid])
         return distortions(frame, self.mean, self._bb)
 
     @classmethod
@@ -173,12 +177,9 @@ def median_window(grid: np.ndarray, k: int) -> np.ndarray:
 
 
 def _noise(frame: np.ndarray, model: BackgroundModel) -> float:
-    """Robust spread of the chromaticity distortion (median + 1.4826·MAD on a subsample). The
-    distortion is per pixel, so it is computed on the subsample's pixels only."""
-    img = as_frame(frame)
-    if img.shape[:2] != model.shape:
-        model.compare(img)  # raises: the frame does not fit the model
-    _, cd = distortions(img[::3, ::3], model.mean[::3, ::3], model._bb[::3, ::3])
+    """Robust spread of the chromaticity distortion (median + 1.4826·MAD on a subsample, the
+    distortion computed on the subsample's pixels only)."""
+    _, cd = model.compare(frame, every=3)
     sample = cd.ravel()
     med = float(np.median(sample))
     return med + 1.4826 * float(np.median(np.abs(sample - med)))
