@@ -1,3 +1,3 @@
-from beyond_self.cli import main
+from beyond_self.cli import entry
 
-raise SystemExit(main())
+raise SystemExit(entry())

@@ -95,6 +95,19 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def entry() -> int:
+    """The `beyond` program: `main`, then, if the command opened a Zenoh session, leave without
+    the interpreter's teardown, which can abort a process that finished cleanly once Zenoh's
+    native threads are up (runtime.process.exit_process)."""
+    code = main()
+    bus = sys.modules.get("beyond_self.runtime.bus")
+    if bus is not None and bus.sessions_opened:
+        from beyond_self.runtime.process import exit_process
+
+        exit_process(code)
+    return code
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args_list = list(sys.argv[1:] if argv is None else argv)
     first = args_list[0] if args_list else None

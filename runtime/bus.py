@@ -59,6 +59,9 @@ def open_failure(config: BusConfig, exc: Exception) -> str:
     return f"cannot open the Zenoh session ({describe(config)}): {reason}"
 
 
+sessions_opened = 0  # by this process; the `beyond` entry point reads it (cli.entry)
+
+
 class Bus:
     def __init__(
         self, session: zenoh.Session, config: BusConfig, *, owns_session: bool = True
@@ -92,6 +95,8 @@ class Bus:
             session = zenoh.open(zenoh_config(config, access_rules))
         except zenoh.ZError as exc:
             raise InputError(open_failure(config, exc)) from None
+        global sessions_opened
+        sessions_opened += 1
         return cls(session, config)
 
     def __enter__(self) -> Bus:

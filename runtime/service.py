@@ -22,7 +22,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Coroutine
-from typing import Any, TypeVar, overload
+from typing import Any, NoReturn, TypeVar, overload
 
 from beyond_self.runtime import process
 from beyond_self.runtime.accounting import ErrorAccount
@@ -411,7 +411,11 @@ class Service:
             self._bus = None
 
     @classmethod
-    def main(cls, *args: Any, **kwargs: Any) -> int:
-        """Entry point for a service process: logging, run until SIGINT/SIGTERM; the exit
-        status (2 for bad input such as a bad option)."""
-        return process.run_to_completion(lambda: cls(*args, **kwargs).run())
+    def main(cls, *args: Any, **kwargs: Any) -> NoReturn:
+        """Entry point for a service process: logging, run until SIGINT/SIGTERM, then leave
+        with status 0 (2 for bad input such as a bad option).
+
+        It leaves through `process.exit_process`, not by returning to the interpreter: once the
+        session is closed, the interpreter's own teardown of Zenoh's native threads can abort a
+        process that stopped cleanly (SIGABRT, "FATAL: exception not rethrown")."""
+        process.exit_process(process.run_to_completion(lambda: cls(*args, **kwargs).run()))

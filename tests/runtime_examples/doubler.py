@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import sys
-
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import Joint, SkeletonFrame
 
@@ -37,4 +35,4 @@ class Doubler(Service):
 
 
 if __name__ == "__main__":
-    sys.exit(Doubler.main())
+    Doubler.main()

@@ -3,8 +3,6 @@ above a height threshold), so the example is a two-stage pipeline with state."""
 
 from __future__ import annotations
 
-import sys
-
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import GestureSegment, SkeletonFrame
 
@@ -53,4 +51,4 @@ class Segmenter(Service):
 
 
 if __name__ == "__main__":
-    sys.exit(Segmenter.main())
+    Segmenter.main()
