@@ -112,7 +112,7 @@ def test_the_wheel_holds_one_import_package_and_what_the_demo_needs(dist: Path) 
     # `pip install beyond-self[camera]`: the pose model, at the one version that bundles it
     assert "camera" in metadata.get_all("Provides-Extra", [])
     assert 'mediapipe==0.10.14; extra == "camera"' in metadata.get_all("Requires-Dist", [])
-    assert "beyond = beyond_self.cli:main" in entry_points
+    assert "beyond = beyond_self.cli:entry" in entry_points
     assert "# beyond-self" in metadata.get_payload()  # the README, rendered on the index
 
 
