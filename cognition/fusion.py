@@ -104,6 +104,33 @@ def fuse(
     return Posterior(tuple(names), values, table / total)
 
 
+def fuse_marginals(
+    model: BayesNet,
+    queries: Sequence[str],
+    observed: Mapping[str, str],
+    p_hmm: Mapping[str, float] | Sequence[float],
+) -> dict[str, dict[str, float]]:
+    """P_comb(X | observed, G) for each X of `queries` (Action among them or not), each its own
+    marginal: what `fuse` gives one variable at a time, equal to it within rounding.
+
+    Why: a gesture's evidence changes every frame while what is observed (the object's
+    features) stays for the whole gesture. P_BN(A, X | X_obs) is kept per observed set
+    (`CompiledNetwork.pair_tables`), so a frame costs one product with P_HMM(A | G) per variable
+    (case 2 of the formula, and case 1 for the action itself) instead of a sum over the
+    network's whole joint per variable."""
+    _check_observed(model, observed)
+    vec = action_vector(model, p_hmm)
+    compiled = model.compiled
+    tables = compiled.pair_tables(ACTION, [ACTION, *queries], observed)
+    total = float(vec @ tables[0].sum(axis=1))  # P_BN(G-weighted actions | observed), unscaled
+    compiled.check_total(total, observed, {ACTION: vec.tolist()})
+    out: dict[str, dict[str, float]] = {}
+    for name, table in zip(queries, tables[1:], strict=True):
+        weighted = vec @ table
+        out[name] = dict(zip(model.values[name], (weighted / weighted.sum()).tolist(), strict=True))
+    return out
+
+
 def fuse_words(
     model: BayesNet,
     observed: Mapping[str, str],

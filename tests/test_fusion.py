@@ -17,7 +17,7 @@ from beyond_self.cognition.bn import (
     load_definition,
     synthetic_dataset,
 )
-from beyond_self.cognition.fusion import fuse, fuse_words
+from beyond_self.cognition.fusion import fuse, fuse_marginals, fuse_words
 from beyond_self.core.errors import InputError
 
 AFFORDANCE = ("Color", "Shape", "Size", "ObjVel", "ObjHandVel", "HandVel", "Contact")
@@ -72,6 +72,31 @@ def test_word_fusion_formula_equals_soft(
     assert soft.keys() == formula.keys()
     for word in soft:
         assert abs(soft[word] - formula[word]) < 1e-12, word
+
+
+@settings(max_examples=60, deadline=None)
+@given(fusion_case())
+def test_marginals_per_frame_equal_fusing_each_variable(
+    case: tuple[dict[str, str], list[str], list[float]],
+) -> None:
+    """The reasoner's per-frame path (tables kept per observed set) against `fuse` per variable,
+    asked twice so the second answer comes from the kept tables."""
+    observed, query, p_hmm = case
+    model = synthetic_model()
+    for _ in range(2):
+        try:
+            expected = {q: fuse(model, q, observed, p_hmm).marginal(q) for q in query}
+        except InputError as exc:  # impossible evidence: refused the same way
+            with pytest.raises(InputError, match="zero probability") as refused:
+                fuse_marginals(model, query, observed, p_hmm)
+            assert "zero probability" in str(exc), (str(exc), str(refused.value))
+            return
+        got = fuse_marginals(model, query, observed, p_hmm)
+        assert list(got) == query
+        for q in query:
+            assert list(got[q]) == list(expected[q]), q
+            np.testing.assert_allclose(list(got[q].values()), list(expected[q].values()),
+                                       rtol=0, atol=1e-12)  # fmt: skip
 
 
 def test_certain_gesture_equals_observing_the_action() -> None:

@@ -22,6 +22,7 @@ kinds of evidence. Evidence the model gives zero probability is an InputError.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -38,6 +39,8 @@ MAX_CORE_STATES = 5_000_000
 # all eight affordance nodes (2,592). Work, for a query with word variables: rows x affordance
 # states summed over (each row sums over them); 2**21 cells take about 0.05 s (nine words).
 MAX_JOINT_ROWS = 4096
+# evidence sets whose pair tables are kept (CompiledNetwork.pair_tables): one per gesture of a fleet
+_PAIR_TABLES_KEPT = 256
 MAX_QUERY_WORK = 2**21
 
 
@@ -173,6 +176,7 @@ class CompiledNetwork:
         self.joint_nd = self.joint.reshape(self.shape)
         self.leaf_nd = {n: t.reshape(*self.shape, -1) for n, t in self.leaf_tables.items()}
         self.present_nd = self.present.reshape(len(self.words), *self.shape)
+        self._pair_tables: OrderedDict[tuple[Any, ...], dict[str, np.ndarray]] = OrderedDict()
 
     def _broadcast(
         self, name: str, parents: Sequence[str], cpt: np.ndarray, leaf: bool = False
@@ -240,7 +244,7 @@ class CompiledNetwork:
             phi = phi * self.leaf_nd[name][(*idx, code)]
         return phi, free, idx
 
-    def _check_total(
+    def check_total(
         self, total: float, evidence: Mapping[str, str], soft: Mapping[str, Sequence[float]]
     ) -> None:
         if not total > 0:
@@ -309,10 +313,41 @@ class CompiledNetwork:
             operands.append([labels[n] for n in query])
             table = np.einsum(*operands, optimize=len(leaf_q) > 1)
         total = float(table.sum())
-        self._check_total(total, evidence, soft)
+        self.check_total(total, evidence, soft)
         table = table / total
         values = tuple(self.variables[n].values for n in query)
         return Posterior(tuple(query), values, table)
+
+    def pair_tables(
+        self, pivot: str, variables: Sequence[str], evidence: Mapping[str, str]
+    ) -> list[np.ndarray]:
+        """P(pivot, X | evidence) for each X of `variables`, as (pivot values, X values)
+        tables (for X = pivot, P(pivot | evidence) on the diagonal), kept for the last few
+        evidence sets.
+
+        Why kept: fusion asks for the same evidence frame after frame (an object's features stay
+        for a whole gesture) with new soft evidence on the pivot each time; with these tables a
+        frame costs one product with the soft vector per variable instead of a sum over the
+        whole joint."""
+        key = (pivot, tuple(sorted(evidence.items())))
+        kept = self._pair_tables.get(key)
+        if kept is None:
+            kept = self._pair_tables[key] = {}
+            if len(self._pair_tables) > _PAIR_TABLES_KEPT:
+                self._pair_tables.popitem(last=False)
+        else:
+            self._pair_tables.move_to_end(key)
+        out = []
+        for name in variables:
+            table = kept.get(name)
+            if table is None:
+                if name == pivot:
+                    table = np.diag(self.posterior([pivot], evidence).table)
+                else:
+                    table = self.posterior([pivot, name], evidence).table
+                kept[name] = table
+            out.append(table)
+        return out
 
     def word_probabilities(
         self,
@@ -324,7 +359,7 @@ class CompiledNetwork:
         soft = soft or {}
         phi, _, idx = self._weights(evidence, soft)
         total = float(phi.sum())
-        self._check_total(total, evidence, soft)
+        self.check_total(total, evidence, soft)
         present = self.present_nd[(slice(None), *idx)].reshape(len(self.words), -1)
         probs = present @ phi.reshape(-1) / total
         out = dict(zip(self.words, probs.tolist(), strict=True))

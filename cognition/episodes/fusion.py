@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
 from beyond_self.cognition.bn.model import BayesNet
-from beyond_self.cognition.fusion import ACTION, fuse, fuse_words
+from beyond_self.cognition.fusion import ACTION, fuse_marginals, fuse_words
 from beyond_self.cognition.variables import EFFECTS
 from beyond_self.core.errors import InputError
 
@@ -227,16 +227,13 @@ class FusionJoin(Generic[R]):
         return outputs
 
     def predict(self, observed: Mapping[str, str], belief: Mapping[str, float]) -> Prediction:
-        action = fuse(self.model, ACTION, observed, belief).marginal(ACTION)
-        effects = {
-            var: fuse(self.model, var, observed, belief).marginal(var)
-            for var in EFFECTS
-            if var in self.model.values and var not in observed
-        }
+        effects = [v for v in EFFECTS if v in self.model.values and v not in observed]
+        fused = fuse_marginals(self.model, [ACTION, *effects], observed, belief)
+        action = fused.pop(ACTION)
         return Prediction(
             action_belief=_normalised(action),
             evidence=dict(observed),
-            effects={k: _normalised(v) for k, v in effects.items()},
+            effects={k: _normalised(v) for k, v in fused.items()},
         )
 
     def _outcome(self, segment_id: int, g: _Gesture[R]) -> Outcome[R]:
