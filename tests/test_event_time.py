@@ -164,7 +164,10 @@ async def kill_each_in_turn(rate: float, out: Path) -> dict[str, Any]:
     try:
         await pipeline.start()
         while not finished():
-            assert loop.time() - began < 300, (rate, events, lines)
+            assert loop.time() - began < 300, "\n".join(
+                [f"rate {rate}: stalled; what happened:", *events, "what it printed:", *lines]
+                + [f"{p.name}: {line}" for p in pipeline.processes for line in list(p.lines)[-8:]]
+            )
             turn = len(killed)
             g = monitor.report.gestures.get(turn + 1)
             if turn < len(KILLED) and g is not None and g.started is not None:
