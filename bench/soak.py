@@ -239,11 +239,12 @@ async def soak(
         "blocks_unlike_analyse": wrong,
         "kills": len(kills),
         "restarts": {n: r.count for n, r in pipeline.restarts.items()},
-        "clean_stop": set(codes.values()) <= {0},
+        # the deployment's own rule: killed by its SIGTERM while still starting is clean
+        "clean_stop": not pipeline.unclean(),
         "unclean": {
             p.name: [codes[p.name], *list(p.lines)[-3:]]
             for p in pipeline.processes
-            if codes.get(p.name)
+            if p.name in pipeline.unclean()
         },
         "rss_first_fifth_mb": round(statistics.median(m for _, m in memory[:fifth]), 1)
         if memory
