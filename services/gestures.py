@@ -51,6 +51,11 @@ def checkpoints_in(resume: dict[str, int]) -> dict[int, tuple[int, int]]:
     return told
 
 
+def newest_checkpoint(resume: dict[str, int]) -> tuple[int, int, int]:
+    """(stamp, segments, events) of the newest checkpoint a predecessor left; -1: none."""
+    return resume.get("stamp", -1), resume.get("segments", 0), resume.get("events", 0)
+
+
 class GestureStreamer(Service):
     name = "gestures"
     subscribes = ("skeleton", "stream_end")
@@ -82,19 +87,24 @@ class GestureStreamer(Service):
         # a restarted streamer rebuilds its predecessor's state from a checkpoint it left
         resume = self.ledgers.predecessor()
         self.history = checkpoints_in(resume)  # segments told -> (stamp, events)
-        self.resume_from, segments, self.events = self._resume_point(resume)
-        self.tracker: GestureTracker[Header] = GestureTracker(
-            self.gesture_models, buffer_frames=self.buffer_frames, first_segment_id=segments
-        )
-        if self.resume_from >= 0:
-            event(self.log, logging.INFO, "resuming from a checkpoint",
-                  stamp=self.resume_from, segments=segments, events=self.events)  # fmt: skip
+        self.newest = newest_checkpoint(resume)
+        self._resume_at(*self._resume_point(resume))
         self.actions = list(self.gesture_models.actions)
         keys = self.bus.keys
         self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, FRAMES)
         self.segments = self.publisher(keys.gesture_segment, GestureSegment, EVENTS)
         self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame, SKELETON, paced=True)
         self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
+
+    def _resume_at(self, stamp: int, segments: int, events: int) -> None:
+        """Rebuild from the checkpoint at `stamp` (-1: from the start) with its counts."""
+        self.resume_from, self.events = stamp, events
+        self.tracker: GestureTracker[Header] = GestureTracker(
+            self.gesture_models, buffer_frames=self.buffer_frames, first_segment_id=segments
+        )
+        if stamp >= 0:
+            event(self.log, logging.INFO, "resuming from a checkpoint",
+                  stamp=stamp, segments=segments, events=events)  # fmt: skip
 
     def features(self, frame: SkeletonFrame) -> np.ndarray:
         hand = frame.joints.get(self.hand_joint)
@@ -114,6 +124,16 @@ class GestureStreamer(Service):
         stamp = frame.header.stamp
         if self.finished or stamp < self.resume_from:
             return  # before the checkpoint: the predecessor's, already told
+        if self.tracker.last_stamp is None and self.resume_from < stamp <= self.newest[0]:
+            # going back to a checkpoint before a gesture not yet said, whose frames are gone
+            # from the source's cache (the source was restarted too), while the newest one's
+            # are here: rebuild exactly from the newest, as a plain restart does (the gestures
+            # in between are with the consumers, or lost either way). From here instead, the
+            # cut path below left the gesture under way started and never ended: every
+            # consumer waited on it (the kill test stalled)
+            self._resume_at(*self.newest)
+            if stamp < self.resume_from:
+                return
         if self.tracker.last_stamp is None and stamp > self.resume_from >= 0:
             # the frames since the checkpoint are gone (the source was restarted too): number
             # on after every gesture a consumer has, and say that one under way may be cut
@@ -154,7 +174,7 @@ class GestureStreamer(Service):
         """(stamp, segments, events) to start from: the newest checkpoint left, or, when the
         gestures it has told are not all said yet (a workstation taken over: the outputs in
         between are gone), the newest one before the oldest gesture not said. -1: none."""
-        latest = (resume.get("stamp", -1), resume.get("segments", 0), resume.get("events", 0))
+        latest = self.newest
         points = self.history
         said_key = self.bus.keys.description
         if not points or not self.ledgers.book.taken(said_key, self.name):
