@@ -162,6 +162,7 @@ class GestureStreamer(Service):
         """The newest checkpoint, and the newest one at each of the last gesture counts: a
         successor goes back to the one before the oldest gesture not yet said (its outputs
         may have died with the workstation that was working on them, caches and all)."""
+        first_after_gesture = segments not in self.history
         self.history[segments] = (at, events)
         for old in sorted(self.history)[:-CHECKPOINTS_KEPT]:
             del self.history[old]
@@ -169,6 +170,11 @@ class GestureStreamer(Service):
         counts = {"segments": segments, "events": events}
         counts |= {f"events@{n}": e for n, (_, e) in self.history.items()}
         self.ledgers.checkpoint(stamps, counts)
+        if first_after_gesture:
+            # told at once, not with the next health report: at rate max a second of wall
+            # time is many gestures, and a successor whose newest checkpoint is older than the
+            # source's cache cannot rebuild exactly (on_frame)
+            self.ledgers.publish()
 
     def _resume_point(self, resume: dict[str, int]) -> tuple[int, int, int]:
         """(stamp, segments, events) to start from: the newest checkpoint left, or, when the
