@@ -13,6 +13,7 @@ from busutil_net import private_config
 import beyond_self.schemas as s
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.schemas import Keys, Message
 from beyond_self.services.speech import LOG_START, SpeechLog, SpeechSynthesizer
 
@@ -76,11 +77,14 @@ def said(out: Path) -> list[int]:
 
 
 async def test_a_restarted_speech_service_does_not_repeat_what_its_log_says_was_said(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """SIGKILLed after saying gesture 2 but before its ledger reached anyone: the others keep
     a ledger saying 1 only. Its successor gets 2 again (a publisher's cache) and the log, not
-    the stale ledger, keeps it from saying it twice."""
+    the stale ledger, keeps it from saying it twice. Its supervisor tells it that it was
+    restarted, so it asks until the predecessor's ledger is among the answers (a session just
+    opened may not know the others' queryable yet: asked once, it said all four, seen once)."""
+    monkeypatch.setenv(RESTARTS_ENV, "1")
     log = tmp_path / "speech.log"
     log.write_text("1\t0\t-\tan earlier run, before this run's first speech service\n")
     start = log.stat().st_size
