@@ -319,14 +319,14 @@ class Keeper:
         else:
             self._dirty = True
 
-    def seen_downstream(self, key: str, kinds: Iterable[str]) -> int:
-        """The highest segment id any consumer of `key` has handled with one of `kinds` (0:
-        none): where a restarted producer that cannot rebuild its state exactly numbers on."""
-        return max(
-            (max(h.segments(key, kind), default=0) for n, h in self.book.handled.items()
-             if n != self.name for kind in kinds),
-            default=0,
-        )  # fmt: skip
+    def seen_downstream(self, key: str, kinds: Iterable[str]) -> set[int]:
+        """Segment ids some consumer of `key` has handled with one of `kinds`: where a
+        restarted producer that cannot rebuild its state exactly numbers on, and what it must
+        close."""
+        return {
+            segment for n, h in self.book.handled.items() if n != self.name
+            for kind in kinds for segment in h.segments(key, kind)
+        }  # fmt: skip
 
     def done_downstream(self, key: str, kind: str) -> set[int]:
         """Segments whose `kind` every consumer of this service's `key` has handled: a

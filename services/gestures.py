@@ -135,17 +135,7 @@ class GestureStreamer(Service):
             if stamp < self.resume_from:
                 return
         if self.tracker.last_stamp is None and stamp > self.resume_from >= 0:
-            # the frames since the checkpoint are gone (the source was restarted too): number
-            # on after every gesture a consumer has, and say that one under way may be cut
-            seen = self.ledgers.seen_downstream(self.bus.keys.gesture_segment, SEGMENT_KINDS)
-            self.tracker.segment_id = max(self.tracker.segment_id, seen)
-            self.report_error(
-                "resume",
-                InputError(
-                    f"the skeleton cache starts at {stamp}, after the checkpoint "
-                    f"{self.resume_from}: a gesture under way may be cut"
-                ),
-            )
+            self._cut(frame)
         x = self.features(frame)
         events = self.events
         self.emit(self.tracker.push(stamp, frame.frame, x, frame.header))
@@ -157,6 +147,30 @@ class GestureStreamer(Service):
             self._tell_checkpoint(*checkpoint, events)
         if self.end_at is not None and stamp >= self.end_at:
             self.finish()
+
+    def _cut(self, frame: SkeletonFrame) -> None:
+        """The frames since the checkpoint are gone (the source was restarted too): cancel
+        each gesture a consumer saw start and none saw end, whose frames no one can give back
+        (consumers would wait on it for ever), and number on after every gesture a consumer
+        has."""
+        key = self.bus.keys.gesture_segment
+        seen = self.ledgers.seen_downstream(key, SEGMENT_KINDS)
+        closed = self.ledgers.seen_downstream(key, ("end", "cancel"))
+        stamp = frame.header.stamp
+        reason = f"its frames before {stamp} are gone (source and streamer restarted)"
+        self.emit([
+            Cancelled(segment_id=n, frame=frame.frame, start_stamp=self.resume_from,
+                      ref=frame.header, reason=reason)
+            for n in sorted(seen - closed)
+        ])  # fmt: skip
+        self.tracker.segment_id = max(self.tracker.segment_id, *seen, 0)
+        self.report_error(
+            "resume",
+            InputError(
+                f"the skeleton cache starts at {stamp}, after the checkpoint "
+                f"{self.resume_from}: gestures under way were cut ({sorted(seen - closed)})"
+            ),
+        )
 
     def _tell_checkpoint(self, at: int, segments: int, events: int) -> None:
         """The newest checkpoint, and the newest one at each of the last gesture counts: a

@@ -351,3 +351,23 @@ def test_a_late_reasoner_gets_the_posterior_history_before_the_segment_history(
     outcomes = lost.started(2, second) + lost.belief(2, 0, second, belief, 0, final=True)
     outcomes += lost.ended(2, second, second + 1)
     assert [o.segment_id for o in outcomes if isinstance(o, Outcome)] == [2]
+
+
+def test_a_cancel_after_the_end_changes_nothing(network: Any) -> None:
+    """A restarted streamer that lost its frames cancels each gesture its consumers had not
+    yet told it ended (their ledgers lag): one whose end has arrived is whole, and is
+    described as if no cancel had come; one still under way is dropped."""
+    belief = {"tap": 0.9, "grasp": 0.05, "touch": 0.05}
+    join: FusionJoin[int] = FusionJoin(network, expect_objects=False)
+    out = join.started(1, 0) + join.ended(1, 0, 10)
+    out += join.cancelled(1) + join.started(2, 20) + join.cancelled(2)
+    out += join.belief(1, 0, 10, belief, 0, final=True)
+    out += join.belief(2, 0, 30, belief, 0, final=True)
+    assert [o.segment_id for o in out if isinstance(o, Outcome)] == [1]
+    watch: ObjectWatch[int] = ObjectWatch(ClusterModel.load())
+    watch.started(1, 0, 0)
+    watch.ended(1, 0, 10, 1, 0)
+    assert watch.cancelled(1) == [] and 1 in watch.windows
+    watch.started(2, 20, 0)
+    watch.cancelled(2)
+    assert 2 not in watch.windows

@@ -13,6 +13,7 @@ from busutil_net import private_config
 import beyond_self.schemas as s
 from beyond_self.cognition.gestures import synthesize_continuous
 from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.registry import SERVICES, service_class
 
 GARBAGE = [b"", b"\x00\x01\x02", msgspec.msgpack.encode({"type": "Nope", "header": 3})]
@@ -160,3 +161,54 @@ async def test_on_a_replay_health_is_on_the_streams_clock_also_before_it_and_pau
     paused = [(await health.recv(timeout=10)).message.header.stamp for _ in range(3)]
     assert paused == [stream_time] * 3  # no tick: the clock stands still, health goes on
     await _stop(service)
+
+
+async def test_a_restarted_streamer_without_its_checkpoints_frames_cancels_the_gesture_under_way(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Source and streamer both restarted: the skeleton cache starts after the predecessor's
+    checkpoint, so gesture 2, whose start the reasoner has and whose end it never got, cannot
+    be rebuilt. The successor cancels it (consumers would wait on it for ever) and numbers on
+    after it, its events counting on from its predecessor's."""
+    monkeypatch.setenv(RESTARTS_ENV, "1")
+    config = private_config()
+    first = 10**18
+    with Bus.open(config) as others, Bus.open(config) as bus:
+        key = bus.keys.gesture_segment
+        kept = [
+            s.Ledger(
+                header=s.Ledger.original_header("gestures", 9, first), service="gestures",
+                resume={"segments": 1, "events": 3}, resume_stamps={"stamp": first},
+            ),
+            s.Ledger(
+                header=s.Ledger.original_header("reasoner", 9, first), service="reasoner",
+                handled={key: {"start": [(1, 0, 0), (2, 0, 0)], "end": [(1, 0, 0)]}},
+            ),
+        ]  # fmt: skip
+
+        async def answer(_key: str, _request: None) -> list[tuple[str, s.Message]]:
+            return [(others.keys.ledger(m.service), m) for m in kept]
+
+        others.queryable(others.keys.ledger(), None, answer)
+        service = await _start("gestures", bus)
+        segments = others.subscribe(key, s.GestureSegment)
+        pub = others.publisher(others.keys.skeleton, s.SkeletonFrame)
+        await pub.wait_matching(timeout=10)
+        stream = synthesize_continuous(["tap", "grasp"], seed=5)
+        for i in range(5, stream.n_frames):  # the restarted source's cache: frame 0 is gone
+            joints = {
+                n: s.Joint(position=(float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
+                for n, p in stream.joints.items()
+            }
+            pub.put(s.SkeletonFrame(header=_header(i, first + i * 33_333_333), frame=i + 1,
+                                    joints=joints))  # fmt: skip
+        events = [(await segments.recv(timeout=20)).message for _ in range(5)]
+        assert [(e.event, e.segment_id, e.event_seq) for e in events] == [
+            ("cancel", 2, 4),
+            ("start", 3, 5),
+            ("end", 3, 6),
+            ("start", 4, 7),
+            ("end", 4, 8),
+        ]
+        assert "gestures under way were cut ([2])" in service.health_report().last_error  # type: ignore[attr-defined]
+        await _stop(service)

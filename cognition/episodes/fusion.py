@@ -132,6 +132,9 @@ class FusionJoin(Generic[R]):
         return self._advance(end_stamp)
 
     def cancelled(self, segment_id: int) -> list[Output[R]]:
+        g = self.gestures.get(segment_id)
+        if g is not None and g.end_stamp is not None:
+            return []  # whole already: a restarted streamer cancels what it did not see end
         self.gestures.pop(segment_id, None)
         self.finished.add(segment_id)
         return self._flush()

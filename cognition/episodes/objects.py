@@ -274,6 +274,9 @@ class ObjectWatch(Generic[R]):
         return self._decide()
 
     def cancelled(self, segment_id: int) -> list[Output[R]]:
+        window = self.windows.get(segment_id)
+        if window is not None and window.end is not None:
+            return []  # whole already: a restarted streamer cancels what it did not see end
         self.windows.pop(segment_id, None)
         return self._decide()
 
