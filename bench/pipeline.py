@@ -233,8 +233,9 @@ VISION_SCENE = (
 FRAME_BUDGET_MS = 1e3 / 15  # a 15 fps camera's frame interval
 
 
-def vision_scene(repeats: int) -> list[s.Message]:
-    """The scene's messages in stamp order (skeleton and compressed camera frames)."""
+def vision_scene(repeats: int, seed: int = 3, turn: int = 0) -> list[s.Message]:
+    """The scene's messages in stamp order (skeleton and compressed camera frames); `turn`
+    rotates the order of its gestures (another person's scene: bench/fleet.py)."""
     import tempfile
 
     from beyond_self.cli import main as beyond
@@ -242,8 +243,10 @@ def vision_scene(repeats: int) -> list[s.Message]:
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "scene.mcap"
-        scene = ",".join([VISION_SCENE] * repeats)
-        assert beyond(["simulate", scene, "-o", str(path), "--seed", "3"]) == 0
+        gestures = VISION_SCENE.split(",")
+        turn %= len(gestures)
+        scene = ",".join((gestures[turn:] + gestures[:turn]) * repeats)
+        assert beyond(["simulate", scene, "-o", str(path), "--seed", str(seed)]) == 0
         return [item.message() for item in read_recording(path)]
 
 
