@@ -122,8 +122,10 @@ def fuse_marginals(
     vec = action_vector(model, p_hmm)
     compiled = model.compiled
     tables = compiled.pair_tables(ACTION, [ACTION, *queries], observed)
+    # P_BN(A, A | observed) is diagonal: its rows' sums are P_BN(A | observed)
     total = float(vec @ tables[0].sum(axis=1))  # P_BN(G-weighted actions | observed), unscaled
-    compiled.check_total(total, observed, {ACTION: vec.tolist()})
+    if not total > 0:  # the refusal's message, built only when it is needed
+        compiled.check_total(total, observed, {ACTION: vec.tolist()})
     out: dict[str, dict[str, float]] = {}
     for name, table in zip(queries, tables[1:], strict=True):
         weighted = vec @ table
