@@ -53,6 +53,7 @@ from beyond_self.schemas.keys import (
     PREFIX,
     PROGRESS,
     STREAMS,
+    robot_matches,
 )
 
 # queryable name -> key suffix after beyond/<robot>/ (besides every service's own health and
@@ -250,13 +251,15 @@ def access_control(
         elif binding.role == TOOLS_ROLE:
             grants = _reader_grants(declarations, robots)
         elif binding.role in SIDE_MONITORS:
-            tokens = [_key(robots, f"{ALIVE}/{m}") for m in SIDE_MONITORS[binding.role]]
-            grants = [
-                *_reader_grants(declarations, robots),
-                ("alive", ["liveliness_token"], "ingress", tokens),
-            ]
-            for name in sides[SIDE_OF[binding.role]]:
-                grants += _service_grants(by_name[name], robots)
+            grants = []
+            for chunk in _side_chunks(subject, binding):
+                tokens = [_key(chunk, f"{ALIVE}/{m}") for m in SIDE_MONITORS[binding.role]]
+                grants += [
+                    *_reader_grants(declarations, chunk),
+                    ("alive", ["liveliness_token"], "ingress", tokens),
+                ]
+                for name in sides[SIDE_OF[binding.role]]:
+                    grants += _service_grants(by_name[name], chunk)
         else:
             raise unknown(f"role of identity {subject!r}", binding.role, identities(declarations))
         rules.role(subject, grants)
@@ -267,6 +270,15 @@ def access_control(
         "subjects": rules.subjects,
         "policies": rules.policies,
     }
+
+
+def _side_chunks(subject: str, binding: Binding) -> list[str]:
+    """The robot chunks a side's certificate acts on: its robots, and for a fleet's
+    workstation (`beyond keys add ws-1 --workstation 'lab-*'`) also its own name, under which
+    its processes are alive and report (runtime/fleet.py) and its monitor watches them."""
+    fleet_host = binding.role == "workstation" and subject != "workstation"
+    own = fleet_host and not robot_matches(binding.robots, subject)
+    return [binding.robots, *([subject] if own else [])]
 
 
 def identities(declarations: list[Declaration]) -> list[str]:

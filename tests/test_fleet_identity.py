@@ -94,7 +94,15 @@ def test_certificates_carry_their_robots(fleet_store: Path) -> None:
     puts = by_id["lab-1-out-ingress"]["key_exprs"]
     assert "beyond/lab-1/sensors/skeleton" in puts
     assert all(k.startswith("beyond/lab-1/") for k in puts), puts
-    assert all(k.startswith("beyond/lab-$*/") for k in by_id["ws-lab-out-ingress"]["key_exprs"])
+    ws_puts = by_id["ws-lab-out-ingress"]["key_exprs"]
+    assert all(k.startswith(("beyond/lab-$*/", "beyond/ws-lab/")) for k in ws_puts), ws_puts
+    # a fleet's workstation is alive and reports under its own name too (runtime/fleet.py),
+    # and nothing more: a robot's data is not among its own name's keys
+    tokens = by_id["ws-lab-alive-ingress"]["key_exprs"]
+    assert "beyond/ws-lab/alive/monitor-fleet-workstation" in tokens, tokens
+    assert "beyond/lab-$*/alive/monitor-fleet-workstation" in tokens, tokens
+    assert not [k for k in by_id["workstation-out-ingress"]["key_exprs"] if "/workstation/" in k]
+    assert not [k for k in by_id["ops-out-ingress"]["key_exprs"] if k.startswith("beyond/ops/")]
     assert robot_pattern("lab-*") == "lab-$*" and robot_pattern("*") == "*"
     assert robot_matches("lab-$*", "lab-7") and not robot_matches("lab-$*", "other")
     for bad in ("lab/1", "lab-**", "", "-x"):

@@ -144,3 +144,59 @@ def test_a_standby_workstation_takes_over_and_every_robot_is_described_once(
         assert sorted(int(line.split("\t")[1]) for line in said) == [1, 2, 3, 4, 5, 6], said
     taken = re.findall(r"serving a robot no host serves .*robot=(lab-\S+)", ws["ws-b"].text())
     assert {"lab-a1", "lab-a2"} <= set(taken), ws["ws-b"].text()[-3000:]
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="network namespaces need Linux")
+def test_a_secure_fleet_describes_its_robot_through_the_rules(
+    hosts: TwoHosts, tmp_path: Path
+) -> None:
+    """A fleet on the secure bus: the workstation ws-lab (`beyond keys add ws-lab
+    --workstation 'lab-*'`) runs its router and its four services, each presenting ws-lab's
+    certificate; the robot lab-a1 (`beyond keys add lab-a1 --robot`) runs its own router,
+    linked to the workstation's with lab-a1's certificate, and its source and voice with the
+    same. The robot prints exactly the lines `beyond analyse` prints, each gesture said once:
+    the rules made from the certificates carry a fleet end to end (what they refuse is
+    tests/test_fleet_identity.py's)."""
+    from beyond_self.runtime import keystore
+    from beyond_self.services import registry
+
+    keys = tmp_path / "keys"
+    keystore.init(keys, registry.identities())
+    keystore.add(keys, "lab-a1", role="robot", robots="lab-a1")
+    keystore.add(keys, "ws-lab", role="workstation", robots="lab-*")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("BEYOND_")}
+    env.update(BEYOND_LOG_FORMAT="text", PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+    actions, seed = ROBOTS["lab-a1"]
+    recording = tmp_path / "lab-a1.mcap"
+    skeleton_recording(recording, actions, seed=seed, robot="lab-a1")
+    analysed = subprocess.run(
+        [*BEYOND, "analyse", str(recording)], capture_output=True, text=True, env=env,
+        timeout=120, check=True,
+    )  # fmt: skip
+    expected = gesture_lines(analysed.stdout)
+    secure = ["--secure", str(keys), "--no-live"]
+    ws = hosts.start(
+        hosts.ws, "ws-lab",
+        [*BEYOND, "up", *secure, "--profile", "fleet-workstation", "--robot", "ws-lab",
+         "--robots", "lab-*"],
+        env,
+    )  # fmt: skip
+    wait_for("the workstation", lambda: "pipeline up:" in ws.text(), [ws], 90)
+    robot = hosts.start(
+        hosts.robot, "lab-a1",
+        [*BEYOND, "up", *secure, "--profile", "fleet-robot", "--robot", "lab-a1",
+         "--connect", f"tls/{hosts.ws_ip}:7447", "--recording", str(recording), "--rate", RATE,
+         "--timeout", "120", "--wait-for", "gestures,objects,reasoner,describer",
+         "--config", str(voice(tmp_path, "lab-a1"))],
+        env,
+    )  # fmt: skip
+    try:
+        code = robot.popen.wait(150)
+    finally:
+        ws.popen.terminate()
+    assert code == 0, (robot.text()[-4000:], ws.text()[-3000:])
+    assert gesture_lines(robot.text()) == expected, (robot.text()[-4000:], ws.text()[-3000:])
+    said = (tmp_path / "lab-a1" / "speech.log").read_text().splitlines()
+    assert sorted(int(line.split("\t")[1]) for line in said) == [1, 2, 3, 4, 5, 6], said
+    assert ws.popen.wait(30) == 0, ws.text()[-3000:]
+    assert "secure=" in ws.text() and "identity=ws-lab" in ws.text(), ws.text()[-3000:]

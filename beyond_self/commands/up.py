@@ -182,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
     if args.profile.endswith("workstation") and _mode_unset(args, config):
         config = config.with_(mode="client")
     if config.secure is not None and config.identity is None:  # the monitor is the side's
-        config = config.with_(identity=side_identity(args.profile))
+        config = config.with_(identity=side_identity(args.profile, config.robot))
     try:
         status = asyncio.run(up(args, local_group(config)))
     except InputError as exc:  # bad input (a damaged recording...): one line, as every command
@@ -203,7 +203,11 @@ def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str
 
     assert config.secure is not None
     remote = list(config.connect or ()) + list(config.routers)
-    identity = side_identity(profile) if remote else "router"
+    if fleet_side(profile):  # one certificate for the side: its robot's, or its workstation's
+        identity = str(config.identity)
+        names = []
+    else:
+        identity = side_identity(profile, config.robot) if remote else "router"
     for name in [*names, str(config.identity), identity]:
         keystore.check(config.secure, name)
     command = ["router", "--secure", str(config.secure), "--identity", identity]
@@ -212,9 +216,26 @@ def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str
     return command
 
 
-def side_identity(profile: str) -> str:
-    """The certificate of a side's monitor and router: the robot's or the workstation's."""
+def side_identity(profile: str, robot: str) -> str:
+    """The certificate of a side's monitor and router: the robot's or the workstation's. A
+    fleet's side is its own name (`--robot lab-1`, `--robot ws-1`): the certificate `beyond
+    keys add` bound to that robot, or to the robots that workstation is granted, which its
+    router and every process it starts present (fleet_env)."""
+    if fleet_side(profile):
+        return robot
     return "robot" if profile.endswith("robot") else "workstation"
+
+
+def fleet_side(profile: str) -> bool:
+    return profile.startswith("fleet-")
+
+
+def fleet_env(config: BusConfig, profile: str) -> dict[str, str]:
+    """On a secure fleet every process of the side presents the side's certificate, bound to
+    its robots (elsewhere each service presents its own, bound to the deployment's robot)."""
+    if config.secure is None or not fleet_side(profile) or config.identity is None:
+        return {}
+    return {"BEYOND_ZENOH_IDENTITY": config.identity}
 
 
 def check_fleet_profile(profile: str) -> None:
@@ -336,6 +357,7 @@ def deployment(
         config,
         names,
         options=options,
+        env=fleet_env(config, args.profile),
         wait_for=wait_list(args.wait_for) + [n for n in skip if n in PROFILES[args.profile]],
         watcher=monitor_name(args.profile),
         clock="recording" if replayed else "wall",
