@@ -192,6 +192,8 @@ ASK_TIMEOUT_S = 10.0
 # waited for a gesture its predecessor had finished, the pipeline stalled; a restarted speech
 # service said a sentence again)
 ASK_AGAIN_S = 0.1
+# checkpoints a producer keeps, one per gesture count, for a successor to go back to
+CHECKPOINTS_KEPT = 8
 
 
 class Keeper:
@@ -327,6 +329,16 @@ class Keeper:
             segment for n, h in self.book.handled.items() if n != self.name
             for kind in kinds for segment in h.segments(key, kind)
         }  # fmt: skip
+
+    def unsaid(self, said_key: str, gestures: Iterable[int]) -> list[int]:
+        """Of `gestures`, oldest first, those some service taking `said_key` (the
+        descriptions) has not handled: after a takeover their outputs may have died with the
+        workstation, so a successor goes back to a checkpoint before the oldest ([] when
+        nobody takes the descriptions: nothing to go back for)."""
+        if not self.book.taken(said_key, self.name):
+            return []
+        said = self.book.done(said_key, "description", self.name)
+        return sorted(n for n in gestures if n not in said)
 
     def done_downstream(self, key: str, kind: str) -> set[int]:
         """Segments whose `kind` every consumer of this service's `key` has handled: a

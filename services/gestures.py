@@ -30,6 +30,7 @@ from beyond_self.cognition.episodes.tracker import hand_position
 from beyond_self.cognition.gestures import GestureModels
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.delivery import EVENTS, FRAMES, SKELETON
+from beyond_self.runtime.ledger import CHECKPOINTS_KEPT
 from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
@@ -37,7 +38,6 @@ from beyond_self.services import shared
 
 SEGMENT_KINDS = ("start", "end", "cancel")
 # checkpoints kept, one per gesture count: how many gestures back a successor can go
-CHECKPOINTS_KEPT = 8
 
 
 def checkpoints_in(resume: dict[str, int]) -> dict[int, tuple[int, int]]:
@@ -196,12 +196,8 @@ class GestureStreamer(Service):
         between are gone), the newest one before the oldest gesture not said. -1: none."""
         latest = self.newest
         points = self.history
-        said_key = self.bus.keys.description
-        if not points or not self.ledgers.book.taken(said_key, self.name):
-            return latest
-        said = self.ledgers.book.done(said_key, "description", self.name)
-        unsaid = [n for n in range(1, latest[1] + 1) if n not in said]
-        if not unsaid:
+        unsaid = self.ledgers.unsaid(self.bus.keys.description, range(1, latest[1] + 1))
+        if not points or not unsaid:
             return latest
         before = [n for n in points if n < min(unsaid)] or [min(points)]
         stamp, events = points[max(before)]

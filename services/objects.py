@@ -41,6 +41,7 @@ from beyond_self.cognition.episodes import GestureEffects, ObjectAtStart, Object
 from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.images import CameraMessage, image_from_message
+from beyond_self.runtime.ledger import CHECKPOINTS_KEPT
 from beyond_self.runtime.service import Service
 from beyond_self.runtime.subscription import Subscription
 from beyond_self.schemas import (
@@ -112,7 +113,7 @@ class ObjectSegmenter(Service):
         # restarted: the gestures whose effects every consumer has are not measured again, and
         # the camera history before the predecessor's restart point is not gone over again
         self.watch.done(self.ledgers.done_downstream(keys.effects, "effects"))
-        self.resume_from = self.ledgers.predecessor().get("camera", -1)
+        self.history, self.resume_from = self._restart_point(self.ledgers.predecessor())
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
         self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)
@@ -131,6 +132,29 @@ class ObjectSegmenter(Service):
         if self.skip_frames:
             self.spawn(self._describe_newest(), "objects of the newest frame")
         self.spawn(self._catch_up(), "gesture windows")
+
+    def _restart_point(self, resume: dict[str, int]) -> tuple[dict[int, int], int]:
+        """The restart points the predecessor kept at each gesture's start, and the camera
+        stamp to go back to: its newest restart point, or, when a gesture it saw start is not
+        said yet (a workstation taken over: that gesture's results died with it, and the
+        gesture streamer's successor derives it again), the point kept at that gesture's
+        start, so its frames are there to measure it again. -1: from the first frame."""
+        history = {
+            int(name.split("@", 1)[1]): stamp
+            for name, stamp in resume.items()
+            if name.startswith("camera@") and name.split("@", 1)[1].isdigit()
+        }
+        newest = resume.get("camera", -1)
+        unsaid = self.ledgers.unsaid(self.bus.keys.description, history)
+        return history, min(newest, history[unsaid[0]]) if unsaid else newest
+
+    def _tell_checkpoint(self) -> None:
+        """Where a successor would resume: the restart point now, and the one at each of the
+        last gestures' starts (`_restart_point`)."""
+        for old in sorted(self.history)[:-CHECKPOINTS_KEPT]:
+            del self.history[old]
+        points = {f"camera@{n}": stamp for n, stamp in self.history.items()}
+        self.ledgers.checkpoint({"camera": max(0, self.watch.restart_point)} | points)
 
     def on_gestures_progress(self, msg: Progress) -> None:
         stamp = msg.handled.get(self.bus.keys.skeleton, -1)
@@ -163,7 +187,7 @@ class ObjectSegmenter(Service):
             return  # before the predecessor's restart point: nobody needs it again
         image = image_from_message(msg)
         self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image))
-        self.ledgers.checkpoint({"camera": max(0, self.watch.restart_point)})
+        self._tell_checkpoint()
         if not self.skip_frames:
             await self._describe(msg, image)  # before the frame counts as handled: paced
             return
@@ -220,6 +244,9 @@ class ObjectSegmenter(Service):
         self._gestures_complete()
         if event.event == "start":
             self.emit(self.watch.started(event.segment_id, event.start_stamp, event.header))
+            # its window's frames from here on: what a successor needs to measure it again
+            self.history.setdefault(event.segment_id, max(0, self.watch.restart_point))
+            self._tell_checkpoint()
         elif event.event == "cancel":
             self.emit(self.watch.cancelled(event.segment_id))
         elif event.end_stamp is not None:

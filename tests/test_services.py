@@ -212,3 +212,49 @@ async def test_a_restarted_streamer_without_its_checkpoints_frames_cancels_the_g
         ]
         assert "gestures under way were cut ([2])" in service.health_report().last_error  # type: ignore[attr-defined]
         await _stop(service)
+
+
+@pytest.mark.parametrize(("said", "expected"), [([1], 1_000), ([1, 2], 5_000)])
+async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said(
+    monkeypatch: pytest.MonkeyPatch, said: list[int], expected: int
+) -> None:
+    """Taken over: the predecessor's newest restart point (camera stamp 5000) is past gesture
+    2's frames, whose description died with the workstation (the speech service said only
+    1). The gesture streamer's successor derives gesture 2 again, so the object segmenter's
+    goes back to the restart point kept at gesture 2's start; once 2 is said, to the newest."""
+    monkeypatch.setenv(RESTARTS_ENV, "1")
+    config = private_config()
+    with Bus.open(config) as others, Bus.open(config) as bus:
+        said_key = bus.keys.description
+        kept = [
+            s.Ledger(
+                header=s.Ledger.original_header("objects", 9, 1), service="objects",
+                resume_stamps={"camera": 5_000, "camera@1": 200, "camera@2": 1_000},
+            ),
+            s.Ledger(
+                header=s.Ledger.original_header("speech", 9, 1), service="speech",
+                handled={said_key: {"description": [(n, 0, 0) for n in said]}},
+            ),
+        ]  # fmt: skip
+
+        async def answer(_key: str, _request: None) -> list[tuple[str, s.Message]]:
+            return [(others.keys.ledger(m.service), m) for m in kept]
+
+        others.queryable(others.keys.ledger(), None, answer)
+        service = await _start("objects", bus)
+        assert service.resume_from == expected  # type: ignore[attr-defined]
+        assert service.history == {1: 200, 2: 1_000}  # type: ignore[attr-defined]
+        # a gesture that starts now keeps its own point, told to a next successor
+        pub = others.publisher(others.keys.gesture_segment, s.GestureSegment)
+        await pub.wait_matching(timeout=10)
+        header = s.GestureSegment.original_header("gestures", 3, 7_000)
+        pub.put(s.GestureSegment(header=header, event_seq=5, event="start", segment_id=3,
+                                 frame=210, start_stamp=7_000))  # fmt: skip
+        for _ in range(500):
+            if "camera@3" in service.ledgers.resume_stamps:  # type: ignore[attr-defined]
+                break
+            await asyncio.sleep(0.02)
+        stamps = service.ledgers.resume_stamps  # type: ignore[attr-defined]
+        assert stamps["camera@1"] == 200 and stamps["camera@2"] == 1_000
+        assert 0 <= stamps["camera@3"] <= 7_000, stamps
+        await _stop(service)
