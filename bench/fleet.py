@@ -46,6 +46,7 @@ import json
 import os
 import sys
 import time
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -104,18 +105,32 @@ def streams_for(
     return [robot_stream(7 if aligned else 7 + k, gestures) for k in range(n)]
 
 
+@contextlib.asynccontextmanager
+async def present(bus: Bus, robots: list[str], services: list[str]) -> AsyncIterator[list[Bus]]:
+    """Each robot's view of the bus, with the robot there (its source's liveliness token) and
+    its runs of `services` alive, so that its source may publish; gone again afterwards (the
+    fleet drops their runs before the next round)."""
+    views = [bus.for_robot(r) for r in robots]
+    tokens = [v.declare_token(v.keys.alive("ingest")) for v in views]
+    try:
+        for v in views:
+            for name in services:
+                await bus.wait_alive(v.keys.alive(name), timeout=60)
+        yield views
+    finally:
+        for undeclare in tokens:
+            undeclare()
+        for view in views:
+            view.close()
+
+
 async def serve(
     bus: Bus, robots: list[str], streams: list[tuple[list[s.SkeletonFrame], list[int]]]
 ) -> dict[str, Any]:
     """The robots' live skeleton streams at once; per gesture its description latency (ms)."""
-    views = [bus.for_robot(r) for r in robots]
-    tokens = [v.declare_token(v.keys.alive("ingest")) for v in views]
     latencies: list[float] = []
     stages: dict[str, list[float]] = {"gestures": [], "reasoner": [], "describer": []}
-    try:
-        for v in views:  # the robot's runs are there: its source may publish
-            for name in SERVICES:
-                await bus.wait_alive(v.keys.alive(name), timeout=60)
+    async with present(bus, robots, SERVICES) as views:
         pubs = [v.publisher(v.keys.skeleton, s.SkeletonFrame) for v in views]
         outs = [v.subscribe(v.keys.description, s.Description) for v in views]
         # where the time goes: when each gesture's end left the gesture streamer and its words
@@ -194,11 +209,6 @@ async def serve(
                 stages["describer"].append((got.received_ns - word) / 1e6)
         for task in watchers:
             task.cancel()
-        for view in views:
-            view.close()
-    finally:
-        for undeclare in tokens:
-            undeclare()
     return {"latency_ms": latencies, "stages_ms": stages, "stream_s": longest * FRAME_NS / 1e9}
 
 
@@ -219,14 +229,9 @@ async def serve_camera(bus: Bus, robots: list[str]) -> dict[str, Any]:
     the skeleton frame that ends it and the first camera frame after its end) to the
     description, as bench/pipeline.py measures one robot's."""
     scenes = [camera_scene(k) for k in range(len(robots))]
-    views = [bus.for_robot(r) for r in robots]
-    tokens = [v.declare_token(v.keys.alive("ingest")) for v in views]
     latencies: list[float] = []
     frames = {"described": 0, "skipped": 0}
-    try:
-        for v in views:
-            for name in CAMERA_SERVICES:
-                await bus.wait_alive(v.keys.alive(name), timeout=60)
+    async with present(bus, robots, CAMERA_SERVICES) as views:
         pubs = [
             (v.publisher(v.keys.skeleton, s.SkeletonFrame),
              v.publisher(v.keys.stream(CAMERA), s.CompressedCameraFrame))
@@ -291,11 +296,6 @@ async def serve_camera(bus: Bus, robots: list[str]) -> dict[str, Any]:
                 latencies.append((described[k][segment_id] - last_input) / 1e6)
         for task in watchers:
             task.cancel()
-        for view in views:
-            view.close()
-    finally:
-        for undeclare in tokens:
-            undeclare()
     stream_s = timeline[-1][0] / 1e9
     return {"latency_ms": latencies, "stream_s": stream_s, "camera_frames": frames}
 
