@@ -196,6 +196,27 @@ ASK_AGAIN_S = 0.1
 CHECKPOINTS_KEPT = 8
 
 
+def per_gesture(resume: Mapping[str, int], name: str) -> dict[int, int]:
+    """What a predecessor left per gesture count as "<name>@N" (`at_gestures`): N -> value."""
+    prefix = f"{name}@"
+    return {
+        int(key.removeprefix(prefix)): value
+        for key, value in resume.items()
+        if key.startswith(prefix) and key.removeprefix(prefix).isdigit()
+    }
+
+
+def at_gestures(name: str, values: Mapping[int, int]) -> dict[str, int]:
+    """`values` per gesture count as a ledger's resume entries, "<name>@N"."""
+    return {f"{name}@{n}": value for n, value in values.items()}
+
+
+def keep_newest(history: dict[int, Any]) -> None:
+    """Drop all but the CHECKPOINTS_KEPT highest gesture counts of `history`."""
+    for old in sorted(history)[:-CHECKPOINTS_KEPT]:
+        del history[old]
+
+
 class Keeper:
     """A service's part in exactly-once: its own `Handled`, the `LedgerBook` of the others', its
     `Ledger` published and answered for, and the checks the Service base makes with them."""

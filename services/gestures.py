@@ -30,25 +30,20 @@ from beyond_self.cognition.episodes.tracker import hand_position
 from beyond_self.cognition.gestures import GestureModels
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.delivery import EVENTS, FRAMES, SKELETON
-from beyond_self.runtime.ledger import CHECKPOINTS_KEPT
+from beyond_self.runtime.ledger import at_gestures, keep_newest, per_gesture
 from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
 from beyond_self.services import shared
 
 SEGMENT_KINDS = ("start", "end", "cancel")
-# checkpoints kept, one per gesture count: how many gestures back a successor can go
 
 
 def checkpoints_in(resume: dict[str, int]) -> dict[int, tuple[int, int]]:
     """The checkpoint per gesture count a predecessor left (`_tell_checkpoint` writes them as
     "stamp@N" and "events@N"): N -> (stamp, events)."""
-    told: dict[int, tuple[int, int]] = {}
-    for name, stamp in resume.items():
-        if name.startswith("stamp@"):
-            n = name.removeprefix("stamp@")
-            told[int(n)] = (stamp, resume.get(f"events@{n}", 0))
-    return told
+    events = per_gesture(resume, "events")
+    return {n: (stamp, events.get(n, 0)) for n, stamp in per_gesture(resume, "stamp").items()}
 
 
 def newest_checkpoint(resume: dict[str, int]) -> tuple[int, int, int]:
@@ -156,19 +151,20 @@ class GestureStreamer(Service):
         key = self.bus.keys.gesture_segment
         seen = self.ledgers.seen_downstream(key, SEGMENT_KINDS)
         closed = self.ledgers.seen_downstream(key, ("end", "cancel"))
+        cut = sorted(seen - closed)
         stamp = frame.header.stamp
         reason = f"its frames before {stamp} are gone (source and streamer restarted)"
         self.emit([
             Cancelled(segment_id=n, frame=frame.frame, start_stamp=self.resume_from,
                       ref=frame.header, reason=reason)
-            for n in sorted(seen - closed)
+            for n in cut
         ])  # fmt: skip
         self.tracker.segment_id = max(self.tracker.segment_id, *seen, 0)
         self.report_error(
             "resume",
             InputError(
                 f"the skeleton cache starts at {stamp}, after the checkpoint "
-                f"{self.resume_from}: gestures under way were cut ({sorted(seen - closed)})"
+                f"{self.resume_from}: gestures under way were cut ({cut})"
             ),
         )
 
@@ -178,11 +174,11 @@ class GestureStreamer(Service):
         may have died with the workstation that was working on them, caches and all)."""
         first_after_gesture = segments not in self.history
         self.history[segments] = (at, events)
-        for old in sorted(self.history)[:-CHECKPOINTS_KEPT]:
-            del self.history[old]
-        stamps = {"stamp": at} | {f"stamp@{n}": a for n, (a, _) in self.history.items()}
+        keep_newest(self.history)
+        points = self.history.items()
+        stamps = {"stamp": at} | at_gestures("stamp", {n: a for n, (a, _) in points})
         counts = {"segments": segments, "events": events}
-        counts |= {f"events@{n}": e for n, (_, e) in self.history.items()}
+        counts |= at_gestures("events", {n: e for n, (_, e) in points})
         self.ledgers.checkpoint(stamps, counts)
         if first_after_gesture:
             # told at once, not with the next health report: at rate max a second of wall

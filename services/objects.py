@@ -41,7 +41,7 @@ from beyond_self.cognition.episodes import GestureEffects, ObjectAtStart, Object
 from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.images import CameraMessage, image_from_message
-from beyond_self.runtime.ledger import CHECKPOINTS_KEPT
+from beyond_self.runtime.ledger import at_gestures, keep_newest, per_gesture
 from beyond_self.runtime.service import Service
 from beyond_self.runtime.subscription import Subscription
 from beyond_self.schemas import (
@@ -139,11 +139,7 @@ class ObjectSegmenter(Service):
         said yet (a workstation taken over: that gesture's results died with it, and the
         gesture streamer's successor derives it again), the point kept at that gesture's
         start, so its frames are there to measure it again. -1: from the first frame."""
-        history = {
-            int(name.split("@", 1)[1]): stamp
-            for name, stamp in resume.items()
-            if name.startswith("camera@") and name.split("@", 1)[1].isdigit()
-        }
+        history = per_gesture(resume, "camera")
         newest = resume.get("camera", -1)
         unsaid = self.ledgers.unsaid(self.bus.keys.description, history)
         return history, min(newest, history[unsaid[0]]) if unsaid else newest
@@ -151,9 +147,7 @@ class ObjectSegmenter(Service):
     def _tell_checkpoint(self) -> None:
         """Where a successor would resume: the restart point now, and the one at each of the
         last gestures' starts (`_restart_point`)."""
-        for old in sorted(self.history)[:-CHECKPOINTS_KEPT]:
-            del self.history[old]
-        points = {f"camera@{n}": stamp for n, stamp in self.history.items()}
+        points = at_gestures("camera", self.history)
         self.ledgers.checkpoint({"camera": max(0, self.watch.restart_point)} | points)
 
     def on_gestures_progress(self, msg: Progress) -> None:
@@ -246,6 +240,7 @@ class ObjectSegmenter(Service):
             self.emit(self.watch.started(event.segment_id, event.start_stamp, event.header))
             # its window's frames from here on: what a successor needs to measure it again
             self.history.setdefault(event.segment_id, max(0, self.watch.restart_point))
+            keep_newest(self.history)
             self._tell_checkpoint()
         elif event.event == "cancel":
             self.emit(self.watch.cancelled(event.segment_id))

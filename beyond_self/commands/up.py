@@ -203,12 +203,14 @@ def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str
 
     assert config.secure is not None
     remote = list(config.connect or ()) + list(config.routers)
-    if fleet_side(profile):  # one certificate for the side: its robot's, or its workstation's
+    fleet = fleet_side(profile)  # one certificate for the side: its robot's, or its host's
+    if fleet:
         identity = str(config.identity)
-        names = []
+    elif remote:
+        identity = side_identity(profile, config.robot)
     else:
-        identity = side_identity(profile, config.robot) if remote else "router"
-    for name in [*names, str(config.identity), identity]:
+        identity = "router"
+    for name in [*([] if fleet else names), str(config.identity), identity]:
         keystore.check(config.secure, name)
     command = ["router", "--secure", str(config.secure), "--identity", identity]
     if remote:
