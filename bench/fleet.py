@@ -59,8 +59,10 @@ from pipeline import CAMERA, QUIET, _p, scene_gestures, stream_frames, vision_sc
 import beyond_self.schemas as s  # noqa: E402
 from beyond_self.runtime.bus import Bus  # noqa: E402
 from beyond_self.runtime.config import BusConfig  # noqa: E402
+from beyond_self.runtime.delivery import EVENTS  # noqa: E402
 from beyond_self.runtime.fleet import LEAVE_ENV  # noqa: E402
 from beyond_self.runtime.replay import restamped  # noqa: E402
+from beyond_self.schemas.keys import for_robots  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402
 
 SERVICES = ["gestures", "reasoner", "describer"]
@@ -124,6 +126,20 @@ async def present(bus: Bus, robots: list[str], services: list[str]) -> AsyncIter
             view.close()
 
 
+def observe(bus: Bus, robots: list[str], key: str, cls: type[s.Message]) -> Any:
+    """One subscription to `key` (any robot's) for all of `robots` (the bench's observer must
+    not cost the workstation a subscription and a thread per robot); recovering, so that a
+    message Zenoh dropped under load still counts."""
+    pattern = bus.config.robots or robots[0]  # the fleet's pattern, or the one robot's own set
+    return bus.subscribe(for_robots(pattern, key), cls, EVENTS)
+
+
+def robot_of(robots: list[str]) -> Any:
+    """Index of the robot a received key belongs to."""
+    index = {r: k for k, r in enumerate(robots)}
+    return lambda key: index[key.split("/", 2)[1]]
+
+
 async def serve(
     bus: Bus, robots: list[str], streams: list[tuple[list[s.SkeletonFrame], list[int]]]
 ) -> dict[str, Any]:
@@ -132,11 +148,12 @@ async def serve(
     stages: dict[str, list[float]] = {"gestures": [], "reasoner": [], "describer": []}
     async with present(bus, robots, SERVICES) as views:
         pubs = [v.publisher(v.keys.skeleton, s.SkeletonFrame) for v in views]
-        outs = [v.subscribe(v.keys.description, s.Description) for v in views]
+        outs = observe(bus, robots, bus.keys.description, s.Description)
         # where the time goes: when each gesture's end left the gesture streamer and its words
         # left the reasoner, per robot (the description's own arrival closes the last stage)
-        segs = [v.subscribe(v.keys.gesture_segment, s.GestureSegment) for v in views]
-        words = [v.subscribe(v.keys.words, s.WordProbabilities) for v in views]
+        segs = observe(bus, robots, bus.keys.gesture_segment, s.GestureSegment)
+        words = observe(bus, robots, bus.keys.words, s.WordProbabilities)
+        which = robot_of(robots)
         seen: dict[str, list[dict[int, int]]] = {
             "segment": [{} for _ in robots],
             "words": [{} for _ in robots],
@@ -152,24 +169,24 @@ async def serve(
         index: list[dict[int, int]] = [{} for _ in robots]
         described: list[list[Any]] = [[] for _ in robots]
 
-        async def receive(k: int) -> None:
+        async def receive() -> None:
             with contextlib.suppress(asyncio.CancelledError):
                 while True:
-                    described[k].append(await outs[k].recv(timeout=None))
+                    got = await outs.recv(timeout=None)
+                    described[which(got.key)].append(got)
 
-        async def watch(sub: Any, into: dict[int, int], ends_only: bool) -> None:
+        async def watch(sub: Any, into: list[dict[int, int]], ends_only: bool) -> None:
             with contextlib.suppress(asyncio.CancelledError):
                 while True:
                     got = await sub.recv(timeout=None)
                     if not ends_only or got.message.event == "end":
-                        into.setdefault(got.message.segment_id, got.received_ns)
+                        into[which(got.key)].setdefault(got.message.segment_id, got.received_ns)
 
         loop = asyncio.get_running_loop()
-        watchers = [loop.create_task(receive(k)) for k in range(len(robots))]
-        watchers += [
-            loop.create_task(watch(sub, seen[name][k], name == "segment"))
-            for name, subs in (("segment", segs), ("words", words))
-            for k, sub in enumerate(subs)
+        watchers = [
+            loop.create_task(receive()),
+            loop.create_task(watch(segs, seen["segment"], True)),
+            loop.create_task(watch(words, seen["words"], False)),
         ]
         begin_wall, begin_ns = loop.time(), time.time_ns()
         for i in range(longest):
@@ -209,6 +226,8 @@ async def serve(
                 stages["describer"].append((got.received_ns - word) / 1e6)
         for task in watchers:
             task.cancel()
+        for sub in (outs, segs, words):
+            sub.close()
     return {"latency_ms": latencies, "stages_ms": stages, "stream_s": longest * FRAME_NS / 1e9}
 
 
@@ -237,18 +256,19 @@ async def serve_camera(bus: Bus, robots: list[str]) -> dict[str, Any]:
              v.publisher(v.keys.stream(CAMERA), s.CompressedCameraFrame))
             for v in views
         ]  # fmt: skip
-        outs = [v.subscribe(v.keys.description, s.Description) for v in views]
-        objects = [v.subscribe(v.keys.objects, s.DetectedObjects) for v in views]
+        outs = observe(bus, robots, bus.keys.description, s.Description)
+        objects = observe(bus, robots, bus.keys.objects, s.DetectedObjects)
+        which = robot_of(robots)
         for pair in pubs:
             for pub in pair:
                 await pub.wait_matching(timeout=30)
         described: list[dict[int, int]] = [{} for _ in robots]
 
-        async def receive(k: int) -> None:
+        async def receive() -> None:
             with contextlib.suppress(asyncio.CancelledError):
                 while True:
-                    got = await outs[k].recv(timeout=None)
-                    described[k].setdefault(got.message.segment_id, got.received_ns)
+                    got = await outs.recv(timeout=None)
+                    described[which(got.key)].setdefault(got.message.segment_id, got.received_ns)
 
         async def count(sub: Any) -> None:
             with contextlib.suppress(asyncio.CancelledError):
@@ -258,8 +278,7 @@ async def serve_camera(bus: Bus, robots: list[str]) -> dict[str, Any]:
                     frames["skipped"] += got.message.skipped
 
         loop = asyncio.get_running_loop()
-        watchers = [loop.create_task(receive(k)) for k in range(len(robots))]
-        watchers += [loop.create_task(count(sub)) for sub in objects]
+        watchers = [loop.create_task(receive()), loop.create_task(count(objects))]
         # one timeline: robot k's message i at its offset in its scene, plus k/N of a frame
         timeline = sorted(
             (m.header.stamp - items[0].header.stamp + k * FRAME_NS // len(robots), k, i)
@@ -296,6 +315,8 @@ async def serve_camera(bus: Bus, robots: list[str]) -> dict[str, Any]:
                 latencies.append((described[k][segment_id] - last_input) / 1e6)
         for task in watchers:
             task.cancel()
+        for sub in (outs, objects):
+            sub.close()
     stream_s = timeline[-1][0] / 1e9
     return {"latency_ms": latencies, "stream_s": stream_s, "camera_frames": frames}
 
