@@ -9,8 +9,10 @@ parents, so the definition must list every affordance node before the first word
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 
 from beyond_self.core.errors import InputError, read_text, unknown
 
@@ -52,6 +54,7 @@ class NetworkDefinition:
 
     variables: tuple[Variable, ...]
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
+    _values: Mapping[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         index: dict[str, int] = {}
@@ -60,6 +63,9 @@ class NetworkDefinition:
                 raise InputError(f"duplicate node {var.name!r} in the network definition")
             index[var.name] = i
         object.__setattr__(self, "_index", index)
+        # read on every frame a reasoner fuses: built once, read-only
+        values = {v.name: v.values for v in self.variables}
+        object.__setattr__(self, "_values", MappingProxyType(values))
         kinds = [v.is_word for v in self.variables]
         if True in kinds and False in kinds[kinds.index(True) :]:
             late = self.variables[kinds.index(True) + kinds[kinds.index(True) :].index(False)]
@@ -71,6 +77,11 @@ class NetworkDefinition:
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(v.name for v in self.variables)
+
+    @property
+    def values(self) -> Mapping[str, tuple[str, ...]]:
+        """Each node's values, by node name."""
+        return self._values
 
     @property
     def affordance(self) -> tuple[Variable, ...]:

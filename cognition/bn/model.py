@@ -95,8 +95,8 @@ class BayesNet:
         return self.definition.names
 
     @property
-    def values(self) -> dict[str, tuple[str, ...]]:
-        return {v.name: v.values for v in self.definition.variables}
+    def values(self) -> Mapping[str, tuple[str, ...]]:
+        return self.definition.values
 
     @property
     def words(self) -> tuple[str, ...]:
