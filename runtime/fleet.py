@@ -23,7 +23,13 @@ Partitioning and failover: one robot's service is served by exactly one workstat
 holds a token saying which host serves it (`Keys.server`); a workstation serves the robots of
 its `robots` pattern at once and those of its `standby` pattern (another workstation's) only
 once no host has served them for `takeover_after_s` (3 s, or $BEYOND_TAKEOVER_S), and never a
-robot another host serves. A workstation SIGKILLed mid-gesture loses its tokens with its
+robot another host serves. A stage takes a robot over sink first: it waits, beyond that, until
+each of its `consumers` (the fleet services it feeds) that was seen serving the robot has a run
+for it again (its liveliness token `beyond/<robot>/alive/<consumer>`, declared once the run is
+set up), so that its new run finds its consumers' new instances (which have handled nothing
+yet) and sends them what they need to rebuild, rather than withholding it on the word of the
+dead ones; a consumer that does not come back (the standby does not run it) is waited for
+until `takeover_latest_s` at most. A workstation SIGKILLed mid-gesture loses its tokens with its
 session; its standby's new run is a restarted service (runtime.ledger): it asks the robot's
 ledgers, resumes from the checkpoints and caches, and describes what is left, once. Two hosts
 that both serve a robot (started together, a link back) settle it by name: the greater yields.
@@ -58,14 +64,13 @@ LEAVE_ENV = "BEYOND_ROBOT_LEAVE_S"  # another wait (s): a test's robots leave an
 # runs take to declare their tokens, so a standby never races a workstation starting up
 TAKEOVER_AFTER_S = 3.0
 TAKEOVER_ENV = "BEYOND_TAKEOVER_S"
-# and this much longer per stage after it in the pipeline: the sink takes over first, so that a
-# producer's new run finds its consumers' new instances (which have handled nothing yet) and
-# sends them what they need to rebuild, rather than withholding it on the word of the dead ones
+# at most this much longer per stage after it in the pipeline, for consumers that do not come
+# back: a stage goes as soon as its consumers' new runs are there
 TAKEOVER_STEP_S = 1.5
 
 
-def takeover_after_s(stages_after: int) -> float:
-    """The standby's wait for a service with `stages_after` services after it."""
+def takeover_latest_s(stages_after: int) -> float:
+    """The longest a standby waits for a service with `stages_after` services after it."""
     return seconds_env(TAKEOVER_ENV, TAKEOVER_AFTER_S) + TAKEOVER_STEP_S * stages_after
 
 
@@ -106,6 +111,8 @@ class Fleet:
         bus: Bus | None = None,
         leave_after_s: float | None = None,
         takeover_after_s: float | None = None,
+        consumers: tuple[str, ...] = (),
+        takeover_latest_s: float | None = None,
     ) -> None:
         if config.robots is None:
             raise InputError("a fleet's service needs the robots it serves (--robots PATTERN)")
@@ -128,14 +135,20 @@ class Fleet:
             if takeover_after_s is not None
             else seconds_env(TAKEOVER_ENV, TAKEOVER_AFTER_S)
         )
+        self.consumers = consumers
+        self.takeover_latest_s = max(self.takeover_after_s, takeover_latest_s or 0.0)
         self.runs: dict[str, Run] = {}
         self.failed: dict[str, str] = {}  # robot -> why its run ended on its own
         self.present: set[str] = set()  # robots whose source is there
         self.served_by: dict[str, set[str]] = {}  # robot -> the other hosts serving it
         self.takeovers = 0  # robots this host began serving after no other host did
+        self.consumers_seen: dict[str, set[str]] = {}  # robot -> consumers ever seen serving it
+        self.consumers_alive: dict[str, set[str]] = {}  # robot -> consumers with a run for it now
         self._bus = bus
         self._leaving: dict[str, asyncio.TimerHandle] = {}
-        self._takeover: dict[str, asyncio.TimerHandle] = {}
+        self._takeover: dict[str, asyncio.TimerHandle] = {}  # robot -> its wait's end
+        self._latest: dict[str, asyncio.TimerHandle] = {}  # robot -> the wait on consumers' end
+        self._unserved_since: dict[str, float] = {}  # robot -> when its takeover wait began
         self._server_tokens: dict[str, Callable[[], None]] = {}
         self._stop = asyncio.Event()
         self._health_seq = 0
@@ -161,6 +174,8 @@ class Fleet:
                 keys = Keys()  # any robot's: for_robots puts the pattern in its place
                 bus.watch_tokens(for_robots(pattern, keys.alive(PRESENCE)), self._presence)
                 bus.watch_tokens(for_robots(pattern, keys.server(self.name)), self._server)
+                for consumer in self.consumers:
+                    bus.watch_tokens(for_robots(pattern, keys.alive(consumer)), self._consumer)
             own = Keys(self.config.robot)
 
             async def answer_health(_key: str, _request: None) -> ServiceHealth:
@@ -171,7 +186,8 @@ class Fleet:
             event(self.log, logging.INFO, "serving robots", service=self.name, robots=self.pattern)
             await self._stop.wait()
         finally:
-            for handle in [*self._leaving.values(), *self._takeover.values()]:
+            timers = [*self._leaving.values(), *self._takeover.values(), *self._latest.values()]
+            for handle in timers:
                 handle.cancel()
             await asyncio.gather(*(self._drop(robot) for robot in list(self.runs)))
             for sig in installed:
@@ -238,6 +254,21 @@ class Fleet:
         (hosts.add if present else hosts.discard)(host)
         self._review(robot)
 
+    def _consumer(self, key: str, present: bool) -> None:
+        """A consumer's run for a robot began or ended (any host's)."""
+        split = split_key(key)
+        if split is None or self._stop.is_set():
+            return
+        robot, consumer = split[0], key.rsplit("/", 1)[1]
+        alive = self.consumers_alive.setdefault(robot, set())
+        if present:
+            alive.add(consumer)
+            self.consumers_seen.setdefault(robot, set()).add(consumer)
+            if robot in self._unserved_since and robot not in self._takeover:
+                self._take(robot)  # past its wait, waiting on its consumers
+        else:
+            alive.discard(consumer)
+
     def _review(self, robot: str) -> None:
         """Serve `robot` if it is there and no other host does; yield it to a host whose
         name sorts first if both do."""
@@ -249,24 +280,47 @@ class Fleet:
                 asyncio.get_running_loop().create_task(self._drop(robot))
             return
         if robot not in self.present or others:
-            pending = self._takeover.pop(robot, None)
-            if pending is not None:
-                pending.cancel()
+            self._no_takeover(robot)
             return
         if self._primary(robot):
             self._start(robot)
-        elif robot not in self._takeover:
+        elif robot not in self._unserved_since:
             loop = asyncio.get_running_loop()
+            self._unserved_since[robot] = loop.time()
             self._takeover[robot] = loop.call_later(self.takeover_after_s, self._take, robot)
 
-    def _take(self, robot: str) -> None:
-        """A standby's wait is over: the robot is still there and served by no host."""
+    def _no_takeover(self, robot: str) -> None:
+        for timers in (self._takeover, self._latest):
+            pending = timers.pop(robot, None)
+            if pending is not None:
+                pending.cancel()
+        self._unserved_since.pop(robot, None)
+
+    def _take(self, robot: str, anyway: bool = False) -> None:
+        """A standby's wait is over: serve the robot if it is still there and served by no
+        host, once the consumers seen serving it have runs for it again (`anyway`: the latest
+        wait is over, they are not waited for any more)."""
         self._takeover.pop(robot, None)
-        if robot in self.present and not self.served_by.get(robot) and robot not in self.runs:
-            self.takeovers += 1
-            event(self.log, logging.WARNING, "serving a robot no host serves",
-                  service=self.name, robot=robot, waited_s=self.takeover_after_s)  # fmt: skip
-            self._start(robot)
+        since = self._unserved_since.get(robot)
+        if since is None:
+            return
+        if robot not in self.present or self.served_by.get(robot) or robot in self.runs:
+            self._no_takeover(robot)
+            return
+        loop = asyncio.get_running_loop()
+        waited = loop.time() - since
+        missing = self.consumers_seen.get(robot, set()) - self.consumers_alive.get(robot, set())
+        if missing and not anyway:
+            if robot not in self._latest:  # a consumer's new run comes, or this ends
+                latest = max(self.takeover_latest_s - waited, 0.0)
+                self._latest[robot] = loop.call_later(latest, self._take, robot, True)
+            return
+        self._no_takeover(robot)
+        self.takeovers += 1
+        event(self.log, logging.WARNING, "serving a robot no host serves",
+              service=self.name, robot=robot, waited_s=round(waited, 3),
+              consumers_missing=sorted(missing))  # fmt: skip
+        self._start(robot)
 
     def _left(self, robot: str) -> None:
         self._leaving.pop(robot, None)

@@ -61,6 +61,18 @@ def stages_after(name: str) -> int:
     return depth(name, frozenset({name}))
 
 
+def fleet_consumers(name: str) -> tuple[str, ...]:
+    """The fleet services service `name` feeds directly: a standby's run of `name` waits for
+    theirs (runtime.fleet)."""
+    by_name = {d.name: d for d in declarations()}
+    outputs = set(by_name[name].publishes)
+    return tuple(
+        d.name
+        for d in by_name.values()
+        if d.name != name and service_class(d.name).fleet and outputs & set(d.subscribes)
+    )
+
+
 def identities() -> list[str]:
     """Every identity a secure deployment's keystore needs a certificate for."""
     return acl.identities(declarations())

@@ -218,6 +218,43 @@ def start_service(service: Service) -> asyncio.Task[None]:
     return asyncio.get_running_loop().create_task(service.run(install_signals=False))
 
 
+@pytest.mark.parametrize("consumer_returns", [True, False])
+async def test_a_standby_stage_takes_over_once_its_consumers_new_runs_are_there(
+    consumer_returns: bool,
+) -> None:
+    """A standby's stage takes a dead host's robot over once the consumer seen serving it has
+    a run for it again (sink first: the producer's new run finds its consumers' new instances),
+    not after a fixed step per stage; a consumer that does not come back (the standby does not
+    run it) is waited for until the latest wait only."""
+    config = private_config()
+    standby = config.with_(robot="ws-b", robots="lab-b*", standby="lab-a*")
+    with Bus.open(config) as robots, Bus.open(config) as dead, Bus.open(config) as bus:
+        # coming back, it is the consumer's new run that lets the standby go: the latest wait
+        # is then far beyond the test's own
+        latest = 60.0 if consumer_returns else 1.0
+        fleet = Fleet(Echo, standby, bus=bus, takeover_after_s=0.2, consumers=("sink",),
+                      takeover_latest_s=latest)  # fmt: skip
+        task = asyncio.get_running_loop().create_task(fleet.run(install_signals=False))
+        robot = robots.for_robot("lab-a1")
+        sink_key = robot.keys.alive("sink")
+        robot.declare_token(robot.keys.alive("ingest"))
+        try:
+            gone = dead.declare_token(sink_key)  # the dead host's consumer served the robot
+            await wait_until("the consumer seen", lambda: "sink" in fleet.consumers_alive.get(
+                "lab-a1", set()))  # fmt: skip
+            gone()
+            await wait_until("the consumer gone", lambda: not fleet.consumers_alive["lab-a1"])
+            await wait_until("the standby's wait over", lambda: "lab-a1" in fleet._latest)
+            assert fleet.robots == [] and fleet.takeovers == 0  # waiting on the consumer
+            if consumer_returns:
+                robot.declare_token(sink_key)  # its new run, on any host
+            await wait_until("the standby serving lab-a1", lambda: fleet.robots == ["lab-a1"])
+            assert fleet.takeovers == 1 and not fleet._latest
+        finally:
+            fleet.stop()
+            await asyncio.gather(task, return_exceptions=True)
+
+
 def final_words(seg: int) -> WordProbabilities:
     return WordProbabilities(
         header=_header(seg), segment_id=seg, words={}, evidence={}, action_belief={}, final=True

@@ -144,6 +144,9 @@ def test_a_standby_workstation_takes_over_and_every_robot_is_described_once(
         assert sorted(int(line.split("\t")[1]) for line in said) == [1, 2, 3, 4, 5, 6], said
     taken = re.findall(r"serving a robot no host serves .*robot=(lab-\S+)", ws["ws-b"].text())
     assert {"lab-a1", "lab-a2"} <= set(taken), ws["ws-b"].text()[-3000:]
+    # sink first, each stage once its consumers' new runs were there, none at the latest wait
+    missing = re.findall(r"no host serves .*consumers_missing=(\S+)", ws["ws-b"].text())
+    assert len(missing) == len(taken) and set(missing) == {"[]"}, ws["ws-b"].text()[-3000:]
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="network namespaces need Linux")

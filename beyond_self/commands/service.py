@@ -69,11 +69,14 @@ def run(args: argparse.Namespace) -> int:
         cls.main(config=config, **options)
     if not cls.fleet:  # a robot's source or voice
         raise InputError(f"service {args.name!r} serves one robot (its --robot), not a fleet")
-    from beyond_self.runtime.fleet import Fleet, takeover_after_s
+    from beyond_self.runtime.fleet import Fleet, takeover_latest_s
     from beyond_self.runtime.process import run_to_completion
-    from beyond_self.services.registry import stages_after
+    from beyond_self.services.registry import fleet_consumers, stages_after
 
-    wait = takeover_after_s(stages_after(args.name))
-    exit_process(
-        run_to_completion(lambda: Fleet(cls, config, options, takeover_after_s=wait).run())
-    )
+    latest = takeover_latest_s(stages_after(args.name))
+    consumers = fleet_consumers(args.name)
+
+    def fleet() -> Fleet:
+        return Fleet(cls, config, options, consumers=consumers, takeover_latest_s=latest)
+
+    exit_process(run_to_completion(lambda: fleet().run()))
