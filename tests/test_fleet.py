@@ -31,6 +31,7 @@ from beyond_self.schemas import (
     WordProbabilities,
 )
 from beyond_self.services.deployment import Deployment
+from beyond_self.services.registry import fleet_consumers
 
 RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"
 CONSUMERS = ["gestures", "objects", "reasoner", "describer"]
@@ -253,6 +254,15 @@ async def test_a_standby_stage_takes_over_once_its_consumers_new_runs_are_there(
         finally:
             fleet.stop()
             await asyncio.gather(task, return_exceptions=True)
+
+
+def test_each_stage_waits_for_the_fleet_services_it_feeds() -> None:
+    """What a standby's stage waits for (`beyond service NAME --robots ...`): the fleet
+    services fed by its outputs; the robot's own voice (speech) is not a fleet service."""
+    assert fleet_consumers("gestures") == ("objects", "reasoner")
+    assert fleet_consumers("objects") == ("reasoner",)
+    assert fleet_consumers("reasoner") == ("describer",)
+    assert fleet_consumers("describer") == ()
 
 
 def final_words(seg: int) -> WordProbabilities:
