@@ -159,14 +159,17 @@ def test_a_secure_fleet_describes_its_robot_through_the_rules(
     linked to the workstation's with lab-a1's certificate, and its source and voice with the
     same. The robot prints exactly the lines `beyond analyse` prints, each gesture said once:
     the rules made from the certificates carry a fleet end to end (what they refuse is
-    tests/test_fleet_identity.py's)."""
+    tests/test_fleet_identity.py's). A second workstation, ws-lab2 (lab-b*), on ws-lab's
+    host links its own router to ws-lab's (loopback 7447 is taken: its router takes another
+    port) and comes up beside it."""
     from beyond_self.runtime import keystore
     from beyond_self.services import registry
 
     keys = tmp_path / "keys"
     keystore.init(keys, registry.identities())
     keystore.add(keys, "lab-a1", role="robot", robots="lab-a1")
-    keystore.add(keys, "ws-lab", role="workstation", robots="lab-*")
+    keystore.add(keys, "ws-lab", role="workstation", robots="lab-a*")
+    keystore.add(keys, "ws-lab2", role="workstation", robots="lab-b*")
     env = {k: v for k, v in os.environ.items() if not k.startswith("BEYOND_")}
     env.update(BEYOND_LOG_FORMAT="text", PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
     actions, seed = ROBOTS["lab-a1"]
@@ -181,10 +184,17 @@ def test_a_secure_fleet_describes_its_robot_through_the_rules(
     ws = hosts.start(
         hosts.ws, "ws-lab",
         [*BEYOND, "up", *secure, "--profile", "fleet-workstation", "--robot", "ws-lab",
-         "--robots", "lab-*"],
+         "--robots", "lab-a*"],
         env,
     )  # fmt: skip
     wait_for("the workstation", lambda: "pipeline up:" in ws.text(), [ws], 90)
+    ws2 = hosts.start(
+        hosts.ws, "ws-lab2",
+        [*BEYOND, "up", *secure, "--profile", "fleet-workstation", "--robot", "ws-lab2",
+         "--robots", "lab-b*", "--connect", "tls/127.0.0.1:7447"],
+        env,
+    )  # fmt: skip
+    wait_for("the second workstation", lambda: "pipeline up:" in ws2.text(), [ws, ws2], 90)
     robot = hosts.start(
         hosts.robot, "lab-a1",
         [*BEYOND, "up", *secure, "--profile", "fleet-robot", "--robot", "lab-a1",
@@ -197,9 +207,12 @@ def test_a_secure_fleet_describes_its_robot_through_the_rules(
         code = robot.popen.wait(150)
     finally:
         ws.popen.terminate()
+        ws2.popen.terminate()
     assert code == 0, (robot.text()[-4000:], ws.text()[-3000:])
     assert gesture_lines(robot.text()) == expected, (robot.text()[-4000:], ws.text()[-3000:])
     said = (tmp_path / "lab-a1" / "speech.log").read_text().splitlines()
     assert sorted(int(line.split("\t")[1]) for line in said) == [1, 2, 3, 4, 5, 6], said
     assert ws.popen.wait(30) == 0, ws.text()[-3000:]
     assert "secure=" in ws.text() and "identity=ws-lab" in ws.text(), ws.text()[-3000:]
+    assert ws2.popen.wait(30) == 0, ws2.text()[-3000:]
+    assert "identity=ws-lab2" in ws2.text(), ws2.text()[-3000:]

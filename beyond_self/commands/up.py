@@ -79,7 +79,7 @@ from beyond_self.services.options import load_options
 from beyond_self.services.registry import PROFILES, SERVICES
 
 HELP = "start the pipeline's services as separate processes and watch them"
-SECURE_LOCAL_ROUTER = "tls/127.0.0.1:7447"  # a side's own router, when it links to another
+SECURE_LOCAL_PORT = 7447  # a side's own router, when it links to another (if free)
 DEFAULT_TIMEOUT = 120.0
 
 
@@ -193,12 +193,17 @@ def run(args: argparse.Namespace) -> int:
     exit_process(status)
 
 
-def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str]:
+def secure_router(
+    config: BusConfig, names: list[str], profile: str
+) -> tuple[list[str], str | None]:
     """On a secure bus every side runs its own router: check every certificate this side needs
-    (one line naming the file, before anything starts) and return the router's command. Given
-    endpoints elsewhere (the workstation's router), this side's router links to them with the
-    side's certificate, and this side's processes stay on their own router, so a robot's
-    pipeline keeps running when the network between the machines fails."""
+    (one line naming the file, before anything starts) and return the router's command, and
+    where this side's processes reach it when it is not the default (None). Given endpoints
+    elsewhere (the workstation's router), this side's router links to them with the side's
+    certificate, and this side's processes stay on their own router, so a robot's pipeline
+    keeps running when the network between the machines fails; that router listens on
+    loopback only, on 7447 if free, else on a free port: a second workstation of a fleet on
+    the first one's host links to the first one's router there."""
     from beyond_self.runtime import keystore
 
     assert config.secure is not None
@@ -213,9 +218,26 @@ def secure_router(config: BusConfig, names: list[str], profile: str) -> list[str
     for name in [*([] if fleet else names), str(config.identity), identity]:
         keystore.check(config.secure, name)
     command = ["router", "--secure", str(config.secure), "--identity", identity]
-    if remote:
-        command += ["--listen", SECURE_LOCAL_ROUTER] + [a for e in remote for a in ("--connect", e)]
-    return command
+    if not remote:
+        return command, None
+    local = f"tls/127.0.0.1:{loopback_port(SECURE_LOCAL_PORT)}"
+    command += ["--listen", local] + [a for e in remote for a in ("--connect", e)]
+    return command, local
+
+
+def loopback_port(preferred: int) -> int:
+    """`preferred` if nothing listens there on this machine, else a port the system picks."""
+    import socket
+
+    for port in (preferred, 0):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            try:
+                probe.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            found: int = probe.getsockname()[1]
+            return found
+    raise InputError("no free TCP port on 127.0.0.1 for this side's router")
 
 
 def side_identity(profile: str, robot: str) -> str:
@@ -353,8 +375,9 @@ def deployment(
     options, replayed = service_options(args, names)
     router = None
     if config.secure is not None:
-        router = secure_router(config, names, args.profile)
-        config = config.with_(connect=None, routers=())  # this side's router links elsewhere
+        router, local = secure_router(config, names, args.profile)
+        # this side's router links elsewhere; its processes are clients of it
+        config = config.with_(connect=(local,) if local else None, routers=())
     side = Deployment(
         config,
         names,
