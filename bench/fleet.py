@@ -22,7 +22,9 @@ before the next (their runs are dropped).
 Costs: resident memory (VmRSS) of the processes, summed, and their CPU time over the round
 (cores); next to them the same three services as one process set for one robot (`beyond up`'s
 way before fleets), started and measured in the same run with one robot: N robots that way
-cost N of those. Where the time goes: per stage, the p99 of the time from the gesture's deciding
+cost N of those; and the CPU of this script itself (the robots' simulated sources and its
+observers, which a real fleet would not run on the workstation: `sources_cores`). Where the
+time goes: per stage, the p99 of the time from the gesture's deciding
 frame to its end event leaving the gesture streamer, from there to its words leaving the
 reasoner, and from there to the description (each message's arrival taken off Zenoh, wall
 clock).
@@ -82,6 +84,12 @@ def process_cost(pids: list[int]) -> tuple[float, float]:
             fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
             ticks += int(fields[11]) + int(fields[12])  # utime, stime
     return rss_kb / 1024, ticks / os.sysconf("SC_CLK_TCK")
+
+
+def _own_cpu_s() -> float:
+    """CPU seconds of this process alone (its threads; not the services it started)."""
+    times = os.times()
+    return times.user + times.system
 
 
 def _with_children(pids: list[int]) -> list[int]:
@@ -333,12 +341,14 @@ async def measure(
         await side.start()
         pids = [sp.process.pid for sp in side.processes]
         _, cpu0 = process_cost(pids)
+        bench0 = _own_cpu_s()
         if kind == "camera":
             served = await serve_camera(bus, robots)
         else:
             streams = streams_for(len(robots), gestures, kind == "aligned")
             served = await serve(bus, robots, streams)
         rss, cpu1 = process_cost(pids)
+        bench_s = _own_cpu_s() - bench0
     finally:
         await side.stop()
     lat = served["latency_ms"]
@@ -349,6 +359,9 @@ async def measure(
         "description_p99_ms": round(_p(lat, 99), 2),
         "rss_mb": round(rss, 1),
         "cores": round((cpu1 - cpu0) / served["stream_s"], 3),
+        # the robots' simulated sources and the bench's observers, on the same 2 cores (a real
+        # robot publishes from its own machine)
+        "sources_cores": round(bench_s / served["stream_s"], 3),
     }
     if "stages_ms" in served:
         result["stage_p99_ms"] = {k: round(_p(v, 99), 2) for k, v in served["stages_ms"].items()}
@@ -430,7 +443,8 @@ def print_table(result: dict[str, Any]) -> None:
     rows += [(f"fleet, {r['robots']} with camera", r) for r in result["fleet_camera"]]
     print(
         f"{'':26} {'gestures':>8} {'p50 ms':>8} {'p99 ms':>8} {'RSS MB':>8} {'cores':>6}"
-        "   p99 ms per stage: gestures reasoner describer | camera frames described, skipped"
+        f" {'sources':>7}   p99 ms per stage: gestures reasoner describer"
+        " | camera frames described, skipped"
     )
     for name, r in rows:
         st = r.get("stage_p99_ms")
@@ -441,7 +455,8 @@ def print_table(result: dict[str, Any]) -> None:
         )
         print(
             f"{name:26} {r['gestures']:>8} {r['description_p50_ms']:>8.1f} "
-            f"{r['description_p99_ms']:>8.1f} {r['rss_mb']:>8.0f} {r['cores']:>6.2f}{tail}"
+            f"{r['description_p99_ms']:>8.1f} {r['rss_mb']:>8.0f} {r['cores']:>6.2f} "
+            f"{r['sources_cores']:>7.2f}{tail}"
         )
     single = result["single"]
     best = max(result["fleet"], key=lambda r: r["robots"])
