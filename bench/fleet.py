@@ -64,7 +64,7 @@ from beyond_self.runtime.config import BusConfig  # noqa: E402
 from beyond_self.runtime.delivery import EVENTS  # noqa: E402
 from beyond_self.runtime.fleet import LEAVE_ENV  # noqa: E402
 from beyond_self.runtime.replay import restamped  # noqa: E402
-from beyond_self.schemas.keys import for_robots  # noqa: E402
+from beyond_self.schemas.keys import for_robots, split_key  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402
 
 SERVICES = ["gestures", "reasoner", "describer"]
@@ -145,7 +145,7 @@ def observe(bus: Bus, robots: list[str], key: str, cls: type[s.Message]) -> Any:
 def robot_of(robots: list[str]) -> Any:
     """Index of the robot a received key belongs to."""
     index = {r: k for k, r in enumerate(robots)}
-    return lambda key: index[key.split("/", 2)[1]]
+    return lambda key: index[split_key(key)[0]]  # type: ignore[index]
 
 
 async def serve(

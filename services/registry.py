@@ -47,6 +47,12 @@ def declarations() -> list[acl.Declaration]:
     return [acl.declaration_of(n, service_class(n)) for n in SERVICES]
 
 
+def _fed_by(by_name: dict[str, acl.Declaration], name: str) -> list[str]:
+    """The services that subscribe to something service `name` publishes."""
+    outputs = set(by_name[name].publishes)
+    return [d.name for d in by_name.values() if d.name != name and outputs & set(d.subscribes)]
+
+
 def stages_after(name: str) -> int:
     """How many services deep the chain fed by service `name` goes (the describer 1: speech
     takes its descriptions; speech 0). A standby workstation takes a dead one's robots over
@@ -54,8 +60,7 @@ def stages_after(name: str) -> int:
     by_name = {d.name: d for d in declarations()}
 
     def depth(service: str, seen: frozenset[str]) -> int:
-        outputs = set(by_name[service].publishes)
-        fed = [d.name for d in by_name.values() if outputs & set(d.subscribes)]
+        fed = _fed_by(by_name, service)
         return max((1 + depth(c, seen | {c}) for c in fed if c not in seen), default=0)
 
     return depth(name, frozenset({name}))
@@ -65,12 +70,7 @@ def fleet_consumers(name: str) -> tuple[str, ...]:
     """The fleet services service `name` feeds directly: a standby's run of `name` waits for
     theirs (runtime.fleet)."""
     by_name = {d.name: d for d in declarations()}
-    outputs = set(by_name[name].publishes)
-    return tuple(
-        d.name
-        for d in by_name.values()
-        if d.name != name and service_class(d.name).fleet and outputs & set(d.subscribes)
-    )
+    return tuple(c for c in _fed_by(by_name, name) if service_class(c).fleet)
 
 
 def identities() -> list[str]:
