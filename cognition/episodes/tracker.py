@@ -45,8 +45,9 @@ from beyond_self.cognition.gestures.features import (
     MOTION_LAG,
     extract_features,
     motion_frame,
+    point_features,
 )
-from beyond_self.cognition.gestures.logs import check_positions
+from beyond_self.cognition.gestures.logs import MAX_BODY_UNITS, check_positions
 from beyond_self.cognition.gestures.segmentation import Discarded, SegmenterConfig
 from beyond_self.core.errors import InputError
 
@@ -58,7 +59,10 @@ def hand_position(hand: ArrayLike, torso: ArrayLike | None, what: str) -> np.nda
     (without a torso joint, the hand as given: a hand log's frames), or an InputError when it
     is not a hand's (NaN, or beyond `MAX_BODY_UNITS`). The service and `beyond analyse` both
     skip such a frame, so they answer alike."""
-    x = extract_features(hand, torso)
+    point = point_features(hand, torso)
+    if point is not None and max(map(abs, point)) <= MAX_BODY_UNITS:
+        return np.array(point)
+    x = extract_features(hand, torso)  # says what is wrong with it
     return cast(np.ndarray, check_positions(x, what)[0])
 
 

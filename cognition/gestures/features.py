@@ -28,8 +28,9 @@ on the future. Training runs the same functions over whole arrays.
 
 from __future__ import annotations
 
+import math
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import cast
 
 import numpy as np
@@ -89,6 +90,25 @@ def extract_features(
     return cast(np.ndarray, (h - t) * scale / divisor)
 
 
+def point_features(hand: object, torso: object) -> Point | None:
+    """`extract_features` of one frame given as plain (x, y, z) sequences, on plain floats
+    (the same operations, so the same numbers; a live stream's frame cost numpy more in calls
+    than in arithmetic), or None when the positions are not three finite numbers each: then
+    `extract_features` says what is wrong."""
+    if not isinstance(hand, tuple | list) or len(hand) != FEATURE_DIM:
+        return None
+    hx, hy, hz = (float(v) for v in hand)
+    if torso is None:
+        point = (hx, hy, hz)
+    elif isinstance(torso, tuple | list) and len(torso) == FEATURE_DIM:
+        tx, ty, tz = (float(v) for v in torso)
+        h, v = HORIZONTAL_BODY_SCALE, VERTICAL_BODY_SCALE
+        point = ((hx - tx) / h, (hy - ty) / v, (hz - tz) / h)
+    else:
+        return None
+    return point if all(map(math.isfinite, point)) else None
+
+
 def features_from_joints(
     joints: Mapping[str, ArrayLike],
     *,
@@ -130,19 +150,40 @@ def median_rows(rows: FloatArray) -> FloatArray:
     return mid
 
 
+Point = tuple[float, float, float]
+
+
+def median_of(values: list[float]) -> float:
+    """`median_rows`' number for one column, on plain floats: a live stream's few values a
+    frame cost numpy more in calls than in arithmetic."""
+    ordered = sorted(values)
+    n = len(ordered)
+    return ordered[n // 2] if n % 2 else (ordered[n // 2 - 1] + ordered[n // 2]) / 2
+
+
+def median_point(points: Iterable[Point]) -> Point:
+    """The per-axis median of a few points (`median_rows`' numbers)."""
+    xs, ys, zs = zip(*points, strict=True)
+    return median_of(list(xs)), median_of(list(ys)), median_of(list(zs))
+
+
 class HandSmoother:
     """Causal median of the last `frames` positions: a tracker glitch of up to `frames // 2`
     frames never reaches the segmenter or the motion features."""
 
     def __init__(self, frames: int = 5) -> None:
-        self._recent: deque[FloatArray] = deque(maxlen=frames)
+        self._recent: deque[Point] = deque(maxlen=frames)
 
     def push(self, position: FloatArray) -> FloatArray:
+        return np.array(self.push_point(tuple(position.tolist())))
+
+    def push_point(self, position: Point) -> Point:
+        """`push` on plain floats (the segmenter's per-frame path)."""
         self._recent.append(position)
-        return median_rows(np.stack(self._recent))
+        return median_point(self._recent)
 
     @property
-    def window(self) -> tuple[FloatArray, ...]:
+    def window(self) -> tuple[Point, ...]:
         """The positions the next median is taken over, with the next one."""
         return tuple(self._recent)
 

@@ -33,13 +33,14 @@ known (a third of a second or so after the end it places), so services use it on
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from beyond_self.cognition.gestures.features import HandSmoother, median_rows
+from beyond_self.cognition.gestures.features import HandSmoother, Point, median_point
 from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]
@@ -122,13 +123,14 @@ class GestureSegmenter:
         self._t = 0
         self._smoother = HandSmoother(cfg.median_frames)
         history = max(cfg.rest_frames, cfg.max_lead + 1)
-        self._recent: deque[FloatArray] = deque(maxlen=history)  # smoothed, last frames
+        self._recent: deque[Point] = deque(maxlen=history)  # smoothed, last frames
+        self._smoothed: FloatArray | None = None  # the last of them, as the tracker keeps it
         self._jumped: deque[bool] = deque(maxlen=history)  # ... and whether each jumped
         self._distances: deque[float] = deque(maxlen=cfg.max_gesture + 1)  # in the gesture
-        self._raw_prev: FloatArray | None = None
+        self._raw_prev: Point | None = None
         self._since_jump = 0  # frames since the last tracker jump
         self._state = _IDLE
-        self._rest: FloatArray | None = None
+        self._rest: Point | None = None
         self._start = 0
         self._farthest = 0.0  # distance to the rest pose
         self._forward = 0.0  # forward reach
@@ -152,12 +154,12 @@ class GestureSegmenter:
         gestures (a restarted tracker's proof that it resumes exactly, cognition.episodes)."""
         return (
             self._state,
-            tuple(a.tobytes() for a in self._smoother.window),
-            tuple(a.tobytes() for a in self._recent),
+            tuple(_exact(q) for q in self._smoother.window),
+            tuple(_exact(q) for q in self._recent),
             tuple(self._jumped),
-            None if self._raw_prev is None else self._raw_prev.tobytes(),
+            None if self._raw_prev is None else _exact(self._raw_prev),
             min(self._since_jump, self.config.median_frames),
-            None if self._rest is None else self._rest.tobytes(),
+            None if self._rest is None else _exact(self._rest),
         )
 
     @property
@@ -170,21 +172,28 @@ class GestureSegmenter:
     @property
     def smoothed(self) -> FloatArray:
         """The last frame's position after the causal median (what the segmenter used)."""
-        return self._recent[-1]
+        assert self._smoothed is not None, "pushed a frame before"
+        return self._smoothed
 
     def push(self, position: ArrayLike) -> Segment | Discarded | None:
         cfg = self.config
         p = np.asarray(position, dtype=np.float64)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
+        if p.shape != (3,):
             raise InputError(f"segmenter position has shape {p.shape}; valid: 3 finite numbers")
+        # one frame's arithmetic on plain floats: numpy's per-call cost is most of a frame's
+        point: Point = tuple(p.tolist())
+        if not all(map(math.isfinite, point)):
+            raise InputError(f"segmenter position is {point}; valid: 3 finite numbers")
         t = self._t
         self._t += 1
-        jumped = self._raw_prev is not None and np.linalg.norm(p - self._raw_prev) > cfg.jump
-        self._raw_prev = p
+        previous = self._raw_prev
+        jumped = previous is not None and _length(point, previous) > cfg.jump
+        self._raw_prev = point
         self._since_jump = 0 if jumped else self._since_jump + 1
-        smooth = self._smoother.push(p)
+        smooth = self._smoother.push_point(point)
+        self._smoothed = np.array(smooth)
         self._recent.append(smooth)
-        self._jumped.append(bool(jumped))
+        self._jumped.append(jumped)
         if self._state == _RETURNING and (
             self._resting() is not None or self._distance(smooth) < cfg.near
         ):
@@ -198,7 +207,7 @@ class GestureSegmenter:
                 self._begin(t)
             return None
         if self._state == _ACTIVE:
-            return self._follow(t, smooth, bool(jumped))
+            return self._follow(t, smooth, jumped)
         return None
 
     def finish(self) -> Segment | Discarded | None:
@@ -212,16 +221,18 @@ class GestureSegmenter:
 
     # -- internals -----------------------------------------------------------------------
 
-    def _distance(self, q: FloatArray) -> float:
-        return float(np.linalg.norm(q - self._rest)) if self._rest is not None else 0.0
+    def _distance(self, q: Point) -> float:
+        return _length(q, self._rest) if self._rest is not None else 0.0
 
-    def _resting(self) -> FloatArray | None:
+    def _resting(self) -> Point | None:
         n = self.config.rest_frames
-        if len(self._recent) < n:
+        recent = self._recent
+        if len(recent) < n:
             return None
-        window = np.stack(list(self._recent)[-n:])
-        centre = median_rows(window)
-        if np.max(np.linalg.norm(window - centre, axis=1)) > self.config.rest_radius:
+        window = list(recent)[-n:]
+        centre = median_point(window)
+        radius = self.config.rest_radius
+        if any(_length(q, centre) > radius for q in window):
             return None
         return centre
 
@@ -240,16 +251,17 @@ class GestureSegmenter:
         for q in recent[len(recent) - 1 - back :]:
             self._distances.append(self._distance(q))
         self._farthest = max(self._distances)
-        self._forward = max(float(self._rest[2] - q[2]) for q in recent[-1 - back :])  # type: ignore[index]
+        rest_z = self._rest[2]  # type: ignore[index]
+        self._forward = max(rest_z - q[2] for q in recent[-1 - back :])
         self._jumps = sum(list(self._jumped)[-1 - back :])
 
-    def _follow(self, t: int, smooth: FloatArray, jumped: bool) -> Segment | Discarded | None:
+    def _follow(self, t: int, smooth: Point, jumped: bool) -> Segment | Discarded | None:
         cfg = self.config
         assert self._rest is not None
         d = self._distance(smooth)
         self._distances.append(d)
         self._farthest = max(self._farthest, d)
-        forward = float(self._rest[2] - smooth[2])
+        forward = self._rest[2] - smooth[2]
         self._forward = max(self._forward, forward)
         self._jumps += jumped
         if self._forward < cfg.reach and forward < cfg.leave / 2:
@@ -280,6 +292,17 @@ class GestureSegmenter:
                 start, stop, f"tracking failed: {self._jumps} jumps in {self._t - start} frames"
             )
         return Segment(start, stop)
+
+
+def _exact(q: Point) -> bytes:
+    """A point's exact bits, so that courses compare as the arrays' bytes did (-0.0 is not 0.0)."""
+    return np.array(q).tobytes()
+
+
+def _length(a: Point, b: Point) -> float:
+    """|a - b|, summed as numpy's norm of the rows of an array sums them (x, then y, then z)."""
+    dx, dy, dz = a[0] - b[0], a[1] - b[1], a[2] - b[2]
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 def segment_gestures(positions: ArrayLike, config: SegmenterConfig | None = None) -> list[Segment]:
