@@ -71,6 +71,11 @@ def test_soft_evidence_is_scale_free_and_one_hot_equals_hard() -> None:
     hard = model.query(["B", "w"], {"A": "a1"}).table
     onehot = model.query(["B", "w"], soft={"A": [0, 1]}).table
     assert np.allclose(hard, onehot, atol=1e-15)
+    # a likelihood of tiny numbers: its products with the network's probabilities were
+    # subnormals, imprecise (1e-11 off, hypothesis found it) or 0 ("zero probability" here)
+    for surely in (2.2250738585072014e-308, 5e-324):
+        tiny_onehot = model.query(["B", "w"], soft={"A": [surely, 0.0]}).table
+        assert np.allclose(model.query(["B", "w"], {"A": "a0"}).table, tiny_onehot, atol=1e-15)
 
 
 @pytest.mark.parametrize(

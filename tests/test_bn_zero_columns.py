@@ -59,7 +59,9 @@ def enumerate_posterior(
         else:  # a word nobody asks about, summed over its values
             weight *= given.sum(axis=1)
     for name, likelihood in soft.items():
-        weight *= np.asarray(likelihood)[rows[:, column[name]]]
+        # scaled to a largest value of 1 (the posterior is the same): 2.2e-308 times a few
+        # probabilities is a subnormal with too few bits left for the 1e-12 compared below
+        weight *= (np.asarray(likelihood) / max(likelihood))[rows[:, column[name]]]
     out = np.zeros(tuple(len(values[q]) for q in query))
     np.add.at(out, tuple(rows[:, column[q]] for q in query), weight)
     total = out.sum()

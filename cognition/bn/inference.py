@@ -113,7 +113,12 @@ def check_likelihood(variable: Variable, likelihood: Sequence[float]) -> np.ndar
             f"soft evidence on {variable.name} must be finite, non-negative and not all zero; "
             f"got {', '.join(map(str, values))}"
         )
-    return np.array(values)
+    # Only a likelihood's ratios matter. Scaled by a power of two (exact) to a largest value in
+    # [0.5, 1): a vector of tiny numbers (2.2e-308 for "surely v") would otherwise sink its
+    # products with the network's probabilities into subnormals and lose their precision; an
+    # ordinary vector's posterior comes out bit for bit the same either way.
+    shift = -math.frexp(max(values))[1]
+    return np.array([math.ldexp(x, shift) for x in values])
 
 
 class CompiledNetwork:
