@@ -15,6 +15,7 @@ services; a property test holds them equal to 1e-12.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Literal, cast
 
@@ -45,18 +46,20 @@ def action_vector(model: BayesNet, p_hmm: Mapping[str, float] | Sequence[float])
                 f"gesture evidence lacks action(s) {', '.join(missing)}; "
                 f"give a probability for each of {', '.join(actions)}"
             )
-        vec = np.array([float(p_hmm[a]) for a in actions])
+        probabilities = [float(p_hmm[a]) for a in actions]
     else:
-        vec = np.asarray([float(p) for p in p_hmm])
-        if vec.shape != (len(actions),):
+        probabilities = [float(p) for p in p_hmm]
+        if len(probabilities) != len(actions):
             raise InputError(
                 f"gesture evidence needs {len(actions)} probabilities ({', '.join(actions)}); "
-                f"got {vec.size}"
+                f"got {len(probabilities)}"
             )
-    if not np.all(np.isfinite(vec)) or np.any(vec < 0) or vec.sum() <= 0:
+    # checked on plain floats: a reasoner does this every frame, and numpy's calls cost more
+    if not all(math.isfinite(p) and p >= 0 for p in probabilities) or not any(probabilities):
         raise InputError(
-            f"gesture evidence must be finite, non-negative and not all zero; got {vec.tolist()}"
+            f"gesture evidence must be finite, non-negative and not all zero; got {probabilities}"
         )
+    vec = np.array(probabilities)
     return cast(np.ndarray, vec / vec.sum())
 
 

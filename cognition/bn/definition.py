@@ -55,6 +55,7 @@ class NetworkDefinition:
     variables: tuple[Variable, ...]
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
     _values: Mapping[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
+    _names: tuple[str, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         index: dict[str, int] = {}
@@ -66,6 +67,7 @@ class NetworkDefinition:
         # read on every frame a reasoner fuses: built once, read-only
         values = {v.name: v.values for v in self.variables}
         object.__setattr__(self, "_values", MappingProxyType(values))
+        object.__setattr__(self, "_names", tuple(values))
         kinds = [v.is_word for v in self.variables]
         if True in kinds and False in kinds[kinds.index(True) :]:
             late = self.variables[kinds.index(True) + kinds[kinds.index(True) :].index(False)]
@@ -76,7 +78,7 @@ class NetworkDefinition:
 
     @property
     def names(self) -> tuple[str, ...]:
-        return tuple(v.name for v in self.variables)
+        return self._names
 
     @property
     def values(self) -> Mapping[str, tuple[str, ...]]:
