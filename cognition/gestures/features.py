@@ -39,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from beyond_self.core.errors import InputError, unknown
 
 FloatArray = NDArray[np.float64]
+Point = tuple[float, float, float]  # one frame's position, on plain floats (the live path)
 
 HORIZONTAL_BODY_SCALE = 0.33  # m, the reference pipeline's shoulder-width normaliser
 VERTICAL_BODY_SCALE = 0.23  # m, the reference pipeline's neck-to-torso normaliser
@@ -148,9 +149,6 @@ def median_rows(rows: FloatArray) -> FloatArray:
     n = len(ordered)
     mid: FloatArray = ordered[n // 2] if n % 2 else (ordered[n // 2 - 1] + ordered[n // 2]) / 2
     return mid
-
-
-Point = tuple[float, float, float]
 
 
 def median_of(values: list[float]) -> float:
