@@ -124,9 +124,32 @@ def wait_for(
     while not condition():
         dead = [p.name for p in procs if p.popen.poll() is not None]
         if dead or time.monotonic() > deadline:
-            logs = "\n".join(f"--- {p.name}\n{p.text()[-2500:]}" for p in [*procs, *shown])
+            logs = "\n".join(f"--- {p.name}\n{tail(p)}" for p in [*shown, *procs])
             raise AssertionError(f"waiting for {what}: {dead or 'timed out'}\n{logs}")
         time.sleep(0.1)
+
+
+def tail(proc: Any, chars: int = 2500) -> str:
+    """A process's last lines, repeats folded ("present x57": the watcher polls) and a probe's
+    events counted per kind (which gestures reached that host live, recovered, described), so
+    that a CI log cut in the middle still shows each process."""
+    runs: list[list[Any]] = []  # [line, times in a row]
+    for _, line in list(proc.lines):
+        if runs and runs[-1][0] == line:
+            runs[-1][1] += 1
+        else:
+            runs.append([line, 1])
+    text = "\n".join(line if n == 1 else f"{line} x{n}" for line, n in runs)[-chars:]
+    events = [json.loads(x) for _, x in list(proc.lines) if x.startswith("{")]
+    if not events:
+        return text
+    seen: dict[str, list[int]] = {}
+    for e in events:
+        if "segment" in e:
+            seen.setdefault(f"{e['event']} {e.get('via', '')}".strip(), []).append(e["segment"])
+    tokens = [f"{e['kind']} {e['key']}" for e in events if e.get("event") == "alive"]
+    counted = "; ".join(f"{kind}: {sorted(segs)}" for kind, segs in seen.items())
+    return f"{counted or 'no gesture events'}\nlast tokens: {tokens[-6:]}\n{text[-800:]}"
 
 
 def test_secure_split_survives_a_cut_link(
@@ -175,7 +198,11 @@ def test_secure_split_survives_a_cut_link(
 
     probe = [python, str(REPO / "tests" / "netns_util.py"), "probe"]  # through the robot's router
     seen = hosts.start(hosts.robot, "probe", probe, env)
-    procs.append(seen)
+    # and through the workstation's: what crosses the link, live and from the caches (a stall
+    # after the link is back then says whether the samples stopped crossing or stopped being
+    # delivered)
+    across = hosts.start(hosts.ws, "ws-probe", probe, env)
+    procs += [seen, across]
 
     def ended() -> int:  # gesture ends the robot's own pipeline published, as they happened
         events = [json.loads(x) for _, x in list(seen.lines) if x.startswith("{")]
@@ -192,8 +219,9 @@ def test_secure_split_survives_a_cut_link(
     )  # fmt: skip
     hosts.link(up=True)
     print(f"link down {time.monotonic() - t_down:.1f} s ({before} gesture end(s) probed before)")
+    probes = [watcher, seen, across]
     wait_for("both ends of the split to finish", lambda: ws.popen.poll() is not None
-             and robot.popen.poll() is not None, 90, [watcher, seen], [ws, robot])  # fmt: skip
+             and robot.popen.poll() is not None, 90, probes, [ws, robot])  # fmt: skip
     assert wait_exit(ws, 1) == 0, ws.text()[-4000:]
     assert wait_exit(robot, 1) == 0, robot.text()[-4000:]
     text = ws.text()
