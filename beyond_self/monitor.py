@@ -141,7 +141,10 @@ class PipelineMonitor:
 
     def on_posterior(self, msg: ActionPosterior) -> None:
         self.posterior = msg
-        if not msg.final:
+        if msg.final:
+            self.report.believed(msg.segment_id)
+            self._flush()
+        else:
             self.report.belief(msg.segment_id, msg.frame, msg.actions, msg.posterior)
 
     def on_prediction(self, msg: AffordancePrediction) -> None:

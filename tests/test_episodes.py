@@ -275,6 +275,7 @@ def test_report_skips_a_start_that_never_completes() -> None:
     report = GestureReport()
     report.started(1, 10)  # a stray start: nothing else ever comes for it
     report.started(2, 40)
+    report.believed(2)
     report.ended(2, 80)
     report.recognised(2, {"tap": 0.9, "grasp": 0.1}, {"Shape": "circle"})
     assert report.release() == []  # gesture 2 is not described yet: 1 may still complete
@@ -284,6 +285,43 @@ def test_report_skips_a_start_that_never_completes() -> None:
         '"the robot tapped the ball"'
     )
     assert report.all_printed
+
+
+def test_a_gesture_waits_for_its_beliefs_whatever_overtakes_them() -> None:
+    """Under load a belief can be held up (a gap filled from the gesture streamer's cache) while
+    the end, the recognition and the description, down other paths, arrive: the gesture's lines
+    wait for its final belief, or for a belief about a later gesture (beliefs come in order),
+    and are then the same as when nothing was held up (CI: 'looks like grasp' missing once)."""
+
+    def said(report: GestureReport, n: int) -> None:
+        report.started(n, 10 * n)
+        report.ended(n, 10 * n + 5)
+        report.recognised(n, {"grasp": 0.9, "tap": 0.1}, {})
+        report.described(n, "the robot grasped the ball")
+
+    in_order, overtaken = GestureReport(), GestureReport()
+    in_order.started(1, 10)
+    in_order.belief(1, 11, ["grasp", "tap"], [0.9, 0.1])
+    in_order.believed(1)
+    said(in_order, 1)
+    expected = in_order.release()
+    assert "gesture 1: frame 11, looks like grasp (P_HMM 0.90)" in expected
+
+    said(overtaken, 1)
+    assert overtaken.release() == []  # ended, recognised, described: its beliefs are not in
+    overtaken.belief(1, 11, ["grasp", "tap"], [0.9, 0.1])
+    assert overtaken.release() == []
+    overtaken.believed(1)
+    assert overtaken.release() == expected
+
+    said(overtaken, 2)  # its final belief lost for good: a belief about gesture 3 releases it
+    assert overtaken.release() == []
+    overtaken.belief(3, 31, ["grasp", "tap"], [0.9, 0.1])
+    assert [line for line in overtaken.release() if "looks like" in line] == []
+    assert overtaken.gestures[2].printed
+    overtaken.believed(5)
+    said(overtaken, 4)  # first heard of after a belief about a later gesture: its beliefs are in
+    assert overtaken.gestures[4].final_belief
 
 
 def test_tracker_cancels_a_gesture_the_source_cut_short() -> None:
@@ -312,6 +350,7 @@ def test_a_long_run_keeps_a_bounded_record_of_the_gestures_it_told() -> None:
     printed = 0
     for n in range(1, 2 * KEPT + 50):
         report.started(n, 10)
+        report.believed(n)
         report.ended(n, 20)
         report.recognised(n, {"tap": 1.0}, {})
         report.described(n, "the robot tapped the ball")

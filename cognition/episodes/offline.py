@@ -112,7 +112,9 @@ def analyse_stream(
                 watched(watch.started(ev.segment_id, ev.stamp, None))
                 joined(join.started(ev.segment_id, ev.stamp))
             elif isinstance(ev, Belief):
-                if not ev.final:
+                if ev.final:
+                    report.believed(ev.segment_id)
+                else:
                     report.belief(ev.segment_id, ev.frame, actions, ev.posterior)
                 belief = dict(zip(actions, ev.posterior, strict=True))
                 joined(join.belief(ev.segment_id, ev.frame, ev.stamp, belief, None, ev.final))

@@ -3,9 +3,14 @@ bus (`beyond up`).
 
 Lines depend only on contents: a gesture starts, the most likely action changes, an effect is
 anticipated before the end, the gesture ends, it is recognised, its description. A gesture's
-lines are released as one block in frame order once it is complete (ended, recognised and
-described), and blocks in segment order, so concurrent services interleaving their messages
-differently never change what is printed.
+lines are released as one block in frame order once it is complete (ended, recognised,
+described, and its beliefs all in), and blocks in segment order, so concurrent services
+interleaving their messages differently never change what is printed.
+
+"Its beliefs all in" is the final belief, or a belief about a later gesture: beliefs come from
+one publisher, in order, so either follows every belief about the gesture. The description does
+not: it comes down another path (reasoner, describer) and can overtake a belief that was held up
+(a gap being filled from a publisher's cache on a loaded machine), whose line was then missing.
 """
 
 from __future__ import annotations
@@ -31,12 +36,15 @@ class GestureLines:
     recognised: str = ""
     description: str = ""
     events: list[tuple[int, int, str]] = field(default_factory=list)  # (frame, kind, text)
+    final_belief: bool = False
     printed: bool = False
     skipped: bool = False  # never completed, and a later gesture did
 
     @property
     def complete(self) -> bool:
-        return self.end_frame is not None and bool(self.recognised) and bool(self.description)
+        """Ended, recognised and described, and its final belief in (see the module's note)."""
+        said = self.end_frame is not None and bool(self.recognised) and bool(self.description)
+        return said and self.final_belief
 
     def block(self) -> list[str]:
         """The gesture's lines in frame order; anticipations count only before the end."""
@@ -50,9 +58,15 @@ class GestureReport:
 
     def __init__(self) -> None:
         self.gestures: dict[int, GestureLines] = {}
+        self.beliefs_about = 0  # the latest gesture a belief was about: the ones before are in
 
     def _g(self, segment_id: int) -> GestureLines:
-        return self.gestures.setdefault(segment_id, GestureLines())
+        g = self.gestures.get(segment_id)
+        if g is None:
+            g = self.gestures[segment_id] = GestureLines(
+                final_belief=segment_id < self.beliefs_about
+            )
+        return g
 
     def started(self, segment_id: int, frame: int) -> None:
         g = self._g(segment_id)
@@ -73,6 +87,7 @@ class GestureReport:
         self, segment_id: int, frame: int, actions: Sequence[str], p: Sequence[float]
     ) -> None:
         """A non-final P_HMM at `frame`: a line when the most likely action changes."""
+        self._beliefs_reached(segment_id)
         g = self._g(segment_id)
         i = max(range(len(p)), key=p.__getitem__)
         if actions[i] != g.best:
@@ -80,6 +95,18 @@ class GestureReport:
             g.events.append(
                 (frame, LOOKS, f"frame {frame}, looks like {g.best} (P_HMM {p[i]:.2f})")
             )
+
+    def believed(self, segment_id: int) -> None:
+        """The final P_HMM of the gesture: every belief about it is in."""
+        self._beliefs_reached(segment_id)
+        self._g(segment_id).final_belief = True
+
+    def _beliefs_reached(self, segment_id: int) -> None:
+        if segment_id > self.beliefs_about:
+            for earlier, g in self.gestures.items():  # their final beliefs came first, or never
+                if earlier < segment_id:
+                    g.final_belief = True
+            self.beliefs_about = segment_id
 
     def anticipation(
         self, segment_id: int, frame: int, effects: Mapping[str, Mapping[str, float]]
