@@ -3,6 +3,7 @@ streams interleave in: only the order within each stream is kept, as on the bus.
 
 from __future__ import annotations
 
+import gc
 import random
 from collections.abc import Callable
 from functools import cache
@@ -36,6 +37,7 @@ from beyond_self.cognition.gestures import extract_features
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.commands.analyse import _inputs
+from beyond_self.schemas.base import Header
 
 RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "touch-box.mcap"
 
@@ -322,6 +324,19 @@ def test_a_gesture_waits_for_its_beliefs_whatever_overtakes_them() -> None:
     overtaken.believed(5)
     said(overtaken, 4)  # first heard of after a belief about a later gesture: its beliefs are in
     assert overtaken.gestures[4].final_belief
+
+
+def test_a_trackers_frame_buffer_stays_out_of_the_garbage_collector() -> None:
+    """A fleet's gesture streamer keeps a tracker per robot, each with up to 1,800 frames: as
+    tracked objects they made every full collection walk them (bench/fleet.py, runtime.heap)."""
+    hand = [i for i in _inputs(RECORDING, "right_hand", "torso") if isinstance(i, SkeletonInput)]
+    tracker: GestureTracker[Header] = GestureTracker(default_models())
+    for item in hand:
+        ref = Header(version=1, source="test", seq=item.frame, stamp=item.stamp)
+        tracker.push(item.stamp, item.frame, extract_features(item.hand, item.torso)[0], ref)
+    assert len(tracker.buffer) == len(hand) > 100
+    assert not any(gc.is_tracked(frame) for frame in tracker.buffer)
+    assert tracker.buffer[-1].ref.seq == hand[-1].frame  # and the frame keeps what it was given
 
 
 def test_tracker_cancels_a_gesture_the_source_cut_short() -> None:
