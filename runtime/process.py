@@ -11,6 +11,7 @@ from collections.abc import Callable, Coroutine
 from typing import Any, NoReturn
 
 from beyond_self.core.errors import InputError
+from beyond_self.runtime import heap
 from beyond_self.runtime.log import setup_logging
 
 
@@ -28,8 +29,8 @@ def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
 
 
 def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
-    """Run `work()` in a fresh event loop with logging set up and BLAS on one thread; 0, or 2
-    for bad input (one line logged, no traceback).
+    """Run `work()` in a fresh event loop with logging set up, BLAS on one thread and the heap
+    settled after set-up (runtime.heap); 0, or 2 for bad input (one line logged, no traceback).
 
     Why one BLAS thread: a service is one event loop among the pipeline's processes, and its
     matrix products are small (the table model's upsampling, the network's factors). OpenBLAS's
@@ -40,6 +41,7 @@ def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
     threadpool_limits(limits=1, user_api="blas")
+    heap.manage()
     setup_logging()
     try:
         asyncio.run(work())

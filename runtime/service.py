@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable, Coroutine
 from typing import Any, NoReturn, TypeVar, overload
 
-from beyond_self.runtime import process
+from beyond_self.runtime import heap, process
 from beyond_self.runtime.accounting import ErrorAccount
 from beyond_self.runtime.acl import check_declared
 from beyond_self.runtime.bus import Bus
@@ -379,6 +379,7 @@ class Service:
             self.spawn(self._report_periodically(), "health")
             undeclare_token = self.bus.declare_token(self.bus.keys.alive(self.name))
             self.started.set()
+            heap.settle_soon()
             event(self.log, logging.INFO, "started", service=self.name, robot=self.bus.keys.robot)
             await self._stop.wait()
         finally:
@@ -404,6 +405,7 @@ class Service:
             await self.teardown()
         except Exception as exc:
             self.report_error("teardown", exc)
+        heap.release()
         stopped = stop_counts(self, self.health_report())
         event(self.log, logging.INFO, "stopped", **stopped)
         if self._owns_bus and self._bus is not None:
