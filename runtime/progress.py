@@ -7,6 +7,10 @@ many messages each subscription received and each publisher sent, and the last s
 sent. A report is stamped by the service's clock (the stream's on a replay, runtime.clock), like
 its health. It also answers for it on query (`progress/<name>`), so a player that starts, or starts
 again after a crash, learns at once where every consumer is.
+
+The report after each message goes out only while someone subscribes (`wanted`: a player, a
+monitor); the periodic one always does. Live, nobody paces on it, and building and putting it
+for every skeleton frame was a tenth of a fleet's gesture streamer's time at 96 robots.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ class ProgressReport:
         self.handled: dict[str, int] = {}
         self._header = header
         self._pub: Publisher[Progress] | None = None
+        self.wanted = False  # a subscriber matches the report's key now
 
     def pace(self, key: str) -> None:
         self.paced.add(key)
@@ -37,7 +42,12 @@ class ProgressReport:
         must not stall the pipeline); a dropped report is repaired by the next, or by the
         periodic one beside health."""
         self._pub = bus.publisher(bus.keys.progress(self.name), Progress, STATUS)
+        bus.on_close(self._pub.watch_matching(self._matched))
+        self.wanted = self._pub.matching()
         self._pub.put(first)
+
+    def _matched(self, matching: bool) -> None:  # Zenoh thread
+        self.wanted = matching
 
     def handled_up_to(self, key: str, stamp: int) -> None:
         if key in self.paced:

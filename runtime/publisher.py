@@ -125,6 +125,16 @@ class Publisher(Generic[M]):
         status: zenoh.MatchingStatus = self._plain().matching_status  # type: ignore[assignment]
         return bool(status.matching)
 
+    def watch_matching(self, on_change: Callable[[bool], None]) -> Callable[[], None]:
+        """`on_change(matching)` on a Zenoh thread whenever subscribers come or all go (plain
+        publishers only); the call that stops it."""
+
+        def changed(status: zenoh.MatchingStatus) -> None:
+            on_change(bool(status.matching))
+
+        listener = self._plain().declare_matching_listener(direct_callback(changed))
+        return lambda: undeclare(listener)
+
     async def wait_matching(self, timeout: float = 5.0) -> None:
         """Wait until a subscriber matches (discovery handshake, not a fixed sleep)."""
         loop = asyncio.get_running_loop()

@@ -307,7 +307,7 @@ class Service:
                 ledgers.record(received.key, received.message)
             if paced:
                 progress.handled_up_to(sub.key, received.message.header.stamp)
-            if progress.paced:
+            if progress.wanted:
                 self.publish_progress()
 
         await consume(sub, handler, self.report_error, before=observe, after=done, accept=fresh)

@@ -225,3 +225,27 @@ async def test_service_process_stops_cleanly_on_sigterm() -> None:
                 proc.kill()
         err = proc.stderr.read() if proc.stderr else ""
         assert '"event": "stopped"' in err
+
+
+async def test_progress_after_each_message_goes_out_only_while_someone_subscribes(buses) -> None:
+    """Live, nobody paces on a service's Progress: building and putting it for every frame was
+    a tenth of a fleet's gesture streamer's time (runtime.progress)."""
+    from beyond_self.runtime.progress import ProgressReport
+
+    a, b = buses
+    report = ProgressReport("gestures", lambda cls: s.Header(version=1, source="t", seq=0, stamp=0))
+    report.pace(a.keys.skeleton)
+    report.open(a, report.report({}, {}, {}))
+    assert not report.wanted
+
+    async def until(wanted: bool) -> None:
+        for _ in range(500):
+            if report.wanted is wanted:
+                return
+            await asyncio.sleep(0.02)
+        raise AssertionError(f"wanted stayed {report.wanted} for 10 s")
+
+    sub = b.subscribe(b.keys.progress("gestures"), s.Progress)
+    await until(True)
+    sub.close()
+    await until(False)
