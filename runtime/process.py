@@ -28,9 +28,18 @@ def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
     return installed
 
 
+# How long a thread may hold the GIL while another waits for it. A service's event loop is its
+# one busy Python thread; Zenoh's threads take the GIL for a moment per sample (a callback) and
+# the loop gives it up at every put and select. With CPython's 5 ms, at 96 robots the waiters
+# forced the loop off mid-frame over and over: description p99 132-142 ms; with 20 ms 60-62 ms
+# (bench/fleet.py rounds, same machine). 1 ms was no better than 5, 50 ms worse than 20.
+SWITCH_INTERVAL_S = 0.02
+
+
 def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
-    """Run `work()` in a fresh event loop with logging set up, BLAS on one thread and the heap
-    settled after set-up (runtime.heap); 0, or 2 for bad input (one line logged, no traceback).
+    """Run `work()` in a fresh event loop with logging set up, BLAS on one thread, the GIL's
+    switch interval for one busy loop (`SWITCH_INTERVAL_S`) and the heap settled after set-up
+    (runtime.heap); 0, or 2 for bad input (one line logged, no traceback).
 
     Why one BLAS thread: a service is one event loop among the pipeline's processes, and its
     matrix products are small (the table model's upsampling, the network's factors). OpenBLAS's
@@ -41,6 +50,7 @@ def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
     threadpool_limits(limits=1, user_api="blas")
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     heap.manage()
     setup_logging()
     try:
