@@ -149,7 +149,7 @@ async def soak(
         log=lambda name, line: print(f"[{name}] {line}", file=sys.stderr, flush=True),
     )
     bus = await pipeline.open()
-    monitor = PipelineMonitor(bus, lines.append)
+    monitor = PipelineMonitor.of(pipeline, bus, lines.append)
     monitor.start()
 
     async def capture() -> None:
@@ -206,7 +206,11 @@ async def soak(
             ended = sorted(ended_ids(monitor, lines))
             log = out / "speech.log"
             said = log.read_text().count("\n") if log.exists() else 0
-            alive = all(p.running for p in pipeline.processes)  # no restart still under way
+            # no restart still under way: a process just killed still looks alive until its
+            # exit is reaped, so each kill must also have been answered by a restart (CI: the
+            # last kill went uncounted, 3 restarts for 4 kills)
+            restarted = sum(r.count for r in pipeline.restarts.values()) >= len(kills)
+            alive = restarted and all(p.running for p in pipeline.processes)
             if alive and all(described.get(n) for n in ended) and said >= len(described):
                 break
             await asyncio.sleep(0.2)
