@@ -15,12 +15,13 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from beyond_self.cognition.episodes import GestureReport
 from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.delivery import FRAMES, RELIABLE
-from beyond_self.runtime.ledger import Handled
+from beyond_self.runtime.ledger import Handled, Keeper
 from beyond_self.runtime.subscription import Received, consume
 from beyond_self.schemas import (
     ActionPosterior,
@@ -28,6 +29,8 @@ from beyond_self.schemas import (
     Description,
     DetectedObjects,
     GestureSegment,
+    Header,
+    Ledger,
     Message,
     PersonPose,
     Progress,
@@ -36,7 +39,11 @@ from beyond_self.schemas import (
 )
 from beyond_self.schemas.identity import identify
 
+if TYPE_CHECKING:
+    from beyond_self.services.deployment import Deployment
+
 log = logging.getLogger("beyond.monitor")
+LEDGER_TICK_S = 0.5  # how often a named monitor tells the per-frame results it has handled
 POSE_WINDOW_S = 2.0  # a camera source's pose rate is taken over this much of its stream
 
 
@@ -45,8 +52,19 @@ class PipelineMonitor:
     gesture has its final description: services run concurrently and their messages interleave
     differently from run to run, but the printed lines do not."""
 
-    def __init__(self, bus: Bus, emit: Callable[[str], None]) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        emit: Callable[[str], None],
+        *,
+        name: str | None = None,
+        clock: Clock | None = None,
+    ) -> None:
         self.bus = bus
+        self.name = name
+        # what stamps its ledgers: its deployment's clock, so that a recording of a replay
+        # keeps every channel on the stream's time (a wall-clock ledger stretched its end)
+        self.clock = clock or Clock()
         self.emit = emit
         self.report = GestureReport()
         self.health_reports: dict[str, ServiceHealth] = {}
@@ -62,9 +80,21 @@ class PipelineMonitor:
         self.changed = asyncio.Event()
         self.last_message = time.monotonic()
         self.moving = False  # a service has handled a sensor message, or published
-        self.handled = Handled()
+        # named (its deployment's watcher), the monitor is a consumer in exactly-once: it
+        # publishes what it has handled (runtime.ledger), so a restarted producer sends it
+        # what it lacks too. Unnamed, a belief that had reached the reasoner but not the
+        # monitor when the streamer was SIGKILLed was withheld by the restarted streamer and
+        # missing from the printed lines (CI, tests/test_event_time.py)
+        self.ledgers = Keeper(name or "monitor", self._ledger_header)
+        self.handled: Handled = self.ledgers.handled
+        self._ledger_seq = 0
         self.duplicates = 0  # results received again (and not shown again)
         self._tasks: list[asyncio.Task[None]] = []
+
+    @classmethod
+    def of(cls, side: Deployment, bus: Bus, emit: Callable[[str], None]) -> PipelineMonitor:
+        """The watcher of deployment `side`: a consumer under its name, on its clock."""
+        return cls(bus, emit, name=side.watcher, clock=Clock(side.clock))
 
     def start(self) -> None:
         keys = self.bus.keys
@@ -83,9 +113,26 @@ class PipelineMonitor:
         for key, cls, handler in subscriptions:
             # derived streams may cross a link (robot <-> workstation): recover what it loses
             delivery = RELIABLE if cls in (ServiceHealth, Progress) else FRAMES
+            if delivery is FRAMES:
+                self.handled.declare(key)
             sub = self.bus.subscribe(key, cls, delivery)
             work = consume(sub, handler, self._failed, before=self._seen, accept=self._fresh)
             self._tasks.append(loop.create_task(work))
+        if self.name is not None:
+            self.ledgers.announce(self.bus)
+            self._tasks.append(loop.create_task(self._tell_handled()))
+
+    async def _tell_handled(self) -> None:
+        """Per-frame entries go out with the next tick, as a service's go out with its health
+        (a per-gesture one at once: Keeper.record)."""
+        while True:
+            await asyncio.sleep(LEDGER_TICK_S)
+            self.ledgers.tick()
+
+    def _ledger_header(self, cls: type[Ledger], stamp: int | None) -> Header:
+        seq, self._ledger_seq = self._ledger_seq, self._ledger_seq + 1
+        stamp = self.clock.now_ns() if stamp is None else stamp
+        return cls.original_header(self.ledgers.name, seq, stamp)
 
     def _fresh(self, received: Received[Any]) -> bool:
         """Each result once (runtime.ledger): a restarted service's repeats, or a cache's after
@@ -93,12 +140,13 @@ class PipelineMonitor:
         ident = identify(received.key, received.message)
         if ident is None:
             return True
-        if self.handled.add(received.key, ident):
+        if self.ledgers.record(received.key, received.message):
             return True
         self.duplicates += 1
         return False
 
     def _seen(self, received: Received[Any]) -> None:
+        self.clock.observe(received.message.header.stamp)
         if not isinstance(received.message, ServiceHealth | Progress):
             self.last_message = time.monotonic()
             self.moving = True

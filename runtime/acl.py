@@ -20,11 +20,12 @@ From them, `access_control()` builds the block of a Zenoh router's configuration
 - `tools` (`beyond echo`, `topics`, `ask`, `record`) may read everything and ask the queryables,
   but put, serve and declare nothing;
 - the sides (`robot`, `workstation`, and `router`, the workstation's router) read like tools,
-  declare their monitor's liveliness token, and may do whatever the services that run on their
-  side may (`sides`, services.registry): a side's router links to the other side's router with
-  that certificate and carries its services' traffic (on a secure split each machine runs a
-  router, so the robot's own pipeline keeps running through its router when the network between
-  the machines fails). A fleet's robot certificates are the robot side bound to one robot, its
+  declare their monitor's liveliness token and put its Ledger (a monitor is a consumer in
+  exactly-once: beyond_self.monitor), and may do whatever the services that run on their side
+  may (`sides`, services.registry): a side's router links to the other side's router with that
+  certificate and carries its services' traffic (on a secure split each machine runs a router,
+  so the robot's own pipeline keeps running through its router when the network between the
+  machines fails). A fleet's robot certificates are the robot side bound to one robot, its
   workstation certificates the workstation side bound to the robots they serve.
 
 Recovering streams (runtime/reliable.py) carry zenoh-ext's own traffic under `<key>/@adv/...`:
@@ -253,10 +254,13 @@ def access_control(
         elif binding.role in SIDE_MONITORS:
             grants = []
             for chunk in _side_chunks(subject, binding):
-                tokens = [_key(chunk, f"{ALIVE}/{m}") for m in SIDE_MONITORS[binding.role]]
+                monitors = SIDE_MONITORS[binding.role]
+                tokens = [_key(chunk, f"{ALIVE}/{m}") for m in monitors]
+                ledgers = [_key(chunk, f"{LEDGER}/{m}") for m in monitors]
                 grants += [
                     *_reader_grants(declarations, chunk),
                     ("alive", ["liveliness_token"], "ingress", tokens),
+                    ("ledger", ["put"], "ingress", ledgers),  # its monitor's (beyond_self.monitor)
                 ]
                 for name in sides[SIDE_OF[binding.role]]:
                     grants += _service_grants(by_name[name], chunk)

@@ -275,8 +275,7 @@ class Keeper:
     ) -> Coroutine[Any, Any, None]:
         """Publish this service's ledger, answer for everyone's, and keep hearing the others';
         returns the coroutine to run beside the handlers."""
-        self._pub = bus.publisher(bus.keys.ledger(self.name), Ledger, STATUS)
-        self._pub.put(self.ledger())
+        self.announce(bus)
 
         async def answer(_key: str, _request: None) -> list[tuple[str, Message]]:
             mine = self.ledger()
@@ -291,6 +290,12 @@ class Keeper:
                 self.book.heard(msg)
 
         return consume(sub, heard, on_error)
+
+    def announce(self, bus: Bus) -> None:
+        """Publish this ledger from now on (`publish`, `tick`): all a consumer that serves and
+        resumes nothing needs (a monitor), since every service keeps and answers for it."""
+        self._pub = bus.publisher(bus.keys.ledger(self.name), Ledger, STATUS)
+        self._pub.put(self.ledger())
 
     def ledger(self) -> Ledger:
         return Ledger(
@@ -332,15 +337,17 @@ class Keeper:
             return ident
         return None
 
-    def record(self, key: str, message: Message) -> None:
-        """`message` on `key` has been handled: a per-gesture one is told at once."""
+    def record(self, key: str, message: Message) -> bool:
+        """`message` on `key` has been handled (a per-gesture one is told at once): whether
+        it is new (False: handled already, or it has no identity)."""
         ident = identify(key, message)
         if ident is None or not self.handled.add(key, ident):
-            return
+            return False
         if ident.per_gesture:
             self.publish()
         else:
             self._dirty = True
+        return True
 
     def seen_downstream(self, key: str, kinds: Iterable[str]) -> set[int]:
         """Segment ids some consumer of `key` has handled with one of `kinds`: where a

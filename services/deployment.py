@@ -114,6 +114,7 @@ class Deployment:
             self.options[SOURCE]["wait_for"] = local + list(wait_for)
         self.watcher = watcher
         self.router_command = list(router) if router is not None else None
+        self.clock = clock  # its services' (and its watcher's: beyond_self.monitor)
         clock_env = {"BEYOND_CLOCK": "recording"} if clock == "recording" else {}
         self.env = service_env(config, {**(env or {}), **clock_env})
         self.log = log

@@ -71,7 +71,7 @@ async def run_pipeline(
     )
     bus = await pipeline.open()
     keys = bus.keys
-    monitor = PipelineMonitor(bus, lines.append)
+    monitor = PipelineMonitor.of(pipeline, bus, lines.append)
     monitor.start()
 
     async def capture(stream: str) -> None:
@@ -141,7 +141,7 @@ async def kill_each_in_turn(rate: float, out: Path) -> dict[str, Any]:
         on_restart=lambda name, what: note(f"{name}: {what}"),
     )
     bus = await pipeline.open()
-    monitor = PipelineMonitor(bus, lines.append)
+    monitor = PipelineMonitor.of(pipeline, bus, lines.append)
     monitor.start()
 
     async def capture() -> None:

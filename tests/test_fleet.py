@@ -299,7 +299,7 @@ async def play_robots(
     recorder = None
     try:
         for robot, side in robots.items():
-            monitors[robot] = PipelineMonitor(await side.open(), lines[robot].append)
+            monitors[robot] = PipelineMonitor.of(side, await side.open(), lines[robot].append)
             monitors[robot].start()
         if record_to is not None:
             ready = asyncio.Event()

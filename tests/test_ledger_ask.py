@@ -9,12 +9,16 @@ import logging
 from typing import Any
 
 import pytest
+from busutil_net import private_config
 
+from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime import ledger
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import FRAMES, STATUS
 from beyond_self.runtime.ledger import Keeper, LedgerBook
 from beyond_self.runtime.subscription import Received
-from beyond_self.schemas import Header, Keys, Ledger
-from beyond_self.schemas.identity import Identity
+from beyond_self.schemas import ActionPosterior, Header, Keys, Ledger
+from beyond_self.schemas.identity import Identity, identify
 
 
 def kept(service: str, handled: int) -> Ledger:
@@ -94,3 +98,45 @@ def test_a_producer_withholds_only_what_the_consumer_alive_now_has() -> None:
     book.heard(objects(0, [(3, 0, 0)]))  # a copy of the old instance's, kept by another
     assert not book.consumers_have(key, start, "gestures")
     assert book.last["objects"].instance == 1 and book.instance_of("objects") == 1
+
+
+async def test_a_named_monitor_is_a_consumer_a_restarted_producer_sends_what_it_lacks() -> None:
+    """A belief that reached the reasoner but died in the streamer's send queue on its way to
+    the monitor: the restarted streamer withheld it (every *service* had it) and the monitor
+    printed gesture 2 without its first line (CI). Named, the monitor's ledger says what it
+    has, so the belief goes out again until the monitor has it too."""
+    config = private_config()
+    watching, producing = Bus.open(config), Bus.open(config)
+    try:
+        key = producing.keys.gesture_posterior
+        belief = ActionPosterior(
+            header=Header(version=1, source="gestures", seq=7, stamp=46),
+            segment_id=2,
+            frame=46,
+            actions=["grasp", "touch"],
+            posterior=[0.48, 0.52],
+            log_likelihood=[-3.1, -3.0],
+            normalised_log_likelihood=[-0.1, 0.0],
+        )
+        ident = identify(key, belief)
+        assert ident is not None
+        reasoner = Keeper("reasoner", lambda cls, _: cls.original_header("reasoner", 0, 1))
+        reasoner.handled.add(key, ident)
+        book = LedgerBook()  # the restarted streamer's
+        book.heard(reasoner.ledger())
+        assert book.consumers_have(key, ident, "gestures"), "the services alone: withheld"
+        told = producing.subscribe(producing.keys.ledger("monitor"), Ledger, STATUS)
+        monitor = PipelineMonitor(watching, lambda line: None, name="monitor")
+        monitor.start()
+        book.heard((await told.recv(timeout=10)).message)
+        assert key in book.current["monitor"][1].keys
+        assert not book.consumers_have(key, ident, "gestures"), "the monitor lacks it"
+        beliefs = producing.publisher(key, ActionPosterior, FRAMES)
+        beliefs.put(belief)  # its cache gives it to the monitor, whenever they meet
+        while not book.consumers_have(key, ident, "gestures"):  # told with its next tick
+            book.heard((await told.recv(timeout=10)).message)
+        assert monitor.report.gestures[2].best == "touch", "and it reached the report"
+        monitor.stop()
+    finally:
+        watching.close()
+        producing.close()

@@ -405,7 +405,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     if timeout is None and ("ingest" in side.services or finite):
         timeout = DEFAULT_TIMEOUT
     bus = await side.open()
-    pipeline = PipelineMonitor(bus, lines.emit)
+    pipeline = PipelineMonitor.of(side, bus, lines.emit)
     try:
         if args.foxglove:  # imported only when asked for: the SDK is not free to load
             from beyond_self.runtime.foxglove_bridge import start_in_background
