@@ -16,8 +16,9 @@ services; a property test holds them equal to 1e-12.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Mapping, Sequence
-from typing import Literal, cast
+from typing import Literal
 
 import numpy as np
 
@@ -35,6 +36,14 @@ def action_vector(model: BayesNet, p_hmm: Mapping[str, float] | Sequence[float])
     A mapping is matched by action name (gesture models and network may list actions in different
     orders); a plain sequence must already be in the network's order.
     """
+    return np.array(action_probabilities(model, p_hmm))
+
+
+def action_probabilities(
+    model: BayesNet, p_hmm: Mapping[str, float] | Sequence[float]
+) -> list[float]:
+    """`action_vector` as plain floats: a reasoner fuses every frame of every gesture, and on
+    three actions numpy's per-call cost is most of the work."""
     actions = model.values[ACTION]
     if isinstance(p_hmm, Mapping):
         extra = [a for a in p_hmm if a not in actions]
@@ -54,13 +63,12 @@ def action_vector(model: BayesNet, p_hmm: Mapping[str, float] | Sequence[float])
                 f"gesture evidence needs {len(actions)} probabilities ({', '.join(actions)}); "
                 f"got {len(probabilities)}"
             )
-    # checked on plain floats: a reasoner does this every frame, and numpy's calls cost more
     if not all(math.isfinite(p) and p >= 0 for p in probabilities) or not any(probabilities):
         raise InputError(
             f"gesture evidence must be finite, non-negative and not all zero; got {probabilities}"
         )
-    vec = np.array(probabilities)
-    return cast(np.ndarray, vec / vec.sum())
+    total = sum(probabilities)
+    return [p / total for p in probabilities]
 
 
 def _check_observed(model: BayesNet, observed: Mapping[str, str]) -> None:
@@ -122,17 +130,18 @@ def fuse_marginals(
     (case 2 of the formula, and case 1 for the action itself) instead of a sum over the
     network's whole joint per variable."""
     _check_observed(model, observed)
-    vec = action_vector(model, p_hmm)
+    vec = action_probabilities(model, p_hmm)
     compiled = model.compiled
-    tables = compiled.pair_tables(ACTION, [ACTION, *queries], observed)
-    # P_BN(A, A | observed) is diagonal: its rows' sums are P_BN(A | observed)
-    total = float(vec @ tables[0].sum(axis=1))  # P_BN(G-weighted actions | observed), unscaled
+    actions, *tables = compiled.pair_columns(ACTION, [ACTION, *queries], observed)
+    # P_BN(A, A | observed) is diagonal: its columns' sums are P_BN(A | observed)
+    total = sum(map(operator.mul, vec, map(sum, actions)))  # G-weighted, unscaled
     if not total > 0:  # the refusal's message, built only when it is needed
-        compiled.check_total(total, observed, {ACTION: vec.tolist()})
+        compiled.check_total(total, observed, {ACTION: vec})
     out: dict[str, dict[str, float]] = {}
-    for name, table in zip(queries, tables[1:], strict=True):
-        weighted = vec @ table
-        out[name] = dict(zip(model.values[name], (weighted / weighted.sum()).tolist(), strict=True))
+    for name, columns in zip(queries, tables, strict=True):
+        weighted = [sum(map(operator.mul, vec, column)) for column in columns]
+        scale = sum(weighted)
+        out[name] = dict(zip(model.values[name], [w / scale for w in weighted], strict=True))
     return out
 
 

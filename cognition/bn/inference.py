@@ -182,6 +182,9 @@ class CompiledNetwork:
         self.leaf_nd = {n: t.reshape(*self.shape, -1) for n, t in self.leaf_tables.items()}
         self.present_nd = self.present.reshape(len(self.words), *self.shape)
         self._pair_tables: OrderedDict[tuple[Any, ...], dict[str, np.ndarray]] = OrderedDict()
+        self._pair_columns: OrderedDict[
+            tuple[Any, ...], dict[str, tuple[tuple[float, ...], ...]]
+        ] = OrderedDict()
 
     def _broadcast(
         self, name: str, parents: Sequence[str], cpt: np.ndarray, leaf: bool = False
@@ -353,6 +356,26 @@ class CompiledNetwork:
                 kept[name] = table
             out.append(table)
         return out
+
+    def pair_columns(
+        self, pivot: str, variables: Sequence[str], evidence: Mapping[str, str]
+    ) -> list[tuple[tuple[float, ...], ...]]:
+        """`pair_tables` as plain floats, kept beside them: per X of `variables`, a column per
+        value of X over the pivot's values. For a caller that works on a handful of numbers
+        per call (fusion, every frame of a gesture), where numpy's per-call cost is most of
+        the work."""
+        key = (pivot, tuple(sorted(evidence.items())))
+        kept = self._pair_columns.get(key)
+        if kept is None:
+            kept = self._pair_columns[key] = {}
+            if len(self._pair_columns) > _PAIR_TABLES_KEPT:
+                self._pair_columns.popitem(last=False)
+        else:
+            self._pair_columns.move_to_end(key)
+        missing = [n for n in variables if n not in kept]
+        for name, table in zip(missing, self.pair_tables(pivot, missing, evidence), strict=True):
+            kept[name] = tuple(tuple(float(p) for p in column) for column in table.T)
+        return [kept[n] for n in variables]
 
     def word_probabilities(
         self,
