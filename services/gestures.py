@@ -259,8 +259,8 @@ class GestureStreamer(Service):
                 frame=ev.frame,
                 actions=self.actions,
                 posterior=ev.posterior,
-                log_likelihood=[float(v) for v in r.loglik],
-                normalised_log_likelihood=[float(v) for v in r.normalized],
+                log_likelihood=r.loglik.tolist(),
+                normalised_log_likelihood=r.normalized.tolist(),
                 final=ev.final,
             )
         )
