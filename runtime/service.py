@@ -21,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+import zlib
 from collections.abc import Callable, Coroutine
 from typing import Any, NoReturn, TypeVar, overload
 
@@ -52,6 +53,12 @@ from beyond_self.schemas.messages import Progress, ServiceHealth, StreamClock
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
+
+
+def report_phase(robot: str) -> float:
+    """Where in the health period a robot's runs report, in [0, 1): the same for a robot
+    every time (a hash of its name), spread over the period across a fleet's robots."""
+    return zlib.crc32(robot.encode()) / 2**32
 
 
 class Service:
@@ -328,13 +335,20 @@ class Service:
 
     async def _report_periodically(self) -> None:
         pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, STATUS)
+        loop = asyncio.get_running_loop()
+        # the first report at once (it shows the service is up), the next ones at a phase of
+        # the period of this robot's own: a fleet's runs start together when their robots
+        # appear, and reports in step built and sent a health report and a ledger for every
+        # robot in one go each second, a burst that every gesture under way then queued behind
+        due = loop.time() + self.health_period * report_phase(self.bus.keys.robot)
         while True:
             pub.put(self.health_report())
             if self._progress.paced:
                 self.publish_progress()
             self.ledgers.tick()
             self._recovery_reported = log_recovery(self, self._recovery_reported)
-            await asyncio.sleep(self.health_period)
+            await asyncio.sleep(max(due - loop.time(), 0.0))
+            due = max(due, loop.time()) + self.health_period
 
     # --- lifecycle ------------------------------------------------------------------------
 

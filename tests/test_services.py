@@ -258,3 +258,18 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
         assert stamps["camera@1"] == 200 and stamps["camera@2"] == 1_000
         assert 0 <= stamps["camera@3"] <= 7_000, stamps
         await _stop(service)
+
+
+def test_a_fleets_robots_report_at_phases_of_their_own_spread_over_the_period() -> None:
+    """runtime.service.report_phase: the same phase for a robot every time, and a fleet's
+    robots spread over the whole period (in step, they built every robot's health and ledger
+    in one burst each second)."""
+    from beyond_self.runtime.service import report_phase
+
+    robots = [f"lab-{k}" for k in range(64)]
+    phases = [report_phase(r) for r in robots]
+    assert phases == [report_phase(r) for r in robots]
+    assert all(0 <= p < 1 for p in phases)
+    tenths = {int(p * 10) for p in phases}
+    assert len(tenths) == 10, sorted(phases)  # every tenth of the period has some robots
+    assert max(sum(int(p * 10) == t for p in phases) for t in tenths) <= 16
