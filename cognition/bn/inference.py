@@ -41,6 +41,7 @@ MAX_CORE_STATES = 5_000_000
 MAX_JOINT_ROWS = 4096
 # evidence sets whose pair tables are kept (CompiledNetwork.pair_tables): one per gesture of a fleet
 _PAIR_TABLES_KEPT = 256
+Columns = tuple[tuple[float, ...], ...]  # a table's columns as plain floats (pair_columns)
 MAX_QUERY_WORK = 2**21
 
 
@@ -181,10 +182,9 @@ class CompiledNetwork:
         self.joint_nd = self.joint.reshape(self.shape)
         self.leaf_nd = {n: t.reshape(*self.shape, -1) for n, t in self.leaf_tables.items()}
         self.present_nd = self.present.reshape(len(self.words), *self.shape)
-        self._pair_tables: OrderedDict[tuple[Any, ...], dict[str, np.ndarray]] = OrderedDict()
-        self._pair_columns: OrderedDict[
-            tuple[Any, ...], dict[str, tuple[tuple[float, ...], ...]]
-        ] = OrderedDict()
+        self._pair_tables: OrderedDict[tuple[Any, ...], dict[str, tuple[np.ndarray, Columns]]] = (
+            OrderedDict()
+        )
 
     def _broadcast(
         self, name: str, parents: Sequence[str], cpt: np.ndarray, leaf: bool = False
@@ -337,6 +337,20 @@ class CompiledNetwork:
         for a whole gesture) with new soft evidence on the pivot each time; with these tables a
         frame costs one product with the soft vector per variable instead of a sum over the
         whole joint."""
+        return [table for table, _ in self._pairs(pivot, variables, evidence)]
+
+    def pair_columns(
+        self, pivot: str, variables: Sequence[str], evidence: Mapping[str, str]
+    ) -> list[Columns]:
+        """`pair_tables` as plain floats: per X of `variables`, a column per value of X over
+        the pivot's values. For a caller that works on a handful of numbers per call (fusion,
+        every frame of a gesture), where numpy's per-call cost is most of the work."""
+        return [columns for _, columns in self._pairs(pivot, variables, evidence)]
+
+    def _pairs(
+        self, pivot: str, variables: Sequence[str], evidence: Mapping[str, str]
+    ) -> list[tuple[np.ndarray, Columns]]:
+        """Each X's pair table and its columns, kept for the last few evidence sets."""
         key = (pivot, tuple(sorted(evidence.items())))
         kept = self._pair_tables.get(key)
         if kept is None:
@@ -345,37 +359,14 @@ class CompiledNetwork:
                 self._pair_tables.popitem(last=False)
         else:
             self._pair_tables.move_to_end(key)
-        out = []
         for name in variables:
-            table = kept.get(name)
-            if table is None:
+            if name not in kept:
                 if name == pivot:
                     table = np.diag(self.posterior([pivot], evidence).table)
                 else:
                     table = self.posterior([pivot, name], evidence).table
-                kept[name] = table
-            out.append(table)
-        return out
-
-    def pair_columns(
-        self, pivot: str, variables: Sequence[str], evidence: Mapping[str, str]
-    ) -> list[tuple[tuple[float, ...], ...]]:
-        """`pair_tables` as plain floats, kept beside them: per X of `variables`, a column per
-        value of X over the pivot's values. For a caller that works on a handful of numbers
-        per call (fusion, every frame of a gesture), where numpy's per-call cost is most of
-        the work."""
-        key = (pivot, tuple(sorted(evidence.items())))
-        kept = self._pair_columns.get(key)
-        if kept is None:
-            kept = self._pair_columns[key] = {}
-            if len(self._pair_columns) > _PAIR_TABLES_KEPT:
-                self._pair_columns.popitem(last=False)
-        else:
-            self._pair_columns.move_to_end(key)
-        missing = [n for n in variables if n not in kept]
-        for name, table in zip(missing, self.pair_tables(pivot, missing, evidence), strict=True):
-            kept[name] = tuple(tuple(float(p) for p in column) for column in table.T)
-        return [kept[n] for n in variables]
+                kept[name] = (table, tuple(tuple(float(p) for p in c) for c in table.T))
+        return [kept[name] for name in variables]
 
     def word_probabilities(
         self,
