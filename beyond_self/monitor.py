@@ -21,7 +21,7 @@ from beyond_self.cognition.episodes import GestureReport
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.delivery import FRAMES, RELIABLE
-from beyond_self.runtime.ledger import Handled, Keeper
+from beyond_self.runtime.ledger import Keeper
 from beyond_self.runtime.subscription import Received, consume
 from beyond_self.schemas import (
     ActionPosterior,
@@ -86,7 +86,6 @@ class PipelineMonitor:
         # monitor when the streamer was SIGKILLed was withheld by the restarted streamer and
         # missing from the printed lines (CI, tests/test_event_time.py)
         self.ledgers = Keeper(name or "monitor", self._ledger_header)
-        self.handled: Handled = self.ledgers.handled
         self._ledger_seq = 0
         self.duplicates = 0  # results received again (and not shown again)
         self._tasks: list[asyncio.Task[None]] = []
@@ -114,7 +113,7 @@ class PipelineMonitor:
             # derived streams may cross a link (robot <-> workstation): recover what it loses
             delivery = RELIABLE if cls in (ServiceHealth, Progress) else FRAMES
             if delivery is FRAMES:
-                self.handled.declare(key)
+                self.ledgers.handled.declare(key)
             sub = self.bus.subscribe(key, cls, delivery)
             work = consume(sub, handler, self._failed, before=self._seen, accept=self._fresh)
             self._tasks.append(loop.create_task(work))
