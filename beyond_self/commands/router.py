@@ -7,6 +7,8 @@ import signal
 import sys
 import threading
 
+import zenoh
+
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.config import ROUTER_LISTEN, describe
@@ -22,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args).with_(mode="router")
+    # A router's own errors (a rejected link, a routing table it cannot follow) are the only
+    # account of why traffic stopped crossing it: shown, and RUST_LOG=zenoh=debug for more.
+    zenoh.init_log_from_env_or("error")
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
