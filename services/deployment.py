@@ -16,7 +16,9 @@ started once the others are alive (why: `start`), and waits itself for every con
 
 A service that dies is started again (services.supervision: like systemd's
 `Restart=on-failure`, with backoff and a limit per minute, then it gives up and says so); the
-restarted service resumes where its predecessor's outputs stopped (runtime.ledger).
+restarted service resumes where its predecessor's outputs stopped (runtime.ledger). A side's own
+router is supervised the same way, and restarted on purpose when its link to the other side
+carries presence but no data (services.link_watch): its clients reconnect to the new one.
 
 It lives in `services/` beside the launcher and the registry it builds on: it runs services and
 prints nothing (what to show is the caller's: `beyond up`'s terminal views are in `beyond/`).
@@ -44,14 +46,16 @@ from beyond_self.services.launcher import (
     start_service,
     stop_services,
 )
+from beyond_self.services.link_watch import LinkWatch
 from beyond_self.services.options import check_options
-from beyond_self.services.registry import service_class
+from beyond_self.services.registry import SERVICES, service_class
 from beyond_self.services.supervision import RestartPolicy, Restarts, how_it_ended
 
 if TYPE_CHECKING:
     from beyond_self.runtime.bus import Bus
 
 SOURCE = "ingest"  # the service that publishes sensor streams, started last
+ROUTER = "router"  # a secure side's own router, supervised like a service
 ALIVE_TIMEOUT_S = 60.0  # a process neither alive nor exited after this long: start() fails
 POLL_S = 0.25  # how often wait() looks at the processes and the caller's `done`
 CLOCKS = ("wall", "recording")
@@ -124,6 +128,7 @@ class Deployment:
         self.router: ServiceProcess | None = None
         self.processes: list[ServiceProcess] = []  # the services' current processes
         self.health_watch: HealthWatch | None = None
+        self.link_watch: LinkWatch | None = None
         self.codes: dict[str, int] = {}  # exit codes, once stopped
         self._stopping = asyncio.Event()
         self._token: Callable[[], None] | None = None
@@ -149,8 +154,7 @@ class Deployment:
             # services run in their own sessions, so Ctrl-C reaches only us: we stop them in order
             self._signals = process.install_signals(self._stopping.set)
         if self.router_command is not None:
-            command, env = self.router_command, self._router_env()
-            self.router = await start_service("router", env, command=command, sink=self.log)
+            await self._launch_router()
         from beyond_self.runtime.bus import (
             Bus,  # here: zenoh is slow to import, building a plan needs none
         )
@@ -179,6 +183,10 @@ class Deployment:
         if self.on_stuck is not None:
             self.health_watch = HealthWatch(bus, self.processes, self.on_stuck)
             self.health_watch.start()
+        if self.router is not None and self.restart is not None:
+            remote = [name for name in SERVICES if name not in self.services]
+            self.link_watch = LinkWatch(bus, remote, self.restart_router)
+            self.link_watch.start()
 
     async def launch(self, name: str) -> ServiceProcess:
         """Start service `name` of this deployment, or start it again after it exited: the new
@@ -207,6 +215,21 @@ class Deployment:
             self._supervisor = asyncio.get_running_loop().create_task(self._supervise())
         return sp
 
+    async def _launch_router(self) -> None:
+        assert self.router_command is not None
+        command, env = self.router_command, self._router_env()
+        self.router = await start_service(ROUTER, env, command=command, sink=self.log)
+        self._final.discard(ROUTER)
+
+    def restart_router(self, why: str) -> None:
+        """Kill this side's router (SIGKILL: a router wedged on a dead link may never finish a
+        clean close) for the supervisor to start again, and say why."""
+        if self.router is None or not self.router.running or self._closing.is_set():
+            return
+        self._tell(ROUTER, f"{why}; killing it to start it again")
+        with contextlib.suppress(ProcessLookupError):
+            self.router.process.kill()
+
     def attach(self, close: Callable[[], Awaitable[object]]) -> None:
         """`close` runs in `stop`, once the services have stopped and before the router and the
         session: for what rides on this deployment's session (a Foxglove bridge)."""
@@ -220,14 +243,15 @@ class Deployment:
         router = [self.router] if self.router is not None and not self.router.running else []
         if self.restart is None:
             return [sp.name for sp in self.processes + router if not sp.running]
-        return [sp.name for sp in router] + [n for n in self.services if n in self._final]
+        return [n for n in [ROUTER, *self.services] if n in self._final]
 
     async def _supervise(self) -> None:
-        """Start again, as the restart policy says, every service that dies."""
+        """Start again, as the restart policy says, every service that dies, and the router."""
         assert self.restart is not None
         loop = asyncio.get_running_loop()
         while True:
-            for sp in list(self.processes):
+            router = [self.router] if self.router is not None else []
+            for sp in [*router, *self.processes]:
                 if sp.running or self._judged.get(sp.name) is sp or sp.name in self._pending:
                     continue
                 self._judged[sp.name] = sp
@@ -254,7 +278,11 @@ class Deployment:
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(delay):
                     await self._closing.wait()
-            if not self._closing.is_set():
+            if self._closing.is_set():
+                pass
+            elif name == ROUTER:
+                await self._launch_router()
+            else:
                 await self.launch(name)
         finally:
             self._pending.pop(name, None)
@@ -302,6 +330,8 @@ class Deployment:
             await asyncio.gather(*self._pending.values(), return_exceptions=True)
             if self.health_watch is not None:
                 await self.health_watch.stop()
+            if self.link_watch is not None:
+                await self.link_watch.stop()
             if self._token is not None:
                 self._token()
                 self._token = None

@@ -79,6 +79,45 @@ def test_secure_up_describes_the_demo_recording(hosts: TwoHosts, stores: tuple[P
     assert "router 0" in text  # and it stopped cleanly
 
 
+def router_pids(keystore: Path) -> list[int]:
+    """The `beyond router` processes serving `keystore` (its path is in their command line)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        try:
+            argv = (proc / "cmdline").read_bytes().split(b"\0")
+        except (OSError, ValueError):
+            continue
+        if b"router" in argv and str(keystore).encode() in argv and proc.name.isdigit():
+            found.append(int(proc.name))
+    return found
+
+
+def test_a_killed_router_is_started_again_and_nothing_is_lost_or_repeated(
+    hosts: TwoHosts, stores: tuple[Path, Path]
+) -> None:
+    """Crash-only holds for a secure side's own router too: SIGKILLed mid-gesture, `up` starts
+    it again, its clients reconnect, and every gesture is described and spoken once (what
+    crossed nothing during the gap comes back from the publishers' caches)."""
+    ours, _ = stores
+    argv = [*BEYOND, "up", "--secure", str(ours),
+            "--recording", str(DEMO), "--no-live", "--timeout", "100"]  # fmt: skip
+    up = hosts.start(hosts.ws, "up", argv, clean_env())
+    wait_for("gesture 1 to start", lambda: "gesture 1: started" in up.text(), 90, [up])
+    (pid,) = router_pids(ours)
+    os.kill(pid, 9)
+    code = wait_exit(up, 150)
+    text = up.text()
+    assert code == 0, text[-4000:]
+    assert re.search(r"\[up\] router: killed by SIGKILL; restart 1", text), text[-4000:]
+    assert len(router_pids(ours)) == 0  # the restarted one stopped with the rest
+    described = re.findall(r'^gesture (\d+): "(.*)"$', text, re.M)
+    spoken = re.findall(r"^\[speech\] (?!\d\d:\d\d:\d\d )(.*)$", text, re.M)
+    assert [n for n, _ in described] == ["1", "2"], text[-4000:]
+    assert re.search(VERBS["tap"], described[0][1]) and re.search(VERBS["grasp"], described[1][1])
+    assert sorted(spoken) == sorted(d for _, d in described), text[-4000:]  # each said once
+    print("described after the router's restart:", described)
+
+
 def test_router_rules_hold(hosts: TwoHosts, stores: tuple[Path, Path]) -> None:
     ours, theirs = stores
     python = str(REPO / ".venv/bin/python")
@@ -232,6 +271,8 @@ def test_secure_split_survives_a_cut_link(
         assert re.search(VERBS[action], described[str(i)]), (action, described)
     recovered = [int(n) for n in re.findall(r"reasoner: stopped .* recovered=(\d+)", text)]
     print(f"reasoner recovered {recovered} message(s) from the robot's caches")
+    for side in (ws, robot):  # a link found carrying presence but no data (services.link_watch)
+        print(side.name, [line for line in side.text().splitlines() if "[up] router" in line])
     assert recovered and recovered[-1] > 0, text[-3000:]
 
 
