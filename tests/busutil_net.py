@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from beyond_self.runtime.config import BusConfig
-from beyond_self.schemas import Header, Joint, Keys, SkeletonFrame
+from beyond_self.schemas import Header, Joint, Keys, ServiceHealth, SkeletonFrame
 
 REPO = Path(__file__).resolve().parent.parent
 EXAMPLES = Path(__file__).resolve().parent / "runtime_examples"
@@ -55,6 +55,21 @@ def busy_loops(n: int, cpu: int | None = None) -> Iterator[None]:
 
 def private_config() -> BusConfig:
     return BusConfig(robot=f"t{uuid.uuid4().hex[:10]}", port=free_port())
+
+
+def health_report(service: str, seq: int = 0) -> ServiceHealth:
+    """A service's health as it reports it while idle (what a watch of health hears)."""
+    header = Header(version=ServiceHealth.VERSION, source=service, seq=seq, stamp=seq + 1)
+    return ServiceHealth(
+        header=header,
+        service=service,
+        uptime_s=0.0,
+        messages_in=1,
+        messages_out=2,
+        dropped=0,
+        malformed=0,
+        errors=0,
+    )
 
 
 def env_for(config: BusConfig, **extra: str) -> dict[str, str]:

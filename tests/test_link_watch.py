@@ -6,11 +6,11 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 
-from busutil_net import private_config
+from busutil_net import health_report, private_config
 
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.delivery import STATUS
-from beyond_self.schemas import Header, ServiceHealth
+from beyond_self.schemas import ServiceHealth
 from beyond_self.services.link_watch import LinkSilence, LinkWatch
 
 REMOTE = ("ingest", "gestures", "objects")
@@ -50,19 +50,6 @@ def test_a_cut_link_is_not_a_broken_one_and_local_names_do_not_count() -> None:
     assert silence.check(109) is None and silence.check(110) is not None
 
 
-def health(service: str, seq: int) -> ServiceHealth:
-    return ServiceHealth(
-        header=Header(version=ServiceHealth.VERSION, source=service, seq=seq, stamp=seq),
-        service=service,
-        uptime_s=0.0,
-        messages_in=0,
-        messages_out=0,
-        dropped=0,
-        malformed=0,
-        errors=0,
-    )
-
-
 async def test_on_the_bus_a_silent_remote_service_is_reported_and_its_health_heard() -> None:
     config = private_config()
     with Bus.open(config) as ours, Bus.open(config) as theirs:
@@ -86,7 +73,7 @@ async def test_on_the_bus_a_silent_remote_service_is_reported_and_its_health_hea
             pub = theirs.publisher(theirs.keys.health("gestures"), ServiceHealth, STATUS)
             await pub.wait_matching(timeout=10)
             put_at = loop.time()
-            pub.put(health("gestures", 0))
+            pub.put(health_report("gestures"))
             await until(lambda: (hearing.silence.since or 0) >= put_at)
             assert (hearing.silence.since or 0) >= put_at  # the health arrived and was counted
             assert hearing.silence.broken == 0

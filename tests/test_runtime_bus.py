@@ -10,7 +10,7 @@ import threading
 
 import msgspec
 import pytest
-from busutil_net import EXAMPLES, env_for, private_config, skeleton_frames
+from busutil_net import EXAMPLES, env_for, health_report, private_config, skeleton_frames
 
 import beyond_self.schemas as s
 from beyond_self.runtime.bus import Bus
@@ -85,16 +85,7 @@ async def test_malformed_payloads_are_counted_and_skipped(buses) -> None:
 
 async def test_query_reply_and_liveliness(buses) -> None:
     a, b = buses
-    health = s.ServiceHealth(
-        header=s.Header(version=s.ServiceHealth.VERSION, source="q", seq=0, stamp=1),
-        service="q",
-        uptime_s=0.0,
-        messages_in=1,
-        messages_out=2,
-        dropped=0,
-        malformed=0,
-        errors=0,
-    )
+    health = health_report("q")
 
     async def answer(key: str, request: None) -> list[tuple[str, s.Message]]:
         return [(b.keys.health("q"), health)]
