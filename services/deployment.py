@@ -278,12 +278,11 @@ class Deployment:
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(delay):
                     await self._closing.wait()
-            if self._closing.is_set():
-                pass
-            elif name == ROUTER:
-                await self._launch_router()
-            else:
-                await self.launch(name)
+            if not self._closing.is_set():
+                if name == ROUTER:
+                    await self._launch_router()
+                else:
+                    await self.launch(name)
         finally:
             self._pending.pop(name, None)
 
