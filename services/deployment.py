@@ -46,7 +46,7 @@ from beyond_self.services.launcher import (
     start_service,
     stop_services,
 )
-from beyond_self.services.link_watch import LinkWatch
+from beyond_self.services.link_watch import SILENT_S, LinkWatch
 from beyond_self.services.options import check_options
 from beyond_self.services.registry import SERVICES, service_class
 from beyond_self.services.supervision import RestartPolicy, Restarts, how_it_ended
@@ -89,7 +89,9 @@ class Deployment:
     stopped behind the caller's back: a benchmark on a loaded machine is slow, not stuck).
     `stop_on_signals`: SIGINT/SIGTERM end `wait` (as Ctrl-C ends `beyond up`). `restart`: a
     service that dies is started again as the policy says (services.supervision; None: never),
-    and `on_restart(name, what)` is told each restart and each time the policy gives up."""
+    and `on_restart(name, what)` is told each restart and each time the policy gives up. With a
+    restart policy the router is supervised too, and restarted when the other side is present
+    but none of its health has arrived for `link_silent_s` (services.link_watch)."""
 
     def __init__(
         self,
@@ -107,6 +109,7 @@ class Deployment:
         stop_on_signals: bool = False,
         restart: RestartPolicy | None = DEFAULT_RESTART,
         on_restart: Callable[[str, str], None] | None = None,
+        link_silent_s: float = SILENT_S,
     ) -> None:
         if clock not in CLOCKS:
             raise unknown("clock", clock, CLOCKS)
@@ -136,6 +139,7 @@ class Deployment:
         self._signals: list[signal.Signals] = []
         self.restart = restart
         self.on_restart = on_restart
+        self.link_silent_s = link_silent_s
         self.restarts: dict[str, Restarts] = {}  # per service, once it has died
         self._judged: dict[str, ServiceProcess] = {}  # the last dead process of each, decided
         self._final: set[str] = set()  # ended for good: not restarted
@@ -162,6 +166,9 @@ class Deployment:
         try:
             self.bus = Bus.open(self.config)  # a secure client waits here for its router
         except BaseException:
+            if self._supervisor is not None:  # it would start the router again
+                self._supervisor.cancel()
+                self._supervisor = None
             await self._stop_router()
             raise
         return self.bus
@@ -185,7 +192,9 @@ class Deployment:
             self.health_watch.start()
         if self.router is not None and self.restart is not None:
             remote = [name for name in SERVICES if name not in self.services]
-            self.link_watch = LinkWatch(bus, remote, self.restart_router)
+            self.link_watch = LinkWatch(
+                bus, remote, self.restart_router, silent_s=self.link_silent_s
+            )
             self.link_watch.start()
 
     async def launch(self, name: str) -> ServiceProcess:
@@ -211,15 +220,20 @@ class Deployment:
         self._final.discard(name)
         if self.health_watch is not None:
             self.health_watch.misses.pop(name, None)  # a new process: its own record
+        self._supervised()
+        return sp
+
+    def _supervised(self) -> None:
+        """The supervisor runs from the first process started (the router, or a service)."""
         if self.restart is not None and self._supervisor is None:
             self._supervisor = asyncio.get_running_loop().create_task(self._supervise())
-        return sp
 
     async def _launch_router(self) -> None:
         assert self.router_command is not None
         command, env = self.router_command, self._router_env()
         self.router = await start_service(ROUTER, env, command=command, sink=self.log)
         self._final.discard(ROUTER)
+        self._supervised()
 
     def restart_router(self, why: str) -> None:
         """Kill this side's router (SIGKILL: a router wedged on a dead link may never finish a
