@@ -98,7 +98,11 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 def entry() -> int:
     """The `beyond` program: `main`, then, if the command opened a Zenoh session, leave without
     the interpreter's teardown, which can abort a process that finished cleanly once Zenoh's
-    native threads are up (runtime.process.exit_process)."""
+    native threads are up (runtime.process.exit_process). A process a supervisor started is
+    bound to it first (runtime.lifeline): it dies with it."""
+    from beyond_self.runtime import lifeline
+
+    lifeline.bind()
     code = main()
     bus = sys.modules.get("beyond_self.runtime.bus")
     if bus is not None and bus.sessions_opened:

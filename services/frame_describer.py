@@ -1,15 +1,11 @@
 """The object segmenter's per-frame description, in a process of its own.
 
-Why a process: describing a frame (the table estimated from it, every object measured and
-labelled) is the costliest thing the object segmenter does, and no gesture result waits for it.
-On a thread it shared the interpreter lock with the gestures' work, and the cores at the same
-priority: on a loaded machine the frame that completes a gesture waited behind it. In a process
-of its own, at a lower priority when the source is live (`niceness`), the operating system runs
-the gestures' work first and the descriptions with what is left; the frames nothing was left for
-are the ones a live segmenter skips. A replay's describer keeps its priority: every frame is
-described there, and the player waits for it.
-
-Crash-only: the worker watches its parent and leaves when it is gone, so a SIGKILLed segmenter
+Why a process: describing a frame is the costliest thing the segmenter does, and no gesture
+result waits for it. On a thread it shared the interpreter lock and the cores with the gestures'
+work; in a process, at a lower priority when the source is live (`niceness`), the system runs
+the gestures' work first and the descriptions with what is left (the frames nothing was left for
+are those a live segmenter skips). A replay's describer keeps its priority: every frame is
+described there. The worker dies with the segmenter (runtime.lifeline): a SIGKILLed segmenter
 leaves no process behind; one started again starts its own.
 """
 
@@ -19,15 +15,13 @@ import asyncio
 import concurrent.futures
 import multiprocessing
 import os
-import threading
-import time
 
 import numpy as np
 
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.cognition.vision.pipeline import DetectedObject, describe_frame
+from beyond_self.runtime import lifeline
 
-_PARENT_CHECK_S = 1.0
 _clusters: ClusterModel | None = None  # the worker's own copy, loaded once
 
 
@@ -36,8 +30,9 @@ class FrameDescriber:
 
     def __init__(self, clusters: str | None, niceness: int = 0) -> None:
         context = multiprocessing.get_context("spawn")  # nothing of ours (a Zenoh session) forked
+        parent = lifeline.child_env()[lifeline.ENV]  # submit() below starts it from this thread
         self._pool = concurrent.futures.ProcessPoolExecutor(
-            1, mp_context=context, initializer=_start, initargs=(clusters, niceness, os.getpid())
+            1, mp_context=context, initializer=_start, initargs=(clusters, niceness, parent)
         )
         self._pool.submit(_ready)  # start it now, not at the first frame
 
@@ -52,21 +47,15 @@ class FrameDescriber:
         self._pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _start(clusters: str | None, niceness: int, parent: int) -> None:
+def _start(clusters: str | None, niceness: int, parent: str) -> None:
     global _clusters
+    lifeline.bind({lifeline.ENV: parent})
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
     threadpool_limits(limits=1, user_api="blas")
     if niceness:
         os.nice(niceness)
     _clusters = ClusterModel.load(clusters)
-    threading.Thread(target=_leave_with, args=(parent,), daemon=True).start()
-
-
-def _leave_with(parent: int) -> None:
-    while os.getppid() == parent:
-        time.sleep(_PARENT_CHECK_S)
-    os._exit(0)
 
 
 def _ready() -> bool:

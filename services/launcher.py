@@ -25,6 +25,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from beyond_self.runtime import lifeline
 from beyond_self.runtime.config import ENV_VARS, BusConfig
 
 if TYPE_CHECKING:
@@ -84,9 +85,9 @@ async def start_service(
         cmd += ["--config", config_file]
     for key, value in (options or {}).items():
         cmd += ["--set", f"{key}={json.dumps(value)}"]
-    proc = await asyncio.create_subprocess_exec(
+    proc = await asyncio.create_subprocess_exec(  # started from this thread: the event loop's
         *cmd,
-        env=dict(env),
+        env={**env, **lifeline.child_env()},  # it dies with us (runtime.lifeline)
         stdin=asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT,

@@ -69,6 +69,7 @@ from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError, unknown
 from beyond_self.live_view import render
 from beyond_self.monitor import PipelineMonitor
+from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.config import BusConfig
 from beyond_self.runtime.process import exit_process
@@ -81,6 +82,7 @@ from beyond_self.services.registry import PROFILES, SERVICES
 HELP = "start the pipeline's services as separate processes and watch them"
 SECURE_LOCAL_PORT = 7447  # a side's own router, when it links to another (if free)
 DEFAULT_TIMEOUT = 120.0
+ALIVE_QUERY_S = 2.0  # how long the services already on the bus have to answer
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -173,6 +175,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="exit once the (remote) source has ended and every gesture is described",
     )
     add_bus_arguments(parser)
+    parser.epilog = (
+        "Every service dies with `up`, however `up` ends (SIGKILL too). A second `up` for a "
+        "robot whose services are on the bus already says so in one line and exits 2: stop the "
+        "first, or give the second another --robot."
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -405,6 +412,12 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     if timeout is None and ("ingest" in side.services or finite):
         timeout = DEFAULT_TIMEOUT
     bus = await side.open()
+    if running := await already_up(side, bus):
+        await side.stop()
+        raise InputError(
+            f"robot {side.config.robot!r} already has {', '.join(running)} on the bus (another "
+            "beyond up?); stop it first, or give this one another --robot"
+        )
     pipeline = PipelineMonitor.of(side, bus, lines.emit)
     try:
         if args.foxglove:  # imported only when asked for: the SDK is not free to load
@@ -434,6 +447,16 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         # the readable part was played and described above; what was lost, as analyse says it
         raise InputError(end.damage)
     return 0 if ending.ok else 1
+
+
+async def already_up(side: Deployment, bus: Bus) -> list[str]:
+    """The services (and monitor) of this side already alive on the bus for its robot: those of
+    another `beyond up`. Two sets of the same services on one robot's keys would each take the
+    other's messages for their own."""
+    names = [*side.services, *([side.watcher] if side.watcher else [])]
+    found = await bus.live_tokens(bus.keys.alive("*"), timeout=ALIVE_QUERY_S)
+    alive = {key.rsplit("/", 1)[-1] for key in found}
+    return [name for name in names if name in alive]
 
 
 async def watch(

@@ -1,0 +1,75 @@
+"""`beyond up` owns its services (issue 39): SIGKILLed mid-gesture, it leaves none behind; a
+second `up` for a robot whose services are on the bus says so in one line and exits 2."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+from pathlib import Path
+
+import pytest
+from busutil_net import REPO, env_for, private_config, run_beyond
+from test_lifeline import gone, wait_gone
+
+import beyond_self.schemas as s
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import EVENTS
+from beyond_self.services.launcher import BEYOND
+from beyond_self.services.registry import PROFILES
+
+RECORDING = REPO / "recordings" / "three-actions.mcap"
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process below `pid` (children, theirs, ...), from /proc."""
+    found: list[int] = []
+    todo = [pid]
+    while todo:
+        parent = todo.pop()
+        for task in Path(f"/proc/{parent}/task").glob("*"):
+            try:
+                kids = [int(k) for k in (task / "children").read_text().split()]
+            except FileNotFoundError:
+                continue
+            found += kids
+            todo += kids
+    return found
+
+
+@pytest.mark.slow
+async def test_up_killed_mid_gesture_leaves_no_service_and_a_second_up_exits_2(
+    tmp_path: Path,
+) -> None:
+    config = private_config()
+    env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
+    args = ["up", "--recording", str(RECORDING), "--rate", "1", "--no-live", "--timeout", "90"]
+    with Bus.open(config) as bus, (tmp_path / "up.err").open("w") as err:
+        segments = bus.subscribe(bus.keys.gesture_segment, s.GestureSegment, EVENTS)
+        up = await asyncio.create_subprocess_exec(
+            *BEYOND, *args, env=env, cwd=tmp_path, stdout=asyncio.subprocess.DEVNULL, stderr=err
+        )
+        children: list[int] = []
+        try:
+            services = PROFILES["all"]
+            await bus.wait_alive(bus.keys.alive("*"), count=len(services) + 1, timeout=90)
+            code, out, said = await run_beyond(args, env=env, cwd=tmp_path, timeout=60)
+            assert code == 2, said
+            assert out == ""
+            assert len(said.splitlines()) == 1, said
+            assert said.startswith(f"beyond up: error: robot {config.robot!r} already has ingest")
+            first = (await segments.recv(timeout=60)).message
+            assert first.event == "start"  # mid-gesture: started, not yet ended
+            children = descendants(up.pid)
+            assert len(children) >= len(services)  # and the object segmenter's describer
+            up.send_signal(signal.SIGKILL)
+            await up.wait()
+            left = wait_gone(children, 2.0)
+            assert left == [], [Path(f"/proc/{p}/cmdline").read_bytes() for p in left]
+        finally:
+            if up.returncode is None:
+                up.kill()
+                await up.wait()
+            for pid in children:
+                if not gone(pid):
+                    os.kill(pid, signal.SIGKILL)
