@@ -2,10 +2,11 @@
 
 `PipelineMonitor` subscribes to the outputs of every service and feeds them to
 `cognition.episodes.GestureReport`, which makes the lines `beyond analyse` prints offline. It
-also keeps the state a live terminal view draws (per-service health, current action posterior,
-effect prediction, last description), knows when a source has been fully described, and
-when waiting on the pipeline has gone on too long (`waited_too_long`: start-up and the tail after
-the source's end, never a source's silence).
+also keeps the state a live terminal view draws (health, posterior, prediction, description),
+knows when a source has been fully described, when waiting has gone on too long
+(`waited_too_long`: start-up and the tail after the source's end, never a source's silence),
+and what the run lost (`losses`: gestures cut, sensor frames dropped as stale), which its
+summary says and which makes `beyond up` exit non-zero.
 """
 
 from __future__ import annotations
@@ -88,6 +89,8 @@ class PipelineMonitor:
         self.ledgers = Keeper(name or "monitor", self._ledger_header)
         self._ledger_seq = 0
         self.duplicates = 0  # results received again (and not shown again)
+        self.cut: dict[int, str] = {}  # gestures cancelled because their frames were lost: why
+        self.stale: dict[tuple[str, int], int] = {}  # (service, restarts): frames dropped stale
         self._tasks: list[asyncio.Task[None]] = []
 
     @classmethod
@@ -182,6 +185,8 @@ class PipelineMonitor:
             self.report.started(msg.segment_id, msg.frame)
         elif msg.event == "cancel":
             self.report.cancelled(msg.segment_id)
+            if msg.cut:
+                self.cut[msg.segment_id] = msg.reason
         else:
             self.report.ended(msg.segment_id, msg.frame)
         self._flush()
@@ -223,6 +228,22 @@ class PipelineMonitor:
 
     def on_health(self, msg: ServiceHealth) -> None:
         self.health_reports[msg.service] = msg
+        if msg.stale:  # each instance counts from 0: a restarted one's count adds to it
+            instance = (msg.service, msg.restarts)
+            self.stale[instance] = max(self.stale.get(instance, 0), msg.stale)
+
+    async def last_health(self, timeout: float = 2.0) -> None:
+        """Ask every service for its health once more before the summary: what it dropped since
+        its last periodic report counts too."""
+        try:
+            replies = await self.bus.query(
+                self.bus.keys.health(), ServiceHealth, timeout=timeout, every=True
+            )
+        except Exception as exc:  # the periodic reports still count
+            log.warning("could not ask the services for their last health: %s", exc)
+            return
+        for reply in replies:
+            self.on_health(reply.message)
 
     # -- completion ----------------------------------------------------------------------
 
@@ -254,6 +275,22 @@ class PipelineMonitor:
             return now - since > timeout_s
         return self.stream_end is not None and now - self.last_message > timeout_s
 
+    def losses(self) -> list[str]:
+        """What the run lost, one phrase each: gestures cut (their frames were lost: they cannot
+        be described) and sensor frames dropped as stale; empty when nothing was."""
+        lost = []
+        if self.cut:
+            why = "; ".join(f"gesture {n}: {self.cut[n] or 'no reason given'}"
+                            for n in sorted(self.cut))  # fmt: skip
+            lost.append(f"{len(self.cut)} cut (frames lost: {why})")
+        if stale := sum(self.stale.values()):
+            by: dict[str, int] = {}
+            for (service, _), count in self.stale.items():
+                by[service] = by.get(service, 0) + count
+            who = ", ".join(f"{n} {c}" for n, c in sorted(by.items()))
+            lost.append(f"{stale} sensor frame(s) dropped as stale ({who})")
+        return lost
+
     def summary(self) -> str:
         end = self.stream_end
         source = (
@@ -263,10 +300,12 @@ class PipelineMonitor:
         )
         gestures = [g for g in self.report.gestures.values() if g.started is not None]
         described = sum(1 for g in gestures if g.description)
+        total = len(gestures) + len(self.cut)
+        lost = "".join(f", {what}" for what in self.losses())
         skipped = (
             f"; {self.frames_skipped} of {self.frames_described + self.frames_skipped} camera "
             "frames not described, to keep up with the live camera (every gesture used them all)"
             if self.frames_skipped
             else ""
         )
-        return f"{source}{described} of {len(gestures)} gesture(s) described{skipped}"
+        return f"{source}{described} of {total} gesture(s) described{lost}{skipped}"

@@ -49,6 +49,7 @@ def health_of(service: Service, seq: int) -> ServiceHealth:
             | ({keys.progress(service.name)} if service.paced_keys else set())
         ),
         restarts=restarts(),
+        stale=service.stale,
     )
 
 

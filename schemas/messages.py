@@ -304,7 +304,10 @@ class GestureSegment(Message, frozen=True):
     """A gesture starts or ends; `end_stamp` is set on "end".
 
     Version 2: "cancel" withdraws a started gesture the segmenter did not keep (too short, or
-    still under way when the source ended), so no consumer waits for an end that never comes."""
+    still under way when the source ended), so no consumer waits for an end that never comes.
+    A cancel says why (`reason`), and `cut` when it was a gesture whose frames are gone (lost,
+    not withdrawn: `beyond up` counts it and exits non-zero); both default, so older messages
+    decode."""
 
     VERSION: ClassVar[int] = 2
 
@@ -314,6 +317,8 @@ class GestureSegment(Message, frozen=True):
     start_stamp: Stamp
     end_stamp: Stamp | None = None
     event_seq: Count = 0  # 1, 2, ... over the streamer's events: a receiver knows what it has
+    reason: Text = ""  # a cancel's why, one line
+    cut: bool = False  # a cancel of a gesture whose frames were lost
 
     def __post_init__(self) -> None:
         if self.event == "end" and self.end_stamp is None:
@@ -402,7 +407,8 @@ class ServiceHealth(Message, frozen=True):
     Version 2: `skipped` counts inputs whose per-frame work was skipped to keep up with a live
     source (camera frames the object segmenter did not describe; never per-gesture work);
     `restarts`, how many times its supervisor (`beyond up`, a Deployment) restarted
-    the service after it died before this instance (0: the first)."""
+    the service after it died before this instance (0: the first). `stale`: sensor messages
+    dropped because their stamp was not after the last one handled on their key."""
 
     VERSION: ClassVar[int] = 2
 
@@ -422,6 +428,7 @@ class ServiceHealth(Message, frozen=True):
     )
     skipped: Count = 0
     restarts: Count = 0
+    stale: Count = 0
 
 
 class StreamEnd(Message, frozen=True):

@@ -156,7 +156,7 @@ class GestureStreamer(Service):
         reason = f"its frames before {stamp} are gone (source and streamer restarted)"
         self.emit([
             Cancelled(segment_id=n, frame=frame.frame, start_stamp=self.resume_from,
-                      ref=frame.header, reason=reason)
+                      ref=frame.header, reason=reason, cut=True)
             for n in cut
         ])  # fmt: skip
         self.tracker.segment_id = max(self.tracker.segment_id, *seen, 0)
@@ -247,6 +247,8 @@ class GestureStreamer(Service):
                         frame=ev.frame,
                         start_stamp=ev.start_stamp,
                         end_stamp=ev.end_stamp if isinstance(ev, Ended) else None,
+                        reason=ev.reason if isinstance(ev, Cancelled) else "",
+                        cut=isinstance(ev, Cancelled) and ev.cut,
                     )
                 )
 

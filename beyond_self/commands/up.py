@@ -82,6 +82,7 @@ from beyond_self.services.registry import PROFILES, SERVICES
 HELP = "start the pipeline's services as separate processes and watch them"
 SECURE_LOCAL_PORT = 7447  # a side's own router, when it links to another (if free)
 DEFAULT_TIMEOUT = 120.0
+LOST = 3  # exit status of a run that lost gestures or sensor frames (its summary says which)
 ALIVE_QUERY_S = 2.0  # how long the services already on the bus have to answer
 
 
@@ -178,7 +179,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = (
         "Every service dies with `up`, however `up` ends (SIGKILL too). A second `up` for a "
         "robot whose services are on the bus already says so in one line and exits 2: stop the "
-        "first, or give the second another --robot."
+        "first, or give the second another --robot. Exit status: 0 done; 1 a failure or a "
+        "timeout; 2 bad input (a damaged recording, a second up); 3 done, but the run lost "
+        "gestures (cut: their frames were lost) or sensor frames (dropped as stale), as its "
+        "summary says."
     )
 
 
@@ -430,6 +434,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         if not side.exited():
             lines.emit(f"pipeline up: {', '.join(side.services)} on robot {side.config.robot!r}")
         ending = await watch(side, pipeline, lines, timeout, finite, live=not args.no_live)
+        await pipeline.last_health()  # what was dropped since the last report counts too
     finally:
         pipeline.stop()
         codes = await side.stop()
@@ -443,10 +448,17 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         lines.emit(f"services that did not stop cleanly: {failed}")
         return 1
     end = pipeline.stream_end
-    if ending.ok and end is not None and end.damage:
-        # the readable part was played and described above; what was lost, as analyse says it
-        raise InputError(end.damage)
-    return 0 if ending.ok else 1
+    return exit_status(ending, end.damage if end is not None else "", pipeline.losses())
+
+
+def exit_status(ending: Ending, damage: str, lost: list[str]) -> int:
+    """0, or 1 (a failure, a timeout), InputError (2: a damaged source), or LOST (the run lost
+    gestures or sensor frames, which the summary said)."""
+    if not ending.ok:
+        return 1
+    if damage:  # the readable part was played and described; what was lost, as analyse says it
+        raise InputError(damage)
+    return LOST if lost else 0
 
 
 async def already_up(side: Deployment, bus: Bus) -> list[str]:

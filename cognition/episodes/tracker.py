@@ -110,6 +110,7 @@ class Cancelled(Generic[R]):
     start_stamp: int
     ref: R
     reason: str = ""  # one line: why the gesture was withdrawn
+    cut: bool = False  # it was a gesture, but its frames are gone: a loss, not a withdrawal
 
 
 Event = Started[R] | Belief[R] | Ended[R] | Cancelled[R]
@@ -249,10 +250,10 @@ class GestureTracker(Generic[R]):
         reason = outcome.reason if outcome is not None else "the stream ended"
         return [self._cancel(reason)]
 
-    def _cancel(self, reason: str) -> Cancelled[R]:
+    def _cancel(self, reason: str, *, cut: bool = False) -> Cancelled[R]:
         self.in_gesture = False
         last = self.buffer[-1]
-        return Cancelled(self.segment_id, last.number, self._start_stamp, last.ref, reason)
+        return Cancelled(self.segment_id, last.number, self._start_stamp, last.ref, reason, cut)
 
     def _since(self, start: int, stop: int | None = None) -> list[_Frame[R]]:
         return [f for f in self.buffer if f.t >= start and (stop is None or f.t < stop)]
@@ -286,7 +287,7 @@ class GestureTracker(Generic[R]):
     def _end(self, segment: Segment) -> list[Event[R]]:
         frames = self._since(segment.start, segment.stop)
         if not frames:
-            return [self._cancel("its frames are no longer buffered")]
+            return [self._cancel("its frames are no longer buffered", cut=True)]
         n = segment.stop - segment.start
         if segment.start == self._results_from and len(frames) == n <= len(self._results):
             result = self._results[n - 1]  # over exactly the gesture's frames already
