@@ -19,6 +19,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from beyond_self.cognition.episodes import GestureReport
+from beyond_self.fleet_tally import FleetTally
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.delivery import FRAMES, RELIABLE
@@ -60,6 +61,7 @@ class PipelineMonitor:
         *,
         name: str | None = None,
         clock: Clock | None = None,
+        robots: list[str] | None = None,
     ) -> None:
         self.bus = bus
         self.name = name
@@ -91,12 +93,17 @@ class PipelineMonitor:
         self.duplicates = 0  # results received again (and not shown again)
         self.cut: dict[int, str] = {}  # gestures cancelled because their frames were lost: why
         self.stale: dict[tuple[str, int], int] = {}  # (service, restarts): frames dropped stale
+        # a fleet workstation: the robots it serves (their patterns), counted apart
+        self.fleet = FleetTally(bus, robots) if robots else None
         self._tasks: list[asyncio.Task[None]] = []
 
     @classmethod
     def of(cls, side: Deployment, bus: Bus, emit: Callable[[str], None]) -> PipelineMonitor:
-        """The watcher of deployment `side`: a consumer under its name, on its clock."""
-        return cls(bus, emit, name=side.watcher, clock=Clock(side.clock))
+        """The watcher of deployment `side`: a consumer under its name, on its clock; a fleet
+        workstation's also counts the gestures of the robots it serves."""
+        config = side.config
+        robots = [p for p in (config.robots, config.standby) if p is not None]
+        return cls(bus, emit, name=side.watcher, clock=Clock(side.clock), robots=robots)
 
     def start(self) -> None:
         keys = self.bus.keys
@@ -120,6 +127,8 @@ class PipelineMonitor:
             sub = self.bus.subscribe(key, cls, delivery)
             work = consume(sub, handler, self._failed, before=self._seen, accept=self._fresh)
             self._tasks.append(loop.create_task(work))
+        if self.fleet is not None:
+            self.fleet.start()
         if self.name is not None:
             self.ledgers.announce(self.bus)
             self._tasks.append(loop.create_task(self._tell_handled()))
@@ -160,6 +169,8 @@ class PipelineMonitor:
     def stop(self) -> None:
         for task in self._tasks:
             task.cancel()
+        if self.fleet is not None:
+            self.fleet.stop()
 
     def _flush(self) -> None:
         for line in self.report.release():
@@ -244,6 +255,8 @@ class PipelineMonitor:
             return
         for reply in replies:
             self.on_health(reply.message)
+        if self.fleet is not None:
+            await self.fleet.last_health(timeout)
 
     # -- completion ----------------------------------------------------------------------
 
@@ -278,17 +291,20 @@ class PipelineMonitor:
     def losses(self) -> list[str]:
         """What the run lost, one phrase each: gestures cut (their frames were lost: they cannot
         be described) and sensor frames dropped as stale; empty when nothing was."""
+        cut = [(f"gesture {n}", self.cut[n]) for n in sorted(self.cut)]
+        stale: dict[str, int] = {}
+        for (service, _), count in self.stale.items():
+            stale[service] = stale.get(service, 0) + count
+        if self.fleet is not None:
+            cut += self.fleet.cut()
+            stale.update(self.fleet.stale())
         lost = []
-        if self.cut:
-            why = "; ".join(f"gesture {n}: {self.cut[n] or 'no reason given'}"
-                            for n in sorted(self.cut))  # fmt: skip
-            lost.append(f"{len(self.cut)} cut (frames lost: {why})")
-        if stale := sum(self.stale.values()):
-            by: dict[str, int] = {}
-            for (service, _), count in self.stale.items():
-                by[service] = by.get(service, 0) + count
-            who = ", ".join(f"{n} {c}" for n, c in sorted(by.items()))
-            lost.append(f"{stale} sensor frame(s) dropped as stale ({who})")
+        if cut:
+            why = "; ".join(f"{what}: {reason or 'no reason given'}" for what, reason in cut)
+            lost.append(f"{len(cut)} cut (frames lost: {why})")
+        if total := sum(stale.values()):
+            who = ", ".join(f"{n} {c}" for n, c in sorted(stale.items()) if c)
+            lost.append(f"{total} sensor frame(s) dropped as stale ({who})")
         return lost
 
     def summary(self) -> str:
@@ -301,11 +317,19 @@ class PipelineMonitor:
         gestures = [g for g in self.report.gestures.values() if g.started is not None]
         described = sum(1 for g in gestures if g.description)
         total = len(gestures) + len(self.cut)
+        robots = ""
+        if self.fleet is not None:  # a fleet workstation: its robots' gestures, not its own
+            fleet_described, fleet_total = self.fleet.counts()
+            described, total = described + fleet_described, total + fleet_total
+            robots = f" ({self.fleet.per_robot() or 'no robot showed one'})"
         lost = "".join(f", {what}" for what in self.losses())
+        # a replay's own segmenter describes every frame; one elsewhere (a fleet's workstation)
+        # keeps to the stream as it arrives, not knowing it is a recording's
+        pace = "the replay, as for a live camera" if self.clock.is_recording else "the live camera"
         skipped = (
             f"; {self.frames_skipped} of {self.frames_described + self.frames_skipped} camera "
-            "frames not described, to keep up with the live camera (every gesture used them all)"
+            f"frames not described, to keep up with {pace} (every gesture used them all)"
             if self.frames_skipped
             else ""
         )
-        return f"{source}{described} of {total} gesture(s) described{lost}{skipped}"
+        return f"{source}{described} of {total} gesture(s) described{robots}{lost}{skipped}"

@@ -343,16 +343,27 @@ async def test_one_set_of_services_serves_a_fleet_and_its_replay(tmp_path: Path)
         env={"BEYOND_LOG_FORMAT": "text", LEAVE_ENV: "0.5"},
     )
     fleet = tmp_path / "fleet.mcap"
+    counted = PipelineMonitor.of(workstation, await workstation.open(), lambda _line: None)
     try:
+        counted.start()  # what the workstation's `beyond up` says at the end
         await workstation.start()
         live = await play_robots(base, {r: RECORDINGS / f for r, f in ROBOTS.items()}, fleet)
         first = time.monotonic() - started
+        said = {r: sum(1 for line in live[r] if line.endswith('"')) for r in ROBOTS}
+        deadline = time.monotonic() + 30
+        while counted.fleet is not None and counted.fleet.counts()[0] < sum(said.values()):
+            assert time.monotonic() < deadline, counted.summary()
+            await asyncio.sleep(0.1)
+        each = ", ".join(f"{r} {n} of {n}" for r, n in sorted(said.items()))
+        n = sum(said.values())
+        assert counted.summary() == f"{n} of {n} gesture(s) described ({each})"
         bus = await workstation.open()
         for robot in ROBOTS:  # their sources have left: the runs are dropped
             await bus.wait_gone(f"beyond/{robot}/alive/gestures", timeout=30)
         replayed = await play_robots(base, dict.fromkeys(ROBOTS, fleet))
         assert not workstation.exited()
     finally:
+        counted.stop()
         codes = await workstation.stop()
     took = time.monotonic() - started
     print(f"{len(ROBOTS)} robots on one workstation: {first:.1f} s; and the replay: {took:.1f} s")

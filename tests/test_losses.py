@@ -15,6 +15,7 @@ from beyond_self.cognition.gestures import synthesize_continuous
 from beyond_self.commands import up
 from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.deployment import Ending
 from beyond_self.services.registry import service_class
@@ -26,7 +27,8 @@ def header(seq: int, stamp: int, source: str = "test") -> s.Header:
 
 def segment(seq: int, event: str, segment_id: int, **more: object) -> s.GestureSegment:
     return s.GestureSegment(
-        header=header(seq, 1000 + seq, "gestures"), event=event,  # type: ignore[arg-type]
+        header=s.GestureSegment.original_header("gestures", seq, 1000 + seq),
+        event=event,  # type: ignore[arg-type]
         segment_id=segment_id, frame=10 * seq, start_stamp=1000,
         end_stamp=1000 + seq if event == "end" else None, **more,  # type: ignore[arg-type]
     )  # fmt: skip
@@ -34,8 +36,9 @@ def segment(seq: int, event: str, segment_id: int, **more: object) -> s.GestureS
 
 def health(service: str, stale: int, restarts: int) -> s.ServiceHealth:
     return s.ServiceHealth(
-        header=header(0, 1, service), service=service, uptime_s=1.0, messages_in=1,
-        messages_out=1, dropped=0, malformed=0, errors=0, restarts=restarts, stale=stale,
+        header=s.ServiceHealth.original_header(service, 0, 1), service=service, uptime_s=1.0,
+        messages_in=1, messages_out=1, dropped=0, malformed=0, errors=0, restarts=restarts,
+        stale=stale,
     )  # fmt: skip
 
 
@@ -50,7 +53,8 @@ def described(monitor: PipelineMonitor, segment_id: int, seq: int) -> None:
     monitor.on_segment(segment(seq + 1, "end", segment_id))
     monitor.on_description(
         s.Description(
-            header=header(seq, 1000 + seq, "describer"), segment_id=segment_id,
+            header=s.Description.original_header("describer", seq, 1000 + seq),
+            segment_id=segment_id,
             sentences=[s.ScoredSentence(text="he taps the box", score=0.0)],
             evidence=s.Evidence(), final=True,
         )
@@ -166,3 +170,66 @@ async def test_the_streamers_cut_reaches_the_summary(monkeypatch: pytest.MonkeyP
         "1 sensor frame(s) dropped as stale (gestures 1)",
     ]
     assert "0 of 1 gesture(s) described, 1 cut" in monitor.summary()
+
+
+async def test_a_fleet_workstation_counts_the_gestures_of_the_robots_it_serves() -> None:
+    """Issue 42: a fleet workstation's summary said "0 of 0 gesture(s) described" though it
+    described them: its own name has no gestures, its robots' keys do. A message received
+    twice (from a cache) counts once; a robot outside the pattern does not count."""
+    config = private_config()
+    with Bus.open(config.with_(robot="ws-1")) as ws, Bus.open(config) as robots:
+        monitor = PipelineMonitor(ws, lambda _line: None, robots=["lab-$*"])
+        monitor.start()
+        pubs = {}
+        for robot in ("lab-1", "lab-2", "other"):
+            keys = robots.for_robot(robot).keys
+            pubs[robot] = (
+                robots.publisher(keys.gesture_segment, s.GestureSegment),
+                robots.publisher(keys.description, s.Description),
+            )
+        for robot in ("lab-1", "lab-2"):  # none subscribes to "other": the pattern is not it
+            await pubs[robot][0].wait_matching(timeout=10)
+        plan = {"lab-1": [1, 2], "lab-2": [1], "other": [1, 2, 3]}
+        for robot, ids in plan.items():
+            segments, descriptions = pubs[robot]
+            for n in ids:
+                for _ in range(2):  # again, as a cache would
+                    segments.put(segment(n, "start", n))
+                    segments.put(segment(n + 1, "end", n))
+                if (robot, n) != ("lab-1", 2):  # its description has not come
+                    descriptions.put(
+                        s.Description(
+                            header=s.Description.original_header("describer", n, 2000 + n),
+                            segment_id=n,
+                            sentences=[s.ScoredSentence(text="he taps it", score=0.0)],
+                            evidence=s.Evidence(), final=True,
+                        )
+                    )  # fmt: skip
+        pubs["lab-2"][0].put(segment(7, "start", 2))
+        pubs["lab-2"][0].put(segment(8, "cancel", 2, reason="its frames are gone", cut=True))
+        fleet = monitor.fleet
+        assert fleet is not None
+        await until(lambda: fleet.counts() == (2, 4), f"the tally: {fleet.robots}")
+        monitor.stop()
+    assert monitor.summary() == (
+        "2 of 4 gesture(s) described (lab-1 1 of 2, lab-2 1 of 2), 1 cut (frames lost: "
+        "lab-2 gesture 2: its frames are gone)"
+    )
+    assert set(fleet.robots) == {"lab-1", "lab-2"}
+
+
+def test_frames_a_replay_skipped_are_not_said_to_be_a_live_cameras(
+    monitor: PipelineMonitor,
+) -> None:
+    """A fleet robot replaying a recording: the workstation's segmenter skips frames as for a
+    live camera; the summary says so, and not that the camera was live."""
+    monitor.frames_described, monitor.frames_skipped = 90, 10
+    assert monitor.summary().endswith(
+        "; 10 of 100 camera frames not described, to keep up with the live camera (every "
+        "gesture used them all)"
+    )
+    monitor.clock = Clock("recording")
+    assert monitor.summary().endswith(
+        "; 10 of 100 camera frames not described, to keep up with the replay, as for a live "
+        "camera (every gesture used them all)"
+    )
