@@ -89,3 +89,32 @@ def test_the_live_view_shows_restarts() -> None:
     gestures = next(r for r in rows if "gestures" in r)
     assert gestures[header.index("restarts")] == "3"
     assert gestures[header.index("in")] == "5"
+
+
+async def test_up_says_which_skipped_service_it_waits_for_until_it_comes() -> None:
+    """Issue 42: `up --skip speech` with no speech service anywhere waited with no hint."""
+    import asyncio
+
+    from beyond_self.runtime.bus import Bus
+
+    args = parsed("--skip", "speech,objects", "--wait-for", "reasoner")
+    awaited = up.awaited_elsewhere(args)
+    assert awaited == {"reasoner": "--wait-for", "speech": "--skip", "objects": "--skip"}
+    config = private_config()
+    said: list[str] = []
+    with Bus.open(config) as bus, Bus.open(config) as elsewhere:
+        hints = asyncio.create_task(
+            up.say_what_is_awaited(bus, {"speech": "--skip"}, period=0.05, say=said.append)
+        )
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + 20
+        while not said:
+            assert loop.time() < deadline, "no hint"
+            await asyncio.sleep(0.02)
+        assert said[0] == (
+            "waiting for speech (--skip: it runs elsewhere); start it on this bus, e.g. "
+            f"`beyond service speech --robot {config.robot}`"
+        )
+        elsewhere.declare_token(elsewhere.keys.alive("speech"))
+        await asyncio.wait_for(hints, 20)  # it has come: the hints end
+    assert set(said) == {said[0]}

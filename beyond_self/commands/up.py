@@ -57,6 +57,7 @@ import asyncio
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +85,7 @@ SECURE_LOCAL_PORT = 7447  # a side's own router, when it links to another (if fr
 DEFAULT_TIMEOUT = 120.0
 LOST = 3  # exit status of a run that lost gestures or sensor frames (its summary says which)
 ALIVE_QUERY_S = 2.0  # how long the services already on the bus have to answer
+HINT_S = 5.0  # how often `up` says which service it still waits for, and how to start it
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -423,6 +425,8 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             "beyond up?); stop it first, or give this one another --robot"
         )
     pipeline = PipelineMonitor.of(side, bus, lines.emit)
+    loop = asyncio.get_running_loop()
+    hints: list[asyncio.Task[None]] = []
     try:
         if args.foxglove:  # imported only when asked for: the SDK is not free to load
             from beyond_self.runtime.foxglove_bridge import start_in_background
@@ -433,9 +437,12 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         await side.start()
         if not side.exited():
             lines.emit(f"pipeline up: {', '.join(side.services)} on robot {side.config.robot!r}")
+        hints.append(loop.create_task(say_what_is_awaited(bus, awaited_elsewhere(args))))
         ending = await watch(side, pipeline, lines, timeout, finite, live=not args.no_live)
         await pipeline.last_health()  # what was dropped since the last report counts too
     finally:
+        for task in hints:
+            task.cancel()
         pipeline.stop()
         codes = await side.stop()
     lines.emit(pipeline.summary())
@@ -459,6 +466,36 @@ def exit_status(ending: Ending, damage: str, lost: list[str]) -> int:
     if damage:  # the readable part was played and described; what was lost, as analyse says it
         raise InputError(damage)
     return LOST if lost else 0
+
+
+def awaited_elsewhere(args: argparse.Namespace) -> dict[str, str]:
+    """The services this side's source waits for that run elsewhere: name -> the option that
+    says so (--skip, --wait-for)."""
+    skipped = [n for n in service_names(args.skip) if n in PROFILES[args.profile]]
+    named = {n: "--wait-for" for n in wait_list(args.wait_for)}
+    return named | dict.fromkeys(skipped, "--skip")
+
+
+async def say_what_is_awaited(
+    bus: Bus,
+    awaited: dict[str, str],
+    period: float = HINT_S,
+    say: Callable[[str], None] | None = None,
+) -> None:
+    """Every `period` s, until each service of `awaited` is on the bus, say on stderr which are
+    not and how to start one: a side waiting on a service nobody started waits in silence."""
+    say = say or (lambda text: print(f"[up] {text}", file=sys.stderr, flush=True))
+    robot = bus.keys.robot
+    while awaited:
+        await asyncio.sleep(period)  # a timer for the terminal: nothing waits on it
+        found = await bus.live_tokens(bus.keys.alive("*"), timeout=ALIVE_QUERY_S)
+        alive = {key.rsplit("/", 1)[-1] for key in found}
+        awaited = {n: why for n, why in awaited.items() if n not in alive}
+        for name, why in awaited.items():
+            say(
+                f"waiting for {name} ({why}: it runs elsewhere); start it on this bus, e.g. "
+                f"`beyond service {name} --robot {robot}`"
+            )
 
 
 async def already_up(side: Deployment, bus: Bus) -> list[str]:
