@@ -12,8 +12,6 @@ it only from its main thread; a child started from another thread has the pidfd 
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import ctypes.util
 import os
 import select
 import signal
@@ -66,6 +64,8 @@ def _pdeathsig(sig: signal.Signals) -> bool:
     """Ask the kernel for `sig` when our parent (thread) ends; False where there is no prctl."""
     if not sys.platform.startswith("linux"):
         return False
+    import ctypes.util  # here: every `beyond` command binds, few have a supervisor
+
     libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
     return bool(libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0)
 
