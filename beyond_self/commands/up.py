@@ -501,11 +501,18 @@ async def say_what_is_awaited(
 async def already_up(side: Deployment, bus: Bus) -> list[str]:
     """The services (and monitor) of this side already alive on the bus for its robot: those of
     another `beyond up`. Two sets of the same services on one robot's keys would each take the
-    other's messages for their own."""
+    other's messages for their own. Alone on the bus (no peer, no router), nothing is; else
+    each token is waited for ALIVE_QUERY_S at most: a peer's session learns the others' tokens
+    as it meets them, after it has met the rendezvous peer (`up`'s own session)."""
+    info = bus.session.info
+    if not list(info.peers_zid()) and not list(info.routers_zid()):
+        return []
     names = [*side.services, *([side.watcher] if side.watcher else [])]
-    found = await bus.live_tokens(bus.keys.alive("*"), timeout=ALIVE_QUERY_S)
-    alive = {key.rsplit("/", 1)[-1] for key in found}
-    return [name for name in names if name in alive]
+    seen = await asyncio.gather(
+        *(bus.wait_alive(bus.keys.alive(n), timeout=ALIVE_QUERY_S) for n in names),
+        return_exceptions=True,
+    )
+    return [name for name, got in zip(names, seen, strict=True) if isinstance(got, set)]
 
 
 async def watch(
