@@ -13,6 +13,7 @@ from busutil_net import private_config
 import beyond_self.schemas as s
 from beyond_self.cognition.gestures import synthesize_continuous
 from beyond_self.commands import up
+from beyond_self.core.errors import InputError
 from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.clock import Clock
@@ -104,7 +105,7 @@ def test_up_exits_3_on_a_loss_and_damage_or_failure_come_first() -> None:
     assert up.exit_status(Ending("done"), damage="", lost=["1 cut"]) == up.LOST == 3
     assert up.exit_status(Ending("stopped"), damage="", lost=["1 cut"]) == 3
     assert up.exit_status(Ending("timeout"), damage="", lost=["1 cut"]) == 1
-    with pytest.raises(up.InputError, match="2 chunks lost"):
+    with pytest.raises(InputError, match="2 chunks lost"):
         up.exit_status(Ending("done"), damage="2 chunks lost", lost=["1 cut"])
 
 
@@ -188,7 +189,8 @@ async def test_a_fleet_workstation_counts_the_gestures_of_the_robots_it_serves()
                 robots.publisher(keys.description, s.Description),
             )
         for robot in ("lab-1", "lab-2"):  # none subscribes to "other": the pattern is not it
-            await pubs[robot][0].wait_matching(timeout=10)
+            for pub in pubs[robot]:
+                await pub.wait_matching(timeout=10)
         plan = {"lab-1": [1, 2], "lab-2": [1], "other": [1, 2, 3]}
         for robot, ids in plan.items():
             segments, descriptions = pubs[robot]
