@@ -6,6 +6,8 @@ from __future__ import annotations
 import asyncio
 import os
 import signal
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -39,7 +41,7 @@ def descendants(pid: int) -> list[int]:
 
 @pytest.mark.slow
 async def test_up_killed_mid_gesture_leaves_no_service_and_a_second_up_exits_2(
-    tmp_path: Path,
+    tmp_path: Path, show: Callable[[str], None]
 ) -> None:
     config = private_config()
     env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
@@ -63,9 +65,12 @@ async def test_up_killed_mid_gesture_leaves_no_service_and_a_second_up_exits_2(
             children = descendants(up.pid)
             assert len(children) >= len(services)  # and the object segmenter's describer
             up.send_signal(signal.SIGKILL)
+            killed = time.monotonic()
             await up.wait()
             left = wait_gone(children, 2.0)
             assert left == [], [Path(f"/proc/{p}/cmdline").read_bytes() for p in left]
+            took = time.monotonic() - killed
+            show(f"{len(children)} processes of up gone {took * 1000:.0f} ms after its SIGKILL")
         finally:
             if up.returncode is None:
                 up.kill()
