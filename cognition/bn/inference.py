@@ -47,7 +47,7 @@ MAX_QUERY_WORK = 2**21
 
 @dataclass(frozen=True)
 class Posterior:
-    """P(variables | evidence): `table[i, j, ...]` for values[0][i], values[1][j], ..."""
+    """P(variables | evidence): `table[i, j, ...]` for `values[0][i]`, `values[1][j]`, ..."""
 
     variables: tuple[str, ...]
     values: tuple[tuple[str, ...], ...]
