@@ -1,16 +1,11 @@
 """The object segmenter's per-frame description, in a process of its own.
 
-Why a process: describing a frame (the table estimated from it, every object measured and
-labelled) is the costliest thing the object segmenter does, and no gesture result waits for it.
-On a thread it shared the interpreter lock with the gestures' work, and the cores at the same
-priority: on a loaded machine the frame that completes a gesture waited behind it. In a process
-of its own, at a lower priority when the source is live (`niceness`), the operating system runs
-the gestures' work first and the descriptions with what is left; the frames nothing was left for
-are the ones a live segmenter skips. A replay's describer keeps its priority: every frame is
-described there, and the player waits for it.
-
-Crash-only: the worker watches its parent and leaves when it is gone, so a SIGKILLed segmenter
-leaves no process behind; one started again starts its own.
+Describing a frame (the table estimated from it, every object measured and labelled) is the
+object segmenter's costliest work, and no gesture result waits for it. On a thread it shared the
+GIL with the gestures' work, so the frame that completes a gesture waited behind it; in a process
+of its own, at a lower priority when the source is live, the system runs the gestures' work first
+and a live segmenter skips the frames nothing was left for. A replay's describer keeps its
+priority: every frame is described. The worker leaves when its parent is gone (crash-only).
 """
 
 from __future__ import annotations
