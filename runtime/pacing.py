@@ -85,7 +85,7 @@ class Pacer:
         about it, and what was sent before it came back is waited for only as far as it gets
         it back (a publisher's cache): the player waits on the instance alive now, for what is
         sent from now on. Where a dead one's handling stopped is not a place anyone will pass
-        again (a restarted gesture streamer without history used to stall the source there)."""
+        again: a restarted consumer without history would stall the source there."""
         self._gone_since.pop(name, None)
         if name in self.handled:
             self.handled[name] = {}
