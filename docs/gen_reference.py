@@ -350,9 +350,13 @@ def results_files() -> list[Path]:
 
 
 def performance_page() -> str:
-    """The performance page, from the results files the bench scripts' JSON lines were kept in."""
+    """The performance page: its notes (docs/performance.md), then tables made from the results
+    files the bench scripts' JSON lines were kept in."""
+    notes = (ROOT / "docs" / "performance.md").read_text(encoding="utf-8")
     lines = [
-        "# Performance",
+        notes.rstrip(),
+        "",
+        "## The figures",
         "",
         "Every figure below is read from `bench/results/*.json` when the site is built. Each file",
         "keeps the one line of JSON a `bench/` script printed (`result`), with the machine, the",
