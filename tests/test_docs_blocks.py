@@ -101,6 +101,20 @@ def test_the_tutorial_service_is_the_runtime_readme_example() -> None:
     assert [b.code for b in timer] == [example.group(1)]
 
 
+def test_the_tutorial_shows_the_demo_lines_the_readme_promises() -> None:
+    """tests/test_package.py and tests/test_pipeline_up.py check the README's lines against real
+    runs; the tutorial's demo block (not run here: the same run, 20 s) must show the same."""
+    readme = blocks((REPO / "README.md").read_text(encoding="utf-8"))
+    tutorial = blocks((REPO / "docs" / "tutorial.md").read_text(encoding="utf-8"))
+    (promised,) = [b.code for b in readme if b.lang == "text" and "\ngesture 2: " in b.code]
+    (demo,) = [b for b in tutorial if b.code == "beyond demo --no-live\n"]
+    shown = (demo.output or "").splitlines()
+    assert [line for line in shown if line.startswith("gesture ")] == [
+        line for line in promised.splitlines() if line.startswith("gesture ")
+    ]
+    assert len(shown) > 14
+
+
 def test_the_block_reader_finds_markers_outputs_and_indented_blocks() -> None:
     page = (
         "<!-- not run: needs a robot -->\n```sh\nbeyond up\n```\n\n"
