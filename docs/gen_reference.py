@@ -24,6 +24,7 @@ if str(ROOT) not in sys.path:  # a fresh clone without an install: the package f
 
 from beyond_self import cli  # noqa: E402
 from beyond_self.commands import schemas_cmd  # noqa: E402
+from beyond_self.runtime import config  # noqa: E402
 from beyond_self.schemas import codec, keys  # noqa: E402
 from beyond_self.schemas.base import Message  # noqa: E402
 
@@ -122,6 +123,17 @@ def cli_reference() -> str:
         if helps.get(name):
             section[1:1] = ["", _cell(helps[name] or "") + "."]
         lines += section
+    lines += [
+        "## Environment variables {#environment}",
+        "",
+        "The bus options' defaults, read by every command and service (`runtime.config.ENV_VARS`);",
+        "an option given on the command line wins.",
+        "",
+        "| variable | meaning |",
+        "|---|---|",
+        *(f"| `{name}` | {_cell(text)} |" for name, text in config.ENV_VARS.items()),
+        "",
+    ]
     return "\n".join(lines) + "\n"
 
 

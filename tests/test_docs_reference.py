@@ -65,6 +65,14 @@ def test_every_command_subcommand_and_option_is_in_the_cli_reference(gen: dict[s
                     assert f"`{action.metavar or action.dest}`" in section, (path, action.dest)
 
 
+def test_every_environment_variable_is_in_the_cli_reference(gen: dict[str, Any]) -> None:
+    from beyond_self.runtime.config import ENV_VARS
+
+    text = _section(gen["cli_reference"](), "## Environment variables")
+    for name in ENV_VARS:
+        assert f"| `{name}` |" in text, name
+
+
 def test_removing_an_option_from_a_parser_removes_it_from_the_reference(
     gen: dict[str, Any], monkeypatch: pytest.MonkeyPatch
 ) -> None:
