@@ -38,13 +38,12 @@ def _cell(text: str) -> str:
 def _flags(action: argparse.Action) -> str:
     if not action.option_strings:
         return f"`{action.metavar or action.dest}`"
-    names = ", ".join(f"`{o}`" for o in action.option_strings)
     if action.nargs == 0:
-        return names
+        return ", ".join(f"`{o}`" for o in action.option_strings)
     metavar = action.metavar or action.dest.upper()
     if isinstance(metavar, tuple):
         metavar = " ".join(metavar)
-    return f"{names} `{metavar}`"
+    return ", ".join(f"`{o} {metavar}`" for o in action.option_strings)
 
 
 def _default(action: argparse.Action) -> str:
