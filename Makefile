@@ -1,6 +1,7 @@
 # The README's two commands: `make demo` runs the full pipeline, `make test` runs lint, types and tests.
 # Both create .venv on first use and reinstall only when pyproject.toml changes; the install
-# holds every extra (the camera's pose model too), so `make test` runs every test.
+# holds every extra (the camera's pose model, the docs site's tools too), so `make test` runs
+# every test and builds the docs.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -10,18 +11,18 @@ STAMP := $(VENV)/.installed
 # test subprocess compiled every module it imported again, 0.3 CPU-s a process.
 RUN := env -u PYTHONDONTWRITEBYTECODE
 
-.PHONY: demo test lint typecheck pytest bench clean
+.PHONY: demo test lint typecheck docs pytest bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,camera]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,camera,docs]'
 	touch $(STAMP)
 
 demo: $(STAMP)
 	$(RUN) $(BIN)/beyond demo
 
-test: $(STAMP) lint typecheck pytest
+test: $(STAMP) lint typecheck docs pytest
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -29,6 +30,12 @@ lint: $(STAMP)
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
+
+# The site under docs/ (mkdocs.yml), strict: a broken link, a page missing from the files or a
+# warning of any plug-in fails the build. The reference pages are generated from the code. The
+# two variables silence a banner some plug-ins print about a future MkDocs 2.
+docs: $(STAMP)
+	$(RUN) NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/mkdocs build --strict --quiet --site-dir site
 
 # Three workers on two cores (much of the suite waits on services starting, podman and paced
 # replays), a test file at a time in the order tests/conftest.py gives: the longest files first.
@@ -39,4 +46,4 @@ bench: $(STAMP)
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) .mypy_cache .pytest_cache .ruff_cache
+	rm -rf $(VENV) .mypy_cache .pytest_cache .ruff_cache site

@@ -2,13 +2,9 @@
 
 Each command lives in its own module under `beyond_self.commands`, imported only when that
 command runs: the science stack (pgmpy, hmmlearn) and the bus (zenoh) are slow to import, and a
-service or a quick `beyond inspect` should not pay for what it does not use.
-
-A command module exposes two functions:
-    add_arguments(parser: argparse.ArgumentParser) -> None
-    run(args: argparse.Namespace) -> int
-and may expose `HELP` (one line). Errors meant for the user are `core.errors.InputError`:
-the dispatcher prints them as one line on stderr and exits with status 2.
+service or a quick `beyond inspect` should not pay for what it does not use. A command module
+exposes `add_arguments(parser)`, `run(args) -> int` and may expose `HELP` (one line). Errors
+meant for the user are `core.errors.InputError`: one line on stderr, exit status 2.
 """
 
 from __future__ import annotations

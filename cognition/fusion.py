@@ -1,16 +1,11 @@
-"""Fusing gesture evidence with the Affordance–Words network: P_comb of SPEC.md.
+"""Fusing gesture evidence with the Affordance–Words network: P_comb.
 
-The robot never observes the human's action directly; a gesture recogniser gives P_HMM(A | G).
-SPEC.md defines the combination in two cases:
-
-1. A among the inferred variables:  P_comb(X_inf | X_obs, G) ∝ P_BN(X_inf | X_obs) · P_HMM(A | G)
-2. A latent:  P_comb(X_inf | X_obs, G) = Σ_A P_HMM(A | G) · P_BN(X_inf, A | X_obs)   (normalised)
-
-Both equal entering P_HMM(A | G) as soft (virtual) evidence on A: with equal priors P_HMM(A | G)
-is proportional to the likelihood L(G | A), which is exactly a virtual-evidence vector. The
-formulas are implemented literally here (`method="formula"`) because they are the definition, and
-the soft-evidence route (`method="soft"`, one compiled query, the default) is what runs in
-services; a property test holds them equal to 1e-12.
+The robot never observes the person's action; a gesture recogniser gives P_HMM(A | G). The
+article combines them in two cases: with A among the inferred variables, P_comb ∝ P_BN(X_inf |
+X_obs) · P_HMM(A | G); with A latent, P_comb = Σ_A P_HMM(A | G) · P_BN(X_inf, A | X_obs). Both
+equal entering P_HMM(A | G) as soft (virtual) evidence on A. The formulas are implemented
+literally (`method="formula"`, the definition) and the soft-evidence route (`method="soft"`, one
+compiled query) is what services run; a property test holds them equal to 1e-12.
 """
 
 from __future__ import annotations

@@ -1,19 +1,10 @@
 """What the article publishes, to check a re-run against, and how a re-run is compared with it.
 
-Sources, all in the public repository gsaponaro/tcds-gestures, folder `article/2019-02_ieee/`
-(the final IEEE version):
-
-- the three 10-best tables, sentences and scores as printed (`results.tex`: Table II and the
-  tables of Fig. 7a/7b), and the four sentences of Fig. 8 (the `\\graspBoxGreenOne` ... macros);
-- the bars of Fig. 4a/4b, Fig. 6 and Fig. 7a/7b, read from the article's own figure files
-  (`figures/*.eps`, written by MATLAB: each bar is a rectangle whose end sits at the value in
-  axis coordinates, printed to 1/1000 of a point, i.e. to better than 5e-6 of the axis), rounded
-  here to 5 decimals. Fig. 6 shows the words with |ΔP| > 0.02 (the threshold of the reference
-  `main.m`), so its list of words is part of what it publishes.
-
-Scores are printed with 5 significant digits (MATLAB `num2str`), so a re-run that reproduces a
-table lies within 5e-6 of each score: the check allows `SCORE_TOLERANCE`. Bars read from the
-figures allow `BAR_TOLERANCE` (the reading to 5e-6 plus the rounding to 5 decimals).
+From gsaponaro/tcds-gestures, `article/2019-02_ieee/` (the final version): the three 10-best
+tables and the sentences of Fig. 8 as printed (`results.tex`), and the bars of Fig. 4, 6 and 7
+read from the article's own MATLAB `.eps` figures (each bar's end to better than 5e-6 of the
+axis), rounded to 5 decimals. Scores are printed with 5 significant digits, so a reproduced
+table lies within `SCORE_TOLERANCE` of each score; bars within `BAR_TOLERANCE`.
 """
 
 from __future__ import annotations

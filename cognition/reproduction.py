@@ -534,7 +534,8 @@ def _table(items: Sequence[ScoredSentence]) -> str:
     return "\n".join(lines)
 
 
-def _check_cell(check: Mapping[str, Any] | None) -> str:
+def check_cell(check: Mapping[str, Any] | None) -> str:
+    """A published figure checked under one unseen-column rule, as a table cell."""
     if check is None:
         return "—"
     mark = "**yes**" if check["reproduced"] else "no"
@@ -544,7 +545,8 @@ def _check_cell(check: Mapping[str, Any] | None) -> str:
     return f"{mark} ({what}max abs diff {check['max_abs_diff']:.1e})"
 
 
-def _needs(figure: Mapping[str, Any]) -> str:
+def needs_cell(figure: Mapping[str, Any]) -> str:
+    """Which unseen-column rule a published figure needs, as a table cell."""
     if "rules_differ_by" not in figure:
         return " or ".join(f"`{rule}`" for rule in figure["needs"]) or "neither"
     if figure["rules_differ_by"] < 1e-12:
@@ -572,8 +574,8 @@ def _published_section(rp: Mapping[str, Any], plots: Mapping[str, str]) -> list[
     for name, figure in rp["figures"].items():
         checks = figure["checks"]
         md.append(
-            f"| {name} | {_check_cell(checks.get(UNSEEN_COMPARED[0]))} | "
-            f"{_check_cell(checks.get(UNSEEN_COMPARED[1]))} | {_needs(figure)} |"
+            f"| {name} | {check_cell(checks.get(UNSEEN_COMPARED[0]))} | "
+            f"{check_cell(checks.get(UNSEEN_COMPARED[1]))} | {needs_cell(figure)} |"
         )
     md += [
         "",

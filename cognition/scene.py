@@ -1,37 +1,13 @@
 """A seeded synthetic scene: a person acting on objects on a table, seen by a body tracker and an
-overhead camera at once. The library behind `beyond simulate` (which only adds the bus messages
-and the MCAP file).
+overhead camera at once; the library behind `beyond simulate` (which adds the messages and file).
 
-Why it exists: the services (gesture streamer, object segmenter, reasoner) need recordings whose
-truth is known and whose two sensor streams agree, so that a replay exercises the whole pipeline
-the way a real session would. Both streams come from the generators the models were built on:
-the skeleton from `cognition.gestures.synthetic` (what the default gesture HMMs were trained on),
-the object's physics from `cognition.vision.tabletop.simulate_experiment` with the effects of
-`cognition.world` (what the clusters and the network were learned from).
-
-How the two streams are tied (times in seconds from the start of the recording; skeleton frame i
-at i / 30, camera frame n at n / camera_fps, one clock):
-- one continuous skeleton stream holds every gesture of the scene, with rests between them;
-- for gesture k the camera shows object k (scene item k's colour, shape and size). The hand
-  approaches it along the skeleton's own track: the right hand from the gesture's first frame to
-  its contact frame, resampled at the camera rate, is the experiment's `hand_track` (so contact in
-  the image happens at the skeleton's contact instant). Contact, the object's motion and the
-  hand leaving it follow the world's rules for that action and object;
-- the camera runs for the whole recording over one table and light. While the skeleton rests the
-  hand is off the table (not drawn): the camera shows the table and the object alone, which is
-  what a segmenter learns the table from. After the experiment the hand lingers, then withdraws
-  the way it came and leaves the view. Between gestures the object is swapped for the next one
-  `SWITCH_LEAD_S` before that gesture starts (or half-way through a shorter rest), or earlier
-  if the default gesture segmenter would start that gesture earlier (a hand that never settles
-  during a short rest): the object segmenter's window for a gesture, from `WINDOW_LEAD_S` before
-  the reported start to the reported end, opens on that gesture's object alone (`_blocks`).
-The hand is a flat skin-coloured blob in the image; what the depth sensor sees of the person
-(`SkeletonStream`) and the camera's geometry are tied only through the approach track, which is
-re-axed and translated so its last point touches the camera's object (see `kinect_to_table`).
-
-`check_scene` runs what the services run (segmenter, recogniser, `analyse_frames` on each
-gesture's camera window) on the two streams and compares with the truth; the tests and
-`beyond simulate --check` use it.
+The services need recordings whose truth is known and whose two sensor streams agree, built from
+the generators the models were built on: the skeleton from `cognition.gestures.synthetic`, the
+object's physics from `cognition.vision.tabletop` with `cognition.world`'s effects. On one clock,
+gesture k acts on object k, the hand in the image approaching along the skeleton's own track (so
+contact happens at the same instant in both); objects are swapped between gestures early enough
+that the object segmenter's window for each gesture opens on its object alone (`_blocks`).
+`check_scene` runs what the services run and compares with the truth.
 """
 
 from __future__ import annotations

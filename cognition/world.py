@@ -1,20 +1,11 @@
-"""How the simulated world responds to the robot's (or a human's) actions.
+"""How the simulated world responds to the robot's (or a person's) actions.
 
-One set of rules shared by everything synthetic: the robot-exploration data set the network learns
-from, the tabletop renderer that the object segmenter is tested on, and `beyond simulate`. Keeping
-them in one place is what makes the synthetic pipeline consistent end to end: the effect the
-renderer shows is the effect the network was trained to expect.
-
-The rules, in words (each continuous quantity gets multiplicative log-normal noise):
-- object speed: touch leaves the object inert; grasp lifts it at a moderate speed; tap pushes it,
-  a sphere rolls away fast, a box slides at a moderate speed; small objects move a bit faster and
-  big ones slower (same push, different mass).
-- hand speed: tap is a fast lateral stroke; grasp and touch are slow, careful approaches.
-- object–hand relative speed: grasp keeps the object in the hand (slow); touch leaves a still
-  object under a moving hand (medium); tap sends the object away from the hand (fast for a
-  rolling sphere, medium for a sliding box).
-- contact: grasp holds the object (long); tap and touch are brief (short).
-Colour has no effect on dynamics.
+One set of rules for everything synthetic (the network's exploration data set, the tabletop
+renderer, `beyond simulate`), so the effect the renderer shows is the effect the network was
+trained to expect. In words, with log-normal noise on each quantity: touch leaves the object
+inert, grasp lifts it at a moderate speed, tap sends a sphere rolling fast and a box sliding;
+small objects move a bit faster; tap is a fast stroke, grasp and touch careful approaches; grasp
+holds the object (long contact), tap and touch are brief. Colour has no effect on dynamics.
 """
 
 from __future__ import annotations

@@ -1,17 +1,11 @@
 """What went wrong in a service, counted and logged once: bad input never stops a service.
 
 A payload that does not decode is counted as malformed; an exception of a handler, a timer, a
-task, a queryable or the teardown is counted as an error. Each distinct problem is logged once
-per key (a flood of one bad message must not become a flood of log lines), every reason is cut
-to one bounded line (a hostile payload's error, a 5,000-joint frame's list of joint names, must
-not become a 95 KB log line that a reader chokes on), and the last one is kept for health
-reports.
-
-"Distinct" means what went wrong, not which message it happened to: reasons are told apart by
-their wording with every number taken out (`shape`), so "frame 363 stamped 1546... is not after
-the previous frame" and the same complaint about frame 364 are one problem, logged once, however
-many frames a restart or a damaged stream repeats it for (one restart used to log 366 lines).
-The ones not logged are counted (`repeats`) and their total is logged when the service stops.
+task, a queryable or the teardown as an error. Each distinct problem is logged once per key, cut
+to one bounded line (a hostile payload must not become a flood of log lines, nor a 95 KB one),
+and the last is kept for health. "Distinct" is what went wrong, not which message: reasons are
+compared with every number taken out (`shape`), so the same complaint about frames 363 and 364
+is one problem. The ones not logged are counted (`repeats`) and their total logged at the end.
 """
 
 from __future__ import annotations

@@ -1,41 +1,13 @@
 """The router's access rules, generated from what the services declare, never written by hand.
 
-Every service class states the streams it subscribes to and publishes and the queryables it
-serves (`subscribes`, `publishes`, `serves`: names from schemas/keys.py), and the Service base
-refuses at run time any key it did not declare, so these rules and the code cannot drift apart.
-From them, `access_control()` builds the block of a Zenoh router's configuration:
-
-- default deny; a subject is a certificate's common name (runtime/keystore.py), and every rule
-  of a subject names only the robots its certificate is bound to (`beyond/<robots>/...`, its
-  `Binding`): a robot's certificate speaks for that robot alone, a workstation's for the
-  robots it was granted (a pattern such as `lab-$*`), a service's for the deployment's robots;
-- a service may put only on its outputs (and its own health, Progress and Ledger), declare
-  subscribers only on its inputs (and everyone's Progress and Ledger) and receive only those,
-  serve only its queryables (and its health, its Progress and the ledgers, which every service
-  answers for: runtime.ledger), declare only its own liveliness token, and watch the others'
-  (ingest waits for its consumers). It hears of
-  every subscription and query, wildcards included: a client publishes only what it knows
-  someone subscribes to, so a reader of `beyond/robot/**` must be announced to every publisher;
-  hearing of an interest reveals no data, and the put and reply rules are unchanged;
-- `tools` (`beyond echo`, `topics`, `ask`, `record`) may read everything and ask the queryables,
-  but put, serve and declare nothing;
-- the sides (`robot`, `workstation`, and `router`, the workstation's router) read like tools,
-  declare their monitor's liveliness token and put its Ledger (a monitor is a consumer in
-  exactly-once: beyond_self.monitor), and may do whatever the services that run on their side
-  may (`sides`, services.registry): a side's router links to the other side's router with that
-  certificate and carries its services' traffic (on a secure split each machine runs a router,
-  so the robot's own pipeline keeps running through its router when the network between the
-  machines fails). A fleet's robot certificates are the robot side bound to one robot, its
-  workstation certificates the workstation side bound to the robots they serve.
-
-Recovering streams (runtime/reliable.py) carry zenoh-ext's own traffic under `<key>/@adv/...`:
-the publisher's cache answers history queries there, declares a liveliness token there (how
-subscribers detect it) and puts its heartbeat there; the subscriber subscribes, queries and
-watches liveliness there. `@adv` is a verbatim chunk, which no wildcard matches, so every stream
-key comes with its own `<key>/@adv/**` in the same rules as the key itself.
-
-A rule naming a key no service declares is an error: a declaration that names an unknown stream,
-or a subscription to a stream no service publishes, is an InputError at generation time.
+Every service class states what it subscribes to, publishes and serves, and the Service base
+refuses any key it did not declare, so these rules and the code cannot drift apart.
+`access_control()` builds the router's block: default deny; a subject is a certificate's common
+name, and its rules name only the robots its certificate is bound to; a service puts only on its
+outputs, subscribes only to its inputs and serves only its queryables; `tools` read and ask; a
+side may do what its services may. Each stream key comes with its zenoh-ext `<key>/@adv/**`
+traffic. A declaration naming an unknown stream is an InputError. docs/concepts/security.md says
+why each rule.
 """
 
 from __future__ import annotations

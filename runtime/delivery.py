@@ -1,26 +1,12 @@
 """How messages on a key travel: one description for publishers and subscribers alike.
 
-Like a ROS 2 QoS profile, a `Delivery` says what a stream needs, and both ends of the stream are
-opened with the same one (`bus.publisher(key, Type, delivery)`, `bus.subscribe(key, Type,
-delivery)`, `service.publisher(...)`, `service.subscribe(...)`); each end reads the fields that
-concern it:
-
-- `congestion` (publisher): a full queue, `"block"` waits for room, `"drop"` drops the sample;
-- `cache` (publisher): keep the last N samples for subscribers that recover (0: none);
-- `recover` (subscriber): ask every publisher found (at start, after a cut link) for its cache,
-  and fill the gaps in its numbering from it;
-- `history` (subscriber): at most this many samples asked of each publisher;
-- `max_age_s` (subscriber): and none older than this (needs session timestamping);
-- `queue` (subscriber): messages waiting for the handler; beyond it the oldest is dropped, counted;
-- `express` (publisher): send at once, unbatched.
-
-Why a cached publisher drops rather than blocks: across a dead link Zenoh's queue fills within
-seconds, and a blocking put would stall the robot's own pipeline until the lease runs out; what
-was dropped comes back from the cache. Why a plain publisher blocks by default: without a cache,
-a dropped sample is gone.
-
-The presets name the stream kinds of this project; the services use them, and so should a new
-stream of the same kind.
+Like a ROS 2 QoS profile, both ends of a stream are opened with the same `Delivery`, and each
+reads the fields that concern it: `congestion`, `cache` and `express` (publisher); `recover`,
+`history`, `max_age_s` and `queue` (subscriber). A cached publisher drops rather than blocks:
+across a dead link Zenoh's queue fills within seconds, and a blocking put would stall the robot's
+own pipeline until the lease ends; what was dropped comes back from the cache. A plain publisher
+blocks by default, since without a cache a dropped sample is gone. The presets name this
+project's stream kinds; a new stream of the same kind uses them (docs/concepts/pipeline.md).
 """
 
 from __future__ import annotations

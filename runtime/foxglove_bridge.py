@@ -1,23 +1,12 @@
-"""The live Foxglove bridge (`beyond foxglove`, `beyond up --foxglove`): the bus as Foxglove's
-WebSocket protocol, served by the `foxglove-sdk` package.
+"""The live Foxglove bridge (`beyond foxglove`, `beyond up --foxglove`), served by `foxglove-sdk`.
 
-Every key under `beyond/<robot>/` becomes a channel named after the key, carrying the message in
-the recordings' JSON form with its JSON Schema (so a live view and an MCAP file of the same run
-look the same in Foxglove), plus the derived views of `runtime.foxglove_views`. The channels of
-the known streams and the views are advertised at start, so a layout finds them before any data;
-other keys (health of each service, keys that are not ours) when first heard.
-
-Work is done only for what a client watches: a sample whose channel and views nobody subscribed
-to is not even decoded, so an idle bridge costs the pipeline one more subscriber and nothing else.
-Bad samples are counted and skipped (they are the services' problem, not the viewer's).
-Log times are the messages' stamps, so on a replay the viewer's timeline is the stream's
-(runtime.clock); a message without one is placed at its arrival moved onto the stamps' clock, and
-one that comes before any stamp (health of a service waiting for a replay to start) is skipped.
-
-Clients connect to a handshake front (runtime.foxglove_front), which accepts both names of the
-protocol, `foxglove.sdk.v1` (the SDK's, the current Foxglove app's) and `foxglove.websocket.v1`
-(the npm `@foxglove/ws-protocol` client's, Lichtblick's), and hands the connection to the SDK's
-server on a loopback port."""
+Every key under `beyond/<robot>/` is a channel named after the key, in the recordings' JSON form
+with its JSON Schema (a live view and an MCAP file of the same run look the same), plus the views
+of `runtime.foxglove_views`; known channels are advertised at start so a layout finds them before
+any data. Work is done only for what a client watches: an idle bridge decodes nothing. Log times
+are the stamps, so a replay's timeline is the stream's. Clients connect through a handshake front
+(runtime.foxglove_front) that accepts both names of the protocol.
+"""
 
 from __future__ import annotations
 

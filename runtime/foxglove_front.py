@@ -1,22 +1,11 @@
-"""The Foxglove clients there are, accepted: a WebSocket handshake front before foxglove-sdk's
-server.
+"""The Foxglove clients there are, accepted: a WebSocket handshake front before foxglove-sdk.
 
-foxglove-sdk 0.30 serves the Foxglove WebSocket protocol under its current subprotocol name,
-`foxglove.sdk.v1`, and nothing else: a client that offers only the protocol's first name,
-`foxglove.websocket.v1`, gets "HTTP 400 Missing expected sec-websocket-protocol header". The
-protocol under both names is the same (Foxglove say so, and Lichtblick and Flora accept either
-by adding the new name beside the old); but the npm client `@foxglove/ws-protocol` (0.8, its
-`FoxgloveClient.SUPPORTED_SUBPROTOCOL`), Lichtblick releases before it added the new name and
-older Foxglove apps offer only the first, while the current Foxglove app offers the new one.
-
-So the bridge listens itself, and the SDK's server listens on an ephemeral loopback port behind
-it. For each connection the front reads the HTTP upgrade request; a client that offers
-`foxglove.websocket.v1` but not `foxglove.sdk.v1` is passed to the SDK asking for
-`foxglove.sdk.v1`, and the SDK's answer is passed back naming the protocol the client offered.
-Everything else, and every byte after the handshake, goes through unchanged in both directions:
-no frame is parsed, and the copying runs in threads of its own with blocking sockets, off the
-bridge's event loop (which decodes the bus), so the front costs one loopback hop and a system
-call or two per chunk.
+foxglove-sdk 0.30 serves the protocol only as `foxglove.sdk.v1`, while the npm client
+`@foxglove/ws-protocol`, Lichtblick and older Foxglove apps offer only `foxglove.websocket.v1`
+(the same protocol). So the bridge listens itself, with the SDK's server on a loopback port
+behind it: the front reads each upgrade request, asks the SDK for `foxglove.sdk.v1` and answers
+the client in the name it offered. Every byte after the handshake passes unparsed, copied by
+threads of its own off the bridge's event loop: one loopback hop (docs/decisions.md).
 """
 
 from __future__ import annotations

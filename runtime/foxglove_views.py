@@ -1,21 +1,11 @@
-"""Foxglove views of bus messages: what the bridge and `beyond record --foxglove` add next to the
-messages themselves, so Foxglove's stock panels show them without a plug-in.
+"""Foxglove views of bus messages, added by the bridge and `beyond record --foxglove`, so
+Foxglove's stock panels show them without a plug-in.
 
-- `beyond/<robot>/foxglove/scene`: the skeleton as a `foxglove.SceneUpdate` (a sphere per joint,
-  coloured by tracking confidence, and a line list of bones) for the 3D panel;
-- `.../foxglove/pose`: a person's pose in the image it was estimated from (cognition.pose) as
-  `foxglove.ImageAnnotations` (joints coloured by confidence, and the bones) over that image;
-- `.../foxglove/objects`: detected objects as `foxglove.ImageAnnotations` (a circle of the
-  object's area at its centroid and its Color/Shape/Size labels) for the Image panel, stamped
-  like the camera frame they were found in, so Foxglove draws them over that frame;
-- `.../foxglove/posterior` and `.../foxglove/affordance`: the action posterior and the effect
-  predictions as maps from value to probability, so a Plot panel path reads
-  `.posterior.grasp` or `.effects.ObjVel.fast`;
-- `.../foxglove/log`: each description as a `foxglove.Log` line for the Log panel.
-
-The view types are our own msgspec Structs laid out as Foxglove's (documented) message types and
-encoded as JSON, Foxglove's schema-described encoding that any WebSocket client reads as is;
-their JSON Schemas come from the same Structs. Stamps are Foxglove `Time`, never bare integers.
+Under `beyond/<robot>/foxglove/`: `scene` (the skeleton as a `SceneUpdate`), `pose` and `objects`
+(`ImageAnnotations` over the image they were found in, stamped like it), `posterior` and
+`affordance` (maps from value to probability, for Plot paths such as `.posterior.grasp`) and `log`
+(each description as a `Log` line). The view types are our msgspec Structs laid out as
+Foxglove's documented types and encoded as JSON; stamps are Foxglove `Time`.
 """
 
 from __future__ import annotations

@@ -1,17 +1,11 @@
 """The garbage collector's view of a service process: what set-up built stays out of its passes.
 
-A service builds its long-lived state once (models, tables, the session's objects, a fleet's
-per-robot runs) and then allocates short-lived messages for the rest of its life. CPython's full
-collection walks every tracked object each time: in a 64-robot fleet (bench/fleet.py) the
-reasoner's and describer's full collections paused their event loops 36-41 ms mid-run, and such a
-pause lands on every frame in flight. After settling they had none mid-run. (The gesture
-streamer's 35-120 ms pauses were its trackers' frame buffers, which are now untracked:
-cognition.episodes.tracker.)
-
-So once a service (or a robot's run in a fleet) is set up, the process collects once and freezes
-what survived (`gc.freeze`): later passes walk only what was made since. When a run ends its
-objects are handed back (`gc.unfreeze`) so the next settle frees its cycles, and frozen again.
-Reference counting is untouched, so nothing a run drops outlives it; only cycles wait for a settle.
+A service builds its long-lived state once and then allocates short-lived messages; CPython's
+full collections walk every tracked object each time, and in a 64-robot fleet they paused the
+reasoner's and describer's loops 36-41 ms mid-run (docs/decisions.md). So once a service (or a
+fleet robot's run) is set up, the process collects once and freezes what survived (`gc.freeze`);
+when a run ends its objects are unfrozen so the next settle frees its cycles. Reference counting
+is untouched: only cycles wait for a settle.
 """
 
 from __future__ import annotations

@@ -1,26 +1,13 @@
 """The deployment's keystore: one CA and one certificate + key per identity, in one directory.
 
-A secure bus (`--secure DIR`) links every process to a router over mutual TLS: the router admits
-a session only with a certificate the deployment's CA signed, and its access rules
-(runtime/acl.py) know the process by the certificate's common name. So identities are names:
-each service's own (`describer`, ...), the sides' (`router`, `robot`, `workstation`, which the
-routers and `beyond up`'s monitors hold), and `tools` (read-only, for `echo`, `topics`, `ask`,
-`record`). Files are `ca.crt`, `ca.key`, `NAME.crt`, `NAME.key`; keys are mode 0600 and the
-directory 0700, because a key is the identity.
-
-A certificate is bound to the robots it may act for, written into it by the CA (a subject
-alternative name `urn:beyond-self:<role>:<robots>`), so the router's rules follow the
-certificates it was given and a key stolen from one robot speaks for that robot alone: a robot's
-certificate (`beyond keys add lab-1 --robot`) holds exactly its own name, a workstation's
-(`beyond keys add ws-1 --workstation 'lab-*'`) the key-expression pattern of the robots it
-serves, a service's or a side's the robots of the deployment (`--robots`, default the one robot
-`robot`). The role says what the identity may do (runtime/acl.py): a service's own name, `tools`,
-or a side (`robot`, `workstation`, `router`). A certificate made before bindings existed holds
-none; it is read as its own name's role on every robot, as it was then.
-
-Problems with a certificate are found here, before Zenoh sees it: Zenoh reports a bad file as
-a failure to open deep in its link layer (or retries a handshake the other side will never
-accept), while a user needs one line naming the file and what is wrong with it.
+The router admits a session only with a certificate the deployment's CA signed, and its rules
+(runtime/acl.py) know the process by the certificate's common name: a service's name, a side's
+(`router`, `robot`, `workstation`) or `tools`. Keys are mode 0600 in a 0700 directory: a key is
+the identity. A certificate is bound to the robots it may act for (a subject alternative name
+`urn:beyond-self:<role>:<robots>`), so a key stolen from one robot speaks for that robot alone; one
+made before bindings existed is read as its own name's role on every robot. Problems with a
+certificate are found here, in one line naming the file, before Zenoh reports them deep in its
+link layer.
 """
 
 from __future__ import annotations

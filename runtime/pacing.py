@@ -1,33 +1,13 @@
 """Backpressure for players: never run further ahead of the slowest consumer than a window.
 
-A replay as fast as possible, or a paced one on a loaded machine, must not lose anything: a
-consumer that falls behind would otherwise see its queue overflow, or its peers act on a stream
-it has not caught up with. Consumers report, per sensor key, the stamp of the last message they
-handled (`Progress`, published by `Service` for `paced` subscriptions). Before publishing a
-message stamped `s` on key `k`, the player waits until every consumer of `k` has handled
-everything sent on `k` up to `s - window`. Which keys a consumer takes comes from its health
-reply (its declared inputs), asked once it is alive; a consumer that never reports progress
-(a plain subscriber, a tool) is not waited for.
-
-Derived streams count too: a consumer that takes another consumer's output (the object
-segmenter takes the gesture streamer's events) must have received everything that one has
-published (`Progress.published` / `received`) before more is sent, or a late event would find
-the frames it needs long gone. The window holds across streams, not per stream: a camera
-running seconds ahead of the skeleton would have the object segmenter buffer (and, past its
-cap, forget) frames a gesture announced later still needs. Bounding every consumer's lag on
-every stream bounds that skew to the window.
-
-This decides only *when* the player sends, never what anyone outputs. A consumer whose
-liveliness token goes away (it crashed, or was killed) is waited for up to `restart_wait_s`,
-so one that is restarted finds the stream where it left it: it gets back what it needs from the
-publishers' caches and reports its progress afresh, and the waiting is on it, the consumer
-alive now, never on what its predecessor had left unhandled. One that does not come back is no
-longer waited for: a player must not hang on a dead service (one that comes back later is
-waited for again). Both are wall-clock decisions, because they are about the machine, not the
-data.
-
-A restarted player goes on where its consumers are: `handled_by_all` says, per key, the last
-stamp every consumer has handled (each answers for its own `Progress` on query).
+A replay as fast as possible, or a paced one on a loaded machine, must lose nothing. Consumers
+report the stamp of the last message they handled per sensor key (`Progress`), and how much they
+received and published; before sending a message stamped `s`, the player waits until every
+consumer of its key, and of what derives from it, is within `window` of `s`. The window holds
+across streams, which bounds a camera's lead over the skeleton too. This decides only when the
+player sends, never what anyone outputs. A consumer that disappears is waited for up to
+`restart_wait_s` (a restarted one resumes from the caches), then no longer: a player must not hang
+on a dead service. `handled_by_all` lets a restarted player go on where its consumers are.
 """
 
 from __future__ import annotations
@@ -105,7 +85,7 @@ class Pacer:
         about it, and what was sent before it came back is waited for only as far as it gets
         it back (a publisher's cache): the player waits on the instance alive now, for what is
         sent from now on. Where a dead one's handling stopped is not a place anyone will pass
-        again (a restarted gesture streamer without history used to stall the source there)."""
+        again: a restarted consumer without history would stall the source there."""
         self._gone_since.pop(name, None)
         if name in self.handled:
             self.handled[name] = {}

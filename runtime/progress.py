@@ -1,16 +1,11 @@
-"""How far a service has got: the `Progress` it publishes for players.
+"""How far a service has got: the `Progress` it publishes for players (runtime.pacing).
 
-A service's `paced` inputs (sensor streams) are the ones a player paces itself on (runtime.pacing):
-after the handler of each message, so everything an input caused has been published before its
-progress says so, the service reports the stamp of the last message it handled per paced key, how
-many messages each subscription received and each publisher sent, and the last stamp each publisher
-sent. A report is stamped by the service's clock (the stream's on a replay, runtime.clock), like
-its health. It also answers for it on query (`progress/<name>`), so a player that starts, or starts
-again after a crash, learns at once where every consumer is.
-
-The report after each message goes out only while someone subscribes (`wanted`: a player, a
-monitor); the periodic one always does. Live, nobody paces on it, and building and putting it
-for every skeleton frame was a tenth of a fleet's gesture streamer's time at 96 robots.
+After the handler of each message on a `paced` input (so everything it caused is published
+first), the service reports the last stamp handled per paced key, what each subscription received
+and each publisher sent, stamped by the service's clock. It answers for it on query too, so a
+player that starts, or starts again, learns at once where every consumer is. The report after
+each message goes out only while someone subscribes (`wanted`); live, nobody paces on it, and it
+cost a tenth of a fleet gesture streamer's time at 96 robots.
 """
 
 from __future__ import annotations

@@ -1,20 +1,12 @@
 """The one replay engine: send timed messages at their stamp-derived times.
 
-`Player` is shared by `beyond replay` (through `replay()` below) and the sensor ingest service
-(services/ingest.py), so speed, pause, pacing and stop mean the same on both paths and a fix to
-one is a fix to both. Each pass sends its cues in order, the n-th at
-`(at_n - at_0) / rate` after the pass began (None: as fast as possible; runtime.replay_control
-holds the one rule for rates). `at` is the message's own time, the recording's publish_time,
-which is its header stamp: timing follows the data, never when a sample arrived or was read.
-With a pacer the player never runs more than a window of stream time ahead of the slowest
-consumer (runtime.pacing), so even an as-fast-as-possible replay into a pipeline is complete and
-deterministic; with a control it holds while paused and shifts its schedule by the time held.
-What a message becomes on the wire (raw publishers here, the ingest's typed and cached ones
-there) is the caller's `send`. With `ticks` the player also publishes the stream's time as it
-goes (runtime.clock: services on the recording's clock stamp their health and progress with
-it); `replay()` does, for every robot it replays, and skips the clock a recording holds.
-
-Messages go out on reliable publishers (Zenoh blocks rather than drops when its queue is full).
+`Player` is shared by `beyond replay` (through `replay()`) and the ingest service, so speed,
+pause, pacing and stop mean the same on both paths. Each pass sends its cues in order, the n-th
+at `(at_n - at_0) / rate` after the pass began (None: as fast as possible), `at` being the
+message's own stamp: timing follows the data. With a pacer it never runs more than a window of
+stream time ahead of the slowest consumer (runtime.pacing), so even an as-fast-as-possible replay
+is complete and deterministic; with `ticks` it publishes the stream's time (runtime.clock). What a
+message becomes on the wire is the caller's `send`; `replay()` uses reliable publishers.
 """
 
 from __future__ import annotations

@@ -1,16 +1,11 @@
 """Typed and raw subscriptions: samples off Zenoh, into an inbox, decoded on the event loop.
 
-A subscription receives through a Zenoh FIFO channel, not a Python callback: Zenoh's network
-thread then never takes the GIL (a callback run there, `indirect=False`, has to create a Python
-thread state per sample; measured 3x fewer samples per second than an indirect callback). One
-small drain thread per subscription blocks in the channel's `recv()` with the GIL released, takes
-whatever else has arrived with `try_recv()`, copies each payload, and hands the whole burst to the
-subscription's inbox in one go (runtime.inbox). A subscription whose delivery recovers
-(`Delivery.recover`) gets its samples from a zenoh-ext advanced subscriber instead
-(runtime.recovery). Decoding happens on the event loop when the consumer takes the sample, so no
-Zenoh thread runs user code, and a malformed payload is counted and reported on the loop;
-payloads larger than a Zenoh batch (camera frames) are also copied out of Zenoh there, just
-before decoding reads them. bench/bus.py measures all of this against raw zenoh-python.
+A subscription receives through a Zenoh FIFO channel, not a Python callback, so Zenoh's network
+thread never takes the GIL (a callback there makes a Python thread state per sample: 3x fewer
+samples per second). One drain thread per subscription blocks in `recv()` with the GIL released
+and hands each burst to the inbox (runtime.inbox); a recovering delivery uses a zenoh-ext advanced
+subscriber instead (runtime.recovery). Decoding happens on the event loop when the consumer takes
+the sample, so no Zenoh thread runs user code. bench/bus.py measures it against raw zenoh-python.
 """
 
 from __future__ import annotations

@@ -1,20 +1,12 @@
 """What a derived message is about, whoever sent it: its identity.
 
-Every per-gesture output is identified by robot, segment id and kind: "start", "end" or
-"cancel" (GestureSegment), "final belief" (the final ActionPosterior), "object"
-(GestureObject), "effects" (ObjectEffects), "outcome" (the final AffordancePrediction), "words"
-(WordProbabilities), "description" (Description). Per-frame outputs add the frame they are
-about: "belief" (an ActionPosterior while the gesture unfolds), "anticipation" (an
-AffordancePrediction before its end), "objects" (DetectedObjects, segment 0: a camera frame is
-about no gesture), and the drafts a describer with `unfolding` makes ("draft words",
-"draft description", numbered by stamp).
-
-The identity is what exactly-once is built on (runtime.ledger): a consumer acts on each identity
-once, whether it came from the service that made it, from a restarted instance of that service
-re-deriving it from its inputs, or from a publisher's cache after a cut link. It depends only on
-the key (the robot is its second chunk) and on what the message says, never on who sent it or
-when, so two services, or two robots' pipelines, agree on it. Sensor streams, health and
-progress have none: they are not per-gesture results.
+A per-gesture output is identified by robot, segment id and kind ("start", "end", "cancel",
+"final belief", "object", "effects", "outcome", "words", "description"); a per-frame one adds its
+frame ("belief", "anticipation", "objects", a describer's drafts). Exactly-once is built on it
+(runtime.ledger): a consumer acts on each identity once, whether it came from its maker, a
+restarted maker re-deriving it, or a cache after a cut link. It depends only on the key and the
+message's contents, never on who sent it or when, so every service agrees on it. Sensor streams,
+health and progress have none.
 """
 
 from __future__ import annotations

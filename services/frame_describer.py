@@ -1,12 +1,11 @@
 """The object segmenter's per-frame description, in a process of its own.
 
-Why a process: describing a frame is the costliest thing the segmenter does, and no gesture
-result waits for it. On a thread it shared the interpreter lock and the cores with the gestures'
-work; in a process, at a lower priority when the source is live (`niceness`), the system runs
-the gestures' work first and the descriptions with what is left (the frames nothing was left for
-are those a live segmenter skips). A replay's describer keeps its priority: every frame is
-described there. The worker dies with the segmenter (runtime.lifeline): a SIGKILLed segmenter
-leaves no process behind; one started again starts its own.
+Describing a frame (the table estimated from it, every object measured and labelled) is the
+object segmenter's costliest work, and no gesture result waits for it. On a thread it shared the
+GIL with the gestures' work, so the frame that completes a gesture waited behind it; in a process
+of its own, at a lower priority when the source is live, the system runs the gestures' work first
+and a live segmenter skips the frames nothing was left for. A replay's describer keeps its
+priority: every frame is described. The worker dies with the segmenter (runtime.lifeline).
 """
 
 from __future__ import annotations

@@ -1,24 +1,14 @@
 """Whether the link to the other side of a split carries data, not just presence.
 
-A secure split runs a router on each side, linked across the network (services.deployment).
-After a cut link comes back, Zenoh 1.10 can leave the two routers linked, each listing the other
-side's liveliness tokens, while samples published on one side no longer reach the other's
-subscribers; nothing in Zenoh reports it and it does not heal (tests/test_secure_netns.py: the
-workstation sat with the robot's tokens present and no sample from it for the rest of the run).
-Seen in its debug log: the robot's router, whose socket was full when the network went, cannot
-close the dead TLS link until TCP retransmits after the network is back, seconds later; the
-reconnect meanwhile reuses the transport being closed, the late close tears it down, and the
-link opened after that sometimes routes presence but not samples.
-
-The watch tells such a link from a cut one by what it still carries. Every service publishes its
-health every second; while a service of the other side is present (its token is here) and
-nothing of the other side's health has arrived for `silent_s`, the link is broken, and the side
-restarts its router (services.deployment). The restart gives the router a new identity, so the
-other side's router meets a stranger, not a transport it half remembers; what was missed comes
-back from the publishers' caches (runtime.recovery). While the other side is absent nothing is
-decided: that is a cut link, which Zenoh handles. The robot's router also keeps listing the
-workstation through a long outage (the same unfinished close), so it is restarted then too,
-once per outage, which its own pipeline survives like any restart (crash-only)."""
+After a cut link comes back, Zenoh 1.10 can leave the two sides' routers linked, each listing the
+other side's liveliness tokens, while samples no longer cross, and it does not heal
+(docs/decisions.md says why). The watch tells such a link from a cut one by what it still
+carries: while a service of the other side is present and none of its health (published every
+second) has arrived for `silent_s`, the side restarts its router (services.deployment), which
+gives it a new identity; what was missed comes back from the caches. While the other side is
+absent nothing is decided: that is a cut link, which Zenoh handles. The robot's router is also
+restarted once per long outage, where it keeps listing the workstation.
+"""
 
 from __future__ import annotations
 

@@ -1,16 +1,12 @@
-"""A camera watching a person, as the ingest's live source: frames from a video file or a camera
-go through the pose model (cognition.pose) and become, with one stamp per frame, the person's
-image (`person_camera`, JPEG), their skeleton (`skeleton`, the joints the gesture models read)
-and where its joints are in the image (`person_pose`, to draw the pose over it). It has the
-shape of an ingest plug-in (an async iterator of `("person", PersonFrame)` items), run by the
-ingest itself, so the model runs where the camera is: on the robot's side. `beyond video` makes
-the same messages with `person_messages`, stamped with the video's frame times instead.
+"""A camera watching a person, as the ingest's live source.
 
-A video file is watched as a camera would show it, at its own pace (its frame times against
-the wall clock); when the model is slower than the video, a frame more than one interval late
-is not estimated (shed, counted: its image is still published), so the pose keeps up with the
-picture instead of falling further behind. A frame with nobody in it gives no skeleton
-(counted).
+Frames from a video file or a camera go through the pose model (cognition.pose) and become, with
+one stamp per frame, the person's image (JPEG), their skeleton and where its joints are in the
+image. It is an ingest plug-in, run by the ingest itself, so the model runs where the camera is;
+`beyond video` makes the same messages with `person_messages`, stamped with the video's times. A
+file is shown at its own pace; a frame more than one interval late is not estimated (shed,
+counted; its image still published), so the pose keeps up with the picture. A frame with nobody
+in it gives no skeleton (counted).
 """
 
 from __future__ import annotations

@@ -1,19 +1,12 @@
 """Speech: speaks the best sentence of every final description with a real synthesizer.
 
-The synthesizer is espeak-ng through its command line: each sentence is rendered to a WAV file
-in `out_dir` (named by robot time stamp and gesture), listed in `speech.log` next to it, and with
-`play` on spoken aloud. Without espeak-ng the service says so once and prints the sentences
-instead. To drop in another synthesizer, subclass and override `synthesize` (see the README's
-recipe): everything else — subscription, health, malformed input, saying each sentence once —
-is inherited.
-
-Once, across a SIGKILL: the bus record of what was said (runtime.ledger) reaches the other
-services a moment after the sentence, so a kill in that moment would let a restarted speech
-service say it again. The speech log is the record that cannot lag: a sentence is rendered (no
-effect yet), then its line is written in one append and synced (the commit), then it is played.
-A restarted service reads the lines its run wrote (from the offset its first instance left in
-its checkpoint) and does not say them again; a kill before the commit renders the same WAV
-again, one after it may cut the sentence short but never repeats it.
+espeak-ng renders each sentence to a WAV in `out_dir`, listed in `speech.log` beside it, and with
+`play` spoken aloud; without espeak-ng the service says so once and prints the sentences. Another
+synthesizer: subclass and override `synthesize` (docs/how-to/speech-synthesizer.md). Once, across
+a SIGKILL: the bus ledger reaches the others a moment after the sentence, so the speech log is the
+record that cannot lag: render, then append the line and sync (the commit), then play. A
+restarted service reads the lines its run wrote and does not say them again; a kill after the
+commit may cut a sentence short but never repeats it.
 """
 
 from __future__ import annotations

@@ -202,7 +202,7 @@ def test_small_run_meets_the_acceptance_criteria(small_run: LearningResults) -> 
     main = small_run.main
     assert main.n_per_action == 8 and main.words
     acc = {s: main.accuracy(s) for s in ("hmm_inferred", "hmm_true", "network", "fused")}
-    # the acceptance (>= 90% of true labels) is the main run's (`beyond learn`: 100%, README);
+    # the acceptance (>= 90% of true labels) is the main run's (`beyond learn`: 100%);
     # with 8 demonstrations per action and 45 held out, one gesture is 2 points of accuracy
     assert acc["hmm_inferred"] >= 0.85 * acc["hmm_true"]
     assert acc["fused"] >= acc["hmm_inferred"] and acc["fused"] >= acc["network"]

@@ -134,7 +134,8 @@ DECOYS = ("schemas", "runtime", "core", "services", "cognition", "beyond", "beyo
 def readme_demo_lines() -> list[str]:
     """The gesture lines the README promises the demo prints."""
     text = (REPO / "README.md").read_text(encoding="utf-8")
-    block = text.split("```text", 1)[1].split("```", 1)[0]
+    blocks = [part.split("```", 1)[0] for part in text.split("```text")[1:]]
+    block = next(b for b in blocks if "\ngesture " in b)  # the demo's output, after the picture
     return [line for line in block.splitlines() if line.startswith("gesture ")]
 
 

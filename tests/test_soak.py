@@ -1,7 +1,7 @@
 """A short run of bench/soak.py (issue 21): a looped recording as fast as possible while services
 are SIGKILLed, one after each gesture described; no description lost, none published or said
 twice, every gesture told as `beyond analyse` tells it, every process stopped cleanly, memory
-bounded. The 10-minute run is the benchmark's (its figures are in README.md)."""
+bounded. The 10-minute run is bench/soak.py's."""
 
 from __future__ import annotations
 

@@ -1,15 +1,11 @@
-"""`beyond analyse RECORDING`: the whole pipeline over a recording, offline, in one process.
-
-    beyond analyse RECORDING|LOG [--config FILE] [--json]
+"""`beyond analyse RECORDING|LOG`: the whole pipeline over a recording, offline, in one process.
 
 No bus, no services: the skeleton and camera streams are read in recording order and go through
-the same library classes the services run (cognition.episodes), with the same options (the
-per-service options of `--config`, as for `beyond up`). It prints the lines `beyond up` prints
-for the same recording; a run on the bus, at any rate and under any load, must equal it. A
-damaged recording is analysed as far as it is readable, with the frames the ingest would play,
-and what was lost is said in one line (exit 2), as `inspect`, `replay` and `up` say it.
-LOG is a YARP hand log (the article's recording folder or its data.log), read exactly as
-`beyond up --log` plays it (the ingest's `scale` and `hand_joint` options apply).
+the same library classes the services run (cognition.episodes), with the same options. It
+prints the lines `beyond up` prints for the same recording: the specification a run on the bus,
+at any rate and under any load, must equal. A damaged recording is analysed as far as it is
+readable, and what was lost is said in one line (exit 2), as `inspect`, `replay` and `up` say it.
+A YARP hand log is read exactly as `beyond up --log` plays it.
 """
 
 from __future__ import annotations

@@ -1,16 +1,7 @@
-"""`beyond bn`: learn, show and query the Affordance–Words Bayesian network.
+"""`beyond bn learn|show|query|words`: the Affordance–Words Bayesian network.
 
-    beyond bn learn [BAG] [--network DEF] -o MODEL [--unseen absent|zero|uniform|dirichlet]
-    beyond bn show MODEL [--json]
-    beyond bn query MODEL --query VAR [VAR ...] [--evidence VAR=VALUE ...]
-                    [--soft VAR=value:p,value:p ...] [--gesture ACTION=p,... |
-                    --gesture-log MODELS LOG [--frames A:B] [--scale S]] [--json]
-    beyond bn words MODEL [--evidence ...] [--soft ...] [--gesture ... | --gesture-log ...] [--json]
-
-The evidence options are the same for every command (beyond/commands/evidence_args.py).
-
-JSON goes to stdout, progress and tables for people to stderr/stdout through rich. Bad input is an
-InputError (exit 2 via the dispatcher).
+The evidence options are the same for every command that takes evidence (evidence_args.py).
+JSON goes to stdout; tables for people go through rich. Bad input is an InputError (exit 2).
 """
 
 from __future__ import annotations

@@ -1,14 +1,10 @@
-"""`beyond demo`: the main job. By default the full pipeline: every service in its own process,
-Zenoh peers on loopback, replaying the bundled recording of a human tapping a ball and grasping a
-box, printing the recognised actions, the anticipated effects and the descriptions (this is
-`beyond up` on `recordings/tap-ball-grasp-box.mcap`).
+"""`beyond demo`: the main job, `beyond up` on the bundled recording of a person tapping a ball and
+grasping a box, printing the recognised actions, the anticipated effects and the descriptions.
 
-With --network it instead takes a tour of the science alone, with no bus: it learns the
-Affordance–Words network from the bundled synthetic robot-exploration data set
-(structure by K2/BIC, parameters by counting) and asks it the article's kinds of questions: which
-action explains the observed effects, what an action will do to an object, how a gesture
-recogniser's uncertain opinion (soft evidence) changes that, and which words describe a scene.
-Needs nothing outside the repository.
+With --network, a tour of the science alone, no bus: the Affordance–Words network learned from
+the bundled synthetic data set, asked the article's kinds of questions (which action explains
+the effects, what an action will do, how a gesture's soft evidence changes that, which words
+describe a scene). Needs nothing outside the repository.
 """
 
 from __future__ import annotations

@@ -1,14 +1,9 @@
 """The evidence options of `bn query`, `bn words`, `describe` and `ask`, parsed in one place.
 
-    --evidence VAR=VALUE ...            hard evidence
-    --soft VAR=value:p,value:p ...      a distribution over VAR's values, by name
-    --gesture ACTION=p,...              P_HMM(A | G) given directly
-    --gesture-log MODELS LOG            P_HMM(A | G) from running the gesture recogniser over a
-    --frames A:B  --scale S             hand log (frames 1-based, inclusive; position scale);
-                                        commands with the network at hand only (not `ask`)
-
-The grammar and the rules are `cognition.bn.evidence`'s; this module only wires them to
-argparse and adds the log as one more source of gesture evidence.
+`--evidence` (hard), `--soft` (a distribution over a variable's values), `--gesture` (P_HMM(A |
+G) given directly) and `--gesture-log MODELS LOG` (P_HMM from running the recogniser over a hand
+log; commands with the network at hand only, not `ask`). The grammar and the rules are
+`cognition.bn.evidence`'s; this module wires them to argparse.
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """`beyond foxglove [--ws-port 8765]`: watch the bus live in Foxglove (open a Foxglove WebSocket
-connection to ws://localhost:8765; see README, "Watch the demo in Foxglove"). `--port` is the
-bus's rendezvous port, as in every command (until 0.3 it was the WebSocket port here, and the
-bus's was `--bus-port`, still accepted).
+connection to ws://localhost:8765; see docs/tutorial.md, "Watch it in Foxglove"). `--port` is the
+bus's rendezvous port, as in every command (`--bus-port`, its spelling before 0.3, still works).
 
 `beyond foxglove --export IN.mcap -o OUT.mcap` adds the same views to a recording made without
 them (`beyond record --foxglove` writes them as it records)."""

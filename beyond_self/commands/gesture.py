@@ -1,26 +1,12 @@
-"""`beyond gesture`: train, run and evaluate the per-action gesture HMMs.
+"""`beyond gesture train|stream|evaluate|realism`: the per-action gesture HMMs.
 
-    beyond gesture train [--data synthetic|DIR|MCAP ...] -o MODELS.json
-    beyond gesture stream MODELS LOG [--frames A:B] [--scale S] [--json]
-    beyond gesture evaluate MODELS|cv|compare DATA [--folds recording|gesture] [--json] [-o DIR]
-    beyond gesture realism DATA [-o DIR]
-
-MODELS is a model file written by `train`, one of the article's MATLAB files, or `default` (the
-shipped models). DATA is `synthetic` (the seeded generator), a folder of hand recordings named
-after their action (the article's human_data/: grasp1_hand, tap1_hand, touch1_hand,
-tap_notable_seated_1, ...), cut into executions by the segmenter, or MCAP recordings (a .mcap
-file or a folder of them) of skeleton frames on beyond/<robot>/sensors/skeleton with joints
-`right_hand` (and `torso`). An MCAP recording's labels come from its "beyond" metadata,
-`gesture_actions` = "grasp,tap,..." (one per gesture, in order) and optionally
-`gesture_frames` = "start:stop,..." (0-based, over its skeleton frames; otherwise the
-segmenter cuts it), or else from its file name (tap_1.mcap: every gesture a tap). `train`
-takes --data several times and trains on all of it (the robot's synthetic experience mixed
-with people's demonstrations).
-
-`evaluate cv DATA` cross-validates instead of testing a model set: leave one recording out
-(default) or one gesture out, optionally also training every fold on `--with` data. `evaluate
-compare DATA` puts our default models, cross-validation and the article's models (on the
-article's own ranges) side by side. `realism` compares the simulator's gestures with DATA's.
+MODELS is a file written by `train`, one of the article's MATLAB files, or `default`. DATA is
+`synthetic`, a folder of hand recordings named after their action (the article's human_data/),
+or MCAP recordings whose labels come from their "beyond" metadata (`gesture_actions`, optionally
+`gesture_frames`) or else their file name (docs/science/gestures.md). `train` takes --data
+several times and trains on all of it; `evaluate cv` cross-validates, `evaluate compare` puts
+our models, cross-validation and the article's side by side; `realism` compares the simulator's
+gestures with DATA's.
 """
 
 from __future__ import annotations

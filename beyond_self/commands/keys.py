@@ -1,19 +1,10 @@
-"""`beyond keys`: the deployment's keystore and the router's access rules.
-
-    beyond keys init DIR [--robots PATTERN] [--days N]   a CA and a certificate per identity
-    beyond keys add NAME [--robots PATTERN] [--dir DIR]  one more identity (or a renewed one)
-    beyond keys add ROBOT --robot                        a fleet robot's own certificate
-    beyond keys add NAME --workstation PATTERN           a workstation serving robots PATTERN
-    beyond keys show [--dir DIR]                         every certificate, its robots, expiry
-    beyond keys acl [--dir DIR]                          the router's access_control block
+"""`beyond keys init|add|show|acl`: the deployment's keystore and the router's access rules.
 
 Identities are the services' names, the sides' (`router`, `robot`, `workstation`) and `tools`
-(read-only: `echo`, `topics`, `ask`, `record`), each bound to the robots it may act for (a robot
-name or a pattern such as 'lab-*'; default the one robot `robot`); a fleet adds one certificate
-per robot, bound to that robot alone, and one per workstation, bound to the robots it serves
-(runtime/keystore.py, runtime/acl.py). DIR defaults to $BEYOND_ZENOH_SECURE. Use it with
-`--secure DIR` on `beyond up`, `router`, `service` and the tools; a router's rules are made from
-the certificates in it, so restart the router after adding one.
+(read-only), each bound to the robots it may act for; a fleet adds one certificate per robot and
+one per workstation (runtime/keystore.py, runtime/acl.py). DIR defaults to
+$BEYOND_ZENOH_SECURE. A router makes its rules from the certificates when it starts, so restart
+it after adding one.
 """
 
 from __future__ import annotations

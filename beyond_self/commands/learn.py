@@ -1,14 +1,9 @@
-"""`beyond learn`: the robot learns to recognise a human's gestures from its own affordance model.
+"""`beyond learn -o DIR`: the robot learns to recognise gestures from its own affordances.
 
-    beyond learn [--robot-data synthetic|DIR|BAG] [--human-data synthetic|DIR] -o DIR [--json]
-
-Self phase on the robot's exploration data (the bundled synthetic set by default; the article's
-salvi2012 folder or one of its bag tables when given), then watching human demonstrations
-(synthetic by default; a folder of hand recordings such as human_data/ gives real gestures with
-simulated scenes), labelling them with the network, training gesture HMMs on those labels and
-evaluating everything on held-out demonstrations, with ablations over words and the number of
-demonstrations. Writes learning.md, results.json and PNG plots into -o/--output; --json also prints
-the results on stdout. The default run takes well under 3 minutes on 2 cores.
+Self phase on the robot's exploration data (the bundled synthetic set by default), then human
+demonstrations labelled by the network, gesture HMMs trained on those labels, and everything
+evaluated on held-out demonstrations, with ablations over words and the number of
+demonstrations. Writes learning.md, results.json and PNG plots; --json also prints the results.
 """
 
 from __future__ import annotations

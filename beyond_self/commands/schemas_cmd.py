@@ -28,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub.add_parser("list", help="message types, versions, keys and wire encodings")
 
 
-def _keys_of(cls: type[Message]) -> list[str]:
+def keys_of(cls: type[Message]) -> list[str]:
     keys = [f"beyond/<robot>/{suffix}" for suffix, c in STREAMS.values() if c is cls]
     if cls.type_name() == "ServiceHealth":
         keys.append(f"beyond/<robot>/{HEALTH}/<service>")
@@ -37,9 +37,9 @@ def _keys_of(cls: type[Message]) -> list[str]:
     return keys
 
 
-def _where(cls: type[Message]) -> str:
+def where(cls: type[Message]) -> str:
     """The keys a type travels on, or the exchange it belongs to."""
-    keys = _keys_of(cls)
+    keys = keys_of(cls)
     if keys:
         return ", ".join(keys)
     return "(query/reply: beyond/<robot>/affordance/ask)"
@@ -48,7 +48,7 @@ def _where(cls: type[Message]) -> str:
 def _page(types: list[type[Message]]) -> str:
     rows = "\n".join(
         f"| `{c.type_name()}` | {c.VERSION} | `{codec.wire_encoding(c)}` | "
-        f"{', '.join(f'`{k}`' for k in _keys_of(c)) or _where(c)} | "
+        f"{', '.join(f'`{k}`' for k in keys_of(c)) or where(c)} | "
         f"`{c.schema_name()}.json` |"
         for c in types
     )
@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         for name in sorted(codec.REGISTRY):
             cls = codec.REGISTRY[name]
             stamps = ", ".join(codec.stamp_paths(cls))
-            keys = _where(cls)
+            keys = where(cls)
             encoding = codec.wire_encoding(cls)
             print(f"{name:<22} v{cls.VERSION}  {encoding:<48} {keys}  [stamps: {stamps}]")
         return 0

@@ -1,14 +1,10 @@
-"""`beyond simulate SCENE -o FILE.mcap`: a seeded synthetic recording of a person acting on
-objects on a table, as the sensors would publish it: skeleton frames at 30 fps and tabletop
-camera frames (JPEG by default, so recordings stay small), on one clock starting at a fixed
-epoch, so the same arguments always give the same bytes.
+"""`beyond simulate SCENE -o FILE.mcap`: a seeded synthetic recording of a person acting on objects.
 
-SCENE is a preset (`tap-ball-grasp-box`, `touch-box`, `three-actions`) or a spec
-`action:color:shape:size[,...]` with the network's values (`cognition.variables`). The scene
-itself is `cognition.scene`; this module only turns it into bus messages in an MCAP file, with
-the scene's truth (items, frames, labels) in the file's metadata. `--check` reads the file back
-and runs what the services would on it (gesture segmenter and recogniser, object segmenter on
-each gesture's camera window), printing one line per gesture against the truth.
+Skeleton frames at 30 fps and tabletop camera frames (JPEG by default, so recordings stay small)
+on one clock from a fixed epoch: the same arguments give the same bytes. The scene is
+`cognition.scene`; this module turns it into bus messages in an MCAP file, with the scene's
+truth in the file's metadata. `--check` reads the file back, runs what the services would on it
+and prints one line per gesture against the truth (exit 1 if one differs).
 """
 
 from __future__ import annotations

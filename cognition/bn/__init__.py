@@ -1,16 +1,10 @@
 """The Affordance–Words Bayesian network: readers, structure and parameter learning, inference.
 
-What other modules call (see README.md in this folder for the model file format):
-
-    load_definition(path) -> NetworkDefinition        # networkDefinition.txt format
-    load_bag(path, definition) -> Dataset             # bag-of-words table format
-    synthetic_dataset() -> Dataset                    # the bundled synthetic training set
-    learn_network(dataset, ...) -> BayesNet           # K2 + BIC structure, BDeu/ML parameters
-    save_model(model, path) / load_model(path)        # versioned JSON, no pickle
-    model.query(query, evidence, soft) -> Posterior   # exact, compiled numpy
-    model.word_probabilities(evidence, soft) -> {word: P(present)}
-
-Importing this package does not import pgmpy (slow); `cognition.bn.pgmpy_bridge` does.
+What other modules call: `load_definition`, `load_bag`, `synthetic_dataset`, `learn_network`
+(K2 + BIC structure, BDeu/ML parameters), `save_model`/`load_model` (versioned JSON, no pickle),
+and a model's `query` and `word_probabilities` (exact, compiled numpy). README.md in this folder
+describes the model file. Importing this package does not import pgmpy (slow);
+`cognition.bn.pgmpy_bridge` does.
 """
 
 from __future__ import annotations

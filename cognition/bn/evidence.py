@@ -1,19 +1,11 @@
 """Evidence: one grammar for typing it, one function that turns it into what the network needs.
 
-Every command that takes evidence (`beyond bn query|words`, `beyond describe`, `beyond ask`) and
-the reasoner's ask queryable go through this module, so a question asked offline and the same
-question asked over the bus give the same numbers and are refused with the same messages:
-
-    --evidence VAR=VALUE ...              hard evidence
-    --soft VAR=value:p,value:p ...        a distribution over VAR's values, by name; values not
-                                          named get 0, and the whole must sum to 1
-    --gesture ACTION=p,ACTION=p,...       P_HMM(A | G), fused with the network (cognition.fusion)
-
-Values are named, not listed in definition order, because `beyond ask` has no network at hand
-(the reasoner holds it) and the bus message carries names; the `parse_*` functions therefore
-need no network. `build_evidence` is where the network comes in: it checks every name, builds
-the soft vectors in definition order and turns gesture evidence into soft evidence on the action,
-which is why the action may then be neither observed nor given as soft evidence.
+Every command that takes evidence and the reasoner's ask queryable go through this module, so a
+question asked offline and over the bus gives the same numbers and the same refusals. Values are
+named, not listed in definition order, because `beyond ask` has no network at hand (the reasoner
+holds it): the `parse_*` functions need none. `build_evidence` is where the network comes in: it
+checks every name, orders the soft vectors and turns gesture evidence into soft evidence on the
+action, which then may be neither observed nor given as soft evidence too.
 """
 
 from __future__ import annotations

@@ -1,22 +1,13 @@
 """Exact inference on the Affordance–Words network, compiled to a few numpy array operations.
 
-Why this shape: the affordance nodes (8 in the article, 2,592 joint states) are the only nodes with
-children, and every word is a leaf whose parents are affordance nodes. So the joint over the
-affordance nodes fits in one small array, computed once, and each word only contributes a factor
-P(word | its parents) broadcast over those states. A query is then: multiply the affordance joint
-by one likelihood vector per piece of evidence, normalise, and sum out what is not asked for. A
-word's P(present | evidence) is one dot product, all words at once one matrix–vector product.
-This agrees with pgmpy's VariableElimination (see `pgmpy_bridge`) to rounding error and is
-hundreds of times faster, which matters because fusion re-queries it for every gesture frame.
-
-Word CPT rows may be all zero (unseen="zero", parameters.py): such a row removes its parent
-configuration from the joint, as the factor product does in the reference toolbox, and every
-query renormalises over the configurations that remain.
-
-Evidence: hard (`{"Shape": "box"}`) or soft (`{"Action": [0.2, 0.7, 0.1]}`: a likelihood vector
-over the variable's values in definition order, scaled arbitrarily; it multiplies the prior, as
-pgmpy's virtual evidence does). A variable cannot be both observed and queried, nor carry both
-kinds of evidence. Evidence the model gives zero probability is an InputError.
+Only the affordance nodes (2,592 joint states in the article) have children, and every word is a
+leaf of them: so their joint is one small array computed once, and a query multiplies it by one
+likelihood vector per piece of evidence, normalises and sums out the rest; all words' P(present)
+is one matrix–vector product. It agrees with pgmpy (`pgmpy_bridge`) to rounding and is hundreds of
+times faster, which fusion needs at every gesture frame. An all-zero word row (unseen="zero")
+removes its parent configuration from the joint, as in the reference toolbox. Soft evidence is a
+likelihood vector in definition order, as pgmpy's virtual evidence; evidence the model gives
+zero probability is an InputError.
 """
 
 from __future__ import annotations
@@ -47,7 +38,7 @@ MAX_QUERY_WORK = 2**21
 
 @dataclass(frozen=True)
 class Posterior:
-    """P(variables | evidence): `table[i, j, ...]` for values[0][i], values[1][j], ..."""
+    """P(variables | evidence): `table[i, j, ...]` for `values[0][i]`, `values[1][j]`, ..."""
 
     variables: tuple[str, ...]
     values: tuple[tuple[str, ...], ...]

@@ -1,21 +1,11 @@
 """Conditional probability tables from counts, with the reference's priors and its unseen rule.
 
-Affordance nodes: BDeu Dirichlet prior with equivalent sample size `ess` (1 in the reference): a
-pseudo-count ess/(q·r) in every cell, q parent configurations, r values. A configuration never seen
-in training thus gets the uniform distribution.
-
-Word nodes: maximum likelihood. For a parent configuration never seen in training the counts are
-all zero and maximum likelihood is undefined. The rule is an explicit choice (`unseen`), and each
-is a different model (README.md beside this file compares them on the article's tables):
-
-- "absent" (default): P(absent) = 1. The configuration stays in the joint and the word is never
-  said there. A proper Bayesian network (what pgmpy requires); the article's "and"/"but" lists.
-- "zero": the column stays all zero, as the reference toolbox (BNT) leaves it. Summing the word
-  out then gives 0, not 1, so the configuration leaves the *joint*: every query renormalises over
-  the configurations every word has seen. This is the model behind the article's Table II.
-- "uniform": 1/r for every value.
-- "dirichlet": give word nodes a BDeu prior of equivalent sample size `word_ess` as well, which
-  changes every word column slightly, not only the unseen ones.
+Affordance nodes: a BDeu Dirichlet prior of equivalent sample size `ess` (1 in the reference), so
+a configuration never seen in training gets the uniform distribution. Word nodes: maximum
+likelihood, undefined for a parent configuration never seen; what goes there is an explicit
+choice (`unseen`: "absent", "zero", "uniform", "dirichlet"), and each is another model
+(docs/science/network.md compares them; "zero" is the reference toolbox's, behind the article's
+Table II).
 """
 
 from __future__ import annotations

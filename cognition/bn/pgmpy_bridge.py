@@ -1,25 +1,12 @@
-"""The network as a pgmpy model, and pgmpy's exact inference as the reference.
+"""The network as a pgmpy model, and pgmpy's exact inference as the reference our compiled
+inference must agree with (tested, benchmarked).
 
-pgmpy is the container other tools understand and the yardstick for our compiled inference:
-`reference_query` must agree with `BayesNet.query` to rounding error (tested, benchmarked).
-
-A network whose word columns are all proper distributions ("absent", "uniform", "dirichlet") is a
-pgmpy DiscreteBayesianNetwork. One with all-zero word columns (unseen="zero", the reference
-toolbox's semantics) is not: pgmpy's TabularCPD requires every column to sum to 1, and writing
-P(absent) = 1 there would be the "absent" model, which keeps those configurations in the joint.
-So that network becomes a pgmpy DiscreteMarkovNetwork whose factors are the CPTs exactly as they
-are (zero columns included) over each node's family: pgmpy's VariableElimination then computes
-the plain factor product, in which a zero column removes its parent configuration, and the
-result is normalised over what remains: the toolbox's junction tree, and our semantics.
-
-Soft evidence on a Bayesian network goes in as pgmpy's virtual evidence (pgmpy 1.x
-`VariableElimination.query(..., virtual_evidence=[TabularCPD])`): pgmpy adds a binary child
-`__VAR` with P(__VAR = 0 | VAR) = the given vector, observed at 0, so the vector acts as a
-likelihood. Because it is used as a probability column, we scale it to a maximum of 1 first (a
-likelihood's scale does not matter). pgmpy rebuilds the inference object around the augmented
-model in place, so every soft query here gets a fresh VariableElimination. pgmpy has no virtual
-evidence for Markov networks: there soft evidence is one more factor over the variable, the
-likelihood vector itself, on a copy of the network.
+A network with proper word columns is a pgmpy DiscreteBayesianNetwork. One with all-zero columns
+(unseen="zero") is not a Bayesian network for pgmpy, so it becomes a DiscreteMarkovNetwork of the
+CPTs exactly as they are: VariableElimination's plain factor product then drops the zero columns'
+configurations, as the toolbox did. Soft evidence is pgmpy's virtual evidence (scaled to a
+maximum of 1, and a fresh inference object per query, since pgmpy rewrites it in place); on a
+Markov network, one more factor on a copy of the network.
 """
 
 from __future__ import annotations

@@ -1,22 +1,12 @@
 """K2 structure search with the BIC score, as the reference (BNT's learn_struct_K2) runs it.
 
-K2 visits nodes in the definition's order. A node starts with no parents; at each step every
-remaining candidate is tried as one extra parent and the best one is kept if it strictly raises
-the node's score; the search stops when no candidate helps or `max_parents` is reached. Ties go to
-the candidate earliest in node order (MATLAB's `max` returns the first maximum).
-
-Which candidates: the roots (Action, Color, Shape, Size) get none; another affordance node may take
-any affordance node before it; a word node may take any affordance node (never a word).
-
-BIC of a family with counts N_jk (parent configuration j, value k), q configurations, r values,
-N rows:  loglik - 0.5 * q * (r - 1) * log N,  loglik = sum_jk N_jk log theta_jk.
-With theta the maximum-likelihood estimate this is exactly pgmpy's `structure_score.BIC`
-(the reference scorer here, used in tests and the benchmark). BNT instead plugs in the parameters
-it would learn, which for the affordance nodes carry a BDeu prior; `bnt_prior=True` does that. On
-the article's data both give the reference graph.
-
-Our scorer counts with one `np.bincount` per family over integer-coded rows, which is what makes
-the whole search take milliseconds instead of pgmpy's pandas group-bys.
+Nodes in the definition's order; each greedily takes the candidate parent that strictly raises
+its score, until none does or `max_parents`; ties go to the earliest candidate (MATLAB's `max`).
+The roots (Action, Color, Shape, Size) take none, an affordance node any affordance node before
+it, a word node any affordance node. BIC with maximum-likelihood parameters is pgmpy's
+`structure_score.BIC` (the reference in tests and the benchmark); `bnt_prior=True` plugs in the
+BDeu parameters BNT would learn. Both give the article's graph. One `np.bincount` per family is
+what makes the search take milliseconds.
 """
 
 from __future__ import annotations

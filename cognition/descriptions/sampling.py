@@ -1,25 +1,13 @@
 """Random sentences drawn the way HTK's HSGen draws them from the network HParse builds.
 
-What "uniform" means here was decided by the article's own samples, not by guessing. HParse turns
-the grammar into a network with one node per word *occurrence* (every alternative and every copy
-of a sub-rule gets its own nodes) joined through null nodes, and HSGen walks it choosing, at each
-word, uniformly among the words that can come next. Null nodes do not count as choices: after
-"the", the next word is one of the 10 words {big, small, green, yellow, blue, sphere, ball, cube,
-box, square} with probability 1/10 each, so a size word appears in 20 % of objects and a colour
-word in 3/8 of them, not 50 % each as "each [optional] is a coin flip" would give. Likewise after
-the agent, each of the six verbs offers five next words (V-s, has, just, V-ed, is), so the five
-verb forms are equally likely (1/5), while picking uniformly among the alternatives
-"V-s | [has] [just] V-ed | is V-ing" would give 1/3 to the V-ed family. The article's
-`sentence_1000samples.txt` and `sentence_10000samples_uniq.txt` agree with the first reading on
-every slot (chi-square, tests/test_descriptions_sampling.py) and reject the second by thousands.
-
-Formally: each slot's rule is compiled into its word positions with First / Follow / Last sets (a
-Glushkov automaton). From a word p the walk has |Follow(p)| next words inside the slot, plus, when
-p can end the slot, the |First(next slot)| words that can start the next one (1 at the sentence
-end). Leaving a slot is thus a choice among a fixed number of words whatever came before, so the
-slots stay independent and each slot's phrase distribution is computed once, exactly; sampling a
-sentence is then one categorical draw per slot. A slot that can be empty would couple neighbours;
-such grammars are refused.
+HSGen walks a network with one node per word occurrence and picks uniformly among the words that
+can come next, so after "the" each of 10 words has 1/10 (a size word in 20% of objects, not 50%),
+and the five verb forms are equally likely. The article's sampled lists agree with that reading
+on every slot and reject "each optional part is a coin flip" (chi-square,
+tests/test_descriptions_sampling.py). Each slot's rule is compiled to its First/Follow/Last sets
+(a Glushkov automaton): leaving a slot is a choice among a fixed number of words, so slots are
+independent and a sentence is one categorical draw per slot. A slot that can be empty would
+couple its neighbours; such grammars are refused.
 """
 
 from __future__ import annotations

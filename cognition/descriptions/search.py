@@ -1,23 +1,12 @@
 """N-best sentences: exact over the whole grammar, from a list of sentences, from random samples.
 
-The exact search never enumerates the ~9.3 million sentences. A sentence is a (prefix, suffix)
-pair of the space's two blocks and scores (Σ log P)/L with L = prefix length + suffix length. Among
-prefixes of the same length, a better sum gives a better sentence whatever suffix follows (same L),
-so a sentence of the global N-best has a prefix among the N best of its length group, and a suffix
-among the N best of its own; the candidates are those lists crossed (a few thousand pairs), scored
-exactly as the brute force scores them, and ranked by (score, key). Search over length is that
-grouping: every total length gets its best sums from the per-length lists, then lengths compete on
-sum/L.
-
-Two details keep it exact rather than nearly so:
-- ties: a group keeps the N best by (sum, key); equal sums stay equal after the same suffix is
-  added, and the key order of prefixes is the key order of the sentences they start;
-- rounding: sums are exact and a better sum always gives a strictly better score (see `space`),
-  so pruning by sum never drops a sentence that rounding would have tied with a kept one.
-
-`require` (a regex the sentence must match) is handled by asking for the exact top K, keeping the
-matches, and growing K fourfold until N matches are found or the grammar is exhausted: the top K
-is exact, so its first N matches are the N best matching sentences.
+The exact search never enumerates the sentences. A sentence is a (prefix, suffix) pair of the
+space's two blocks; among prefixes of one length a better sum gives a better sentence whatever
+suffix follows, so the global N-best's prefixes are among the N best of their length, and the
+same for suffixes. Those lists crossed (a few thousand pairs) are scored exactly and ranked by
+(score, key); lengths then compete on sum/L. Exact sums and key-ordered ties keep it exact, not
+nearly so. `require` asks for the exact top K, keeps the matches, and grows K fourfold until N
+match or the grammar is exhausted.
 """
 
 from __future__ import annotations

@@ -1,23 +1,12 @@
 """A grammar's sentences compiled for scoring: phrase tables, two blocks of slots, sentence keys.
 
-Why this shape: every sentence is one phrase per slot, chosen independently. Splitting the slots
-into a prefix block and a suffix block (3 + 3 slots for the article's grammar: 6,480 prefixes and
-1,440 suffixes) makes every per-call table small, while any sentence is still one (prefix, suffix)
-pair.
-
-Log-probabilities are rounded to multiples of 2**-32 (a change below 1.2e-10 per word) so that
-every sum of them is exact in floating point: a sentence's score then does not depend on the order
-its words are added in. Without that, "... the big ball but the big green ball ..." and the same
-sentence with the two objects swapped would differ in the last bit, and rounding noise, not the
-lexicographic rule, would order them. With it, the exact search, the brute force, scoring a file
-and `score_sentence` give bit-identical scores, and equal scores are real ties.
-
-Phrases are stored sorted by their words, and blocks are enumerated in row-major order, so the
-integer key of a sentence, `prefix_index * n_suffixes + suffix_index`, is its rank in
-lexicographic order of its phrase tuple. When no phrase of a slot is a word-prefix of another
-phrase of the same slot (true of the article's grammar, `lexicographic_keys` says so), that is
-exactly the lexicographic order of the sentence strings: the space sorts before every letter, so
-comparing space-joined strings is comparing word tuples. Ties are broken by this key.
+Every sentence is one phrase per slot, chosen independently; splitting the slots into a prefix
+and a suffix block (6,480 prefixes and 1,440 suffixes for the article's grammar) keeps every table
+small. Log-probabilities are rounded to multiples of 2**-32 so every sum is exact: a score does
+not depend on the order its words are added in, and the exact search, the brute force and
+`score_sentence` agree to the bit. Phrases are sorted and blocks enumerated in row-major order, so
+a sentence's key `prefix_index * n_suffixes + suffix_index` is its lexicographic rank (exactly the
+strings' order when no phrase of a slot is a word-prefix of another: `lexicographic_keys`).
 """
 
 from __future__ import annotations

@@ -1,41 +1,12 @@
 """Human demonstrations as the robot observes them: a gesture, an object, effects, maybe words.
 
-The robot learned its network from its own experiments, where it knew its action and measured
-the effects with its own sensors under controlled conditions. Watching a person is harder, and
-the generator makes every source imperfect in its own way, so that comparing them means something:
-
-- gesture: a skeleton gesture from `cognition.gestures.synthetic` with `HUMAN_GESTURES`, wider
-  variability than the generator's default: people differ in speed (0.55–1.7x), in how far they
-  lift or swing (amplitude 0.4–1.6x, so a sloppy grasp barely lifts and looks like a touch),
-  in phase timing; the tracker is noisier (1.5–4 cm hand jitter, 5 cm drift) and loses the hand
-  now and then (1.5% of frames jump). The HMMs trained on the default generator recognise it
-  perfectly; these gestures are misrecognised about one time in ten.
-- object: colour, shape and size uniformly at random; the robot sees them correctly (its object
-  features come from its own vision, as during exploration).
-- effects: what happens comes from `cognition.world.simulate_effects`, the same world the robot
-  explored, with log-normal noise `action_noise` 0.3 instead of the robot's 0.15 (a person pushes
-  harder or softer than the robot's fixed motor programs); the robot then measures each
-  continuous effect with a further log-normal error `perception_noise` 0.35 (someone else's hand
-  and object, seen from further away) before binning it into labels, so some perceived labels
-  differ from what happened; each effect is missed altogether (occlusion by the person's hand or
-  arm) with probability `p_effect_missed`.
-  With real robot data (salvi2012) the simulator does not apply: its effect values are cluster
-  labels whose meaning differs from the simulator's (there, a grasp has HandVel "fast"). Then
-  `RecordedEffects` draws what happens from the robot's own experiments with the same action
-  and object (same shape and size when there are any, else same shape, else same action), and the
-  robot misperceives each effect as another value with probability `p_misperceived` (0.1).
-- words: with probability `p_words` a narrator describes the demonstration with the narrator of
-  the robot's own training data (`cognition.bn.synthetic.Narrator`: same grammar, same verb
-  habits, occasional wrong verbs and dropped words); otherwise nobody speaks. The narrator sees
-  the true scene, not the robot's noisy perception of it.
-
-The noise of each source is drawn independently of the others: a gesture that is hard to
-recognise does not come with worse effects. That is an assumption, said in the report.
-
-Determinism: demonstration i of action a depends only on (seed, a, i), so a set of N
-demonstrations per action is the first N of a larger set with the same seed (the ablation over
-the number of demonstrations compares nested sets), and the gesture's seed is drawn from the
-same stream.
+Watching a person is harder than the robot's own experiments, and each source is imperfect in its
+own way so that comparing them means something: gestures vary more than the default generator's
+(`HUMAN_GESTURES`), effects are noisier and misperceived or missed, and a narrator speaks with
+probability `p_words`; with the article's robot data, `RecordedEffects` draws effects from the
+robot's own experiments instead. docs/science/development.md gives the figures and why. The
+sources' noises are independent (an assumption, said in the report). Demonstration i of action a
+depends only on (seed, a, i), so N per action are the first N of a larger set with the same seed.
 """
 
 from __future__ import annotations

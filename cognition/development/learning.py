@@ -1,42 +1,13 @@
-"""From the robot's own experience to recognising a human: label, train, calibrate, evaluate.
+"""From the robot's own experience to recognising a person: label, train, calibrate, evaluate.
 
-The steps of the article's learning story (SPEC.md, last sentence of "The idea"):
-
-1. self phase: the Affordance–Words network learned from the robot's exploration data;
-2. observation phase: for each human demonstration, P_BN(A | object, perceived effects, words);
-3. one gesture HMM per action trained on the actions the network inferred;
-4. evaluation on held-out demonstrations whose true actions are known.
-
-Labelling rule (step 2): **keep a demonstration when its network posterior is at least
-`threshold` (0.9) and label it with the posterior's most probable action; drop the rest.** Why
-not weight: hmmlearn's EM has no per-sequence weights, and faking them by repeating sequences
-turns a continuous weight into a crude integer and multiplies training time. Why drop rather than
-keep everything: a wrong label does double damage (it pulls the wrong action's model towards the
-gesture and leaves the right one without it), while a dropped demonstration only costs data. In
-the default run (20 per action, seed 0) the network labels 95% of the watched demonstrations
-right; the rule keeps 52 of 60, all of them right (98.5–100% across the ablation). A floor
-(`min_per_action`) keeps every action trainable: when fewer demonstrations of one inferred
-action pass the threshold, the most confident ones labelled with it are kept anyway. The report
-gives label accuracy before and after the rule.
-
-Word evidence: a heard sentence is a bag of words; every word node of the network gets soft
-evidence [P(heard | absent), P(heard | present)] = [ε, 1−ε] if the word was heard and
-[1−ε, ε] if not (ε = `word_error`, 0.02: a hearing channel). Hard evidence would be the bag-row
-semantics of the training data, but the narrator describes the true scene while the robot
-perceives noisy effects, and a word the network learned never to occur with the perceived effects
-(maximum-likelihood word CPTs have zeros) would then make the evidence impossible.
-
-Fusing gesture and network (step 4d) needs P_HMM(A | G) that means what it says. Normalising
-three HMM likelihoods of a 100-frame gesture gives posteriors of 0 or 1 even when wrong, because
-the HMM treats correlated frames as independent evidence; the fused model then just copies the
-HMM. The gesture evidence is therefore tempered: P_HMM(A | G) ∝ exp(κ · (1/T) log L(G | A)),
-with (1/T) log L the per-frame log-likelihood the article plots and κ the "number of independent
-frames' worth" of evidence a gesture carries. κ is calibrated by the robot on its own watched
-demonstrations, with no true labels: 2-fold cross-fitting (train on one half of the kept
-demonstrations, score the other half) and κ maximising the likelihood of the inferred labels.
-When a fold would lack an action, κ = 1 (the per-frame score itself). Accuracy of the HMMs alone
-does not depend on κ (it keeps the argmax); the report also gives the fused accuracy with the
-untempered posterior, so the effect of this choice is visible.
+The steps: the network from the robot's exploration; P_BN(A | object, perceived effects, words)
+for each watched demonstration; one gesture HMM per action trained on the inferred actions;
+evaluation on held-out demonstrations. A demonstration is kept when its posterior reaches
+`threshold` and labelled with its most probable action (a wrong label does double damage; a
+dropped one only costs data); heard words are soft evidence through a hearing channel
+(`word_error`); the gesture evidence is tempered by κ, calibrated by cross-fitting on the robot's
+own watched demonstrations, because untempered HMM posteriors are 0 or 1 even when wrong.
+docs/science/development.md says why each choice.
 """
 
 from __future__ import annotations

@@ -1,18 +1,12 @@
-"""Joining what the services see into the reasoner's beliefs, per gesture (SPEC.md P_comb).
+"""Joining what the services see into the reasoner's beliefs, per gesture (P_comb).
 
-A gesture's anticipations (its belief at every frame, fused with the object it is about) need
-the object seen when the gesture began; its outcome (the final belief, the effects observed and
-the word probabilities) needs its final belief, its end and its measured effects. All are joined
-by segment id, in whatever order they arrive. Gestures are emitted strictly in segment order
-(everything of gesture n before anything of n + 1), so the output streams are the same sequence
-whatever the interleaving of the inputs.
-
-The object segmenter always answers (with the reason when it could not see), so while it is
-there (`objects_present`, from its liveliness) it is waited for, however late its answer comes.
-Only a segmenter that is not there is waited out, by a deadline in stream time (`deadline_s` of
-skeleton time past the instant, told by the beliefs and events), or at once when
-`expect_objects` is off. A deadline in stream time alone would not do: stream time can race
-ahead of a slow link (a replay as fast as possible), and an answer on its way would be lost.
+A gesture's anticipations need the object seen when it began; its outcome needs its final
+belief, its end and its measured effects. All are joined by segment id in whatever order they
+arrive, and gestures are emitted strictly in segment order, so the outputs are the same whatever
+the inputs' interleaving. The object segmenter always answers (with the reason when it could not
+see), so while it is there it is waited for however late; only an absent one is waited out, by a
+deadline in stream time. A stream-time deadline alone would lose an answer on its way when stream
+time races ahead of a slow link (a replay as fast as possible).
 """
 
 from __future__ import annotations

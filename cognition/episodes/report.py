@@ -1,16 +1,11 @@
-"""The lines a person reads about each gesture, the same offline (`beyond analyse`) and on the
-bus (`beyond up`).
+"""The lines a person reads about each gesture, the same offline (`beyond analyse`) and on the bus.
 
-Lines depend only on contents: a gesture starts, the most likely action changes, an effect is
-anticipated before the end, the gesture ends, it is recognised, its description. A gesture's
-lines are released as one block in frame order once it is complete (ended, recognised,
-described, and its beliefs all in), and blocks in segment order, so concurrent services
-interleaving their messages differently never change what is printed.
-
-"Its beliefs all in" is the final belief, or a belief about a later gesture: beliefs come from
-one publisher, in order, so either follows every belief about the gesture. The description does
-not: it comes down another path (reasoner, describer) and can overtake a belief that was held up
-(a gap being filled from a publisher's cache on a loaded machine), whose line was then missing.
+Lines depend only on contents. A gesture's lines are released as one block in frame order once it
+is complete (ended, recognised, described, and its beliefs all in), and blocks in segment order,
+so services interleaving their messages differently never change what is printed. "Its beliefs
+all in" is the final belief, or a belief about a later gesture (beliefs come from one publisher,
+in order); the description comes down another path and can overtake a belief held up on a
+loaded machine, so it does not count.
 """
 
 from __future__ import annotations

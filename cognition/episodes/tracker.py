@@ -1,26 +1,13 @@
 """Gesture tracking over a skeleton stream: segmentation, streaming recognition, final belief.
 
-Push one hand position per frame with its stamp; get back what happened at that frame: a gesture
-started (from the frame the segmenter places its onset, which can be a few frames back: those
-are caught up), the belief P_HMM(A | G_1^t) for each frame of the gesture, and at its end the
-final belief over exactly its frames followed by the end. A started gesture is cancelled, with
-the reason, when the segmenter withdraws it (not a gesture after all: see
-`cognition.gestures.segmentation`), when the stream ends before it does, or when no action's
-model fits it (its per-frame log-likelihood under the best model is below the models' floor,
-`GestureModels.floor`): a movement nobody can classify is not described as the least bad
-action. So every start is answered, by an end or a cancel.
-
-The recogniser sees the features its models were trained on (`GestureModels.features`): the
-position frame by frame, or the motion relative to the gesture's first frame, which the tracker
-computes from the segmenter's smoothed positions as the gesture unfolds.
-
-`ref` is whatever the caller wants handed back with each event (a message header): events say
-which input frame they derive from, so a service can copy that frame's stamp and sequence.
-
-The final belief is the streaming recogniser's own at the gesture's last frame (it has run over
-exactly the gesture's frames since its start), so a gesture's end costs nothing more than a
-frame; it is recomputed over the gesture's frames only when the segmenter's segment is not the
-one the recogniser followed.
+Push one hand position per frame with its stamp; get back what happened: a gesture started (at
+the onset the segmenter places, a few frames back, caught up), the belief P_HMM(A | G_1^t) for
+each frame, and at its end the final belief then the end. Every start is answered by an end or a
+cancel with the reason: the segmenter withdrew it, the stream ended first, or no action's model
+fits it (below `GestureModels.floor`): a movement nobody can classify is not described as the
+least bad action. `ref` (a message header) is handed back with each event, so a service can copy
+that frame's stamp. The final belief is the streaming recogniser's own at the last frame, so an
+end costs one frame.
 """
 
 from __future__ import annotations

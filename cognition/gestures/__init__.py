@@ -1,23 +1,12 @@
 """Gesture recognition: P_HMM(A | G_1^t) from 3-D hand trajectories, one HMM per action.
 
-The API other modules use (fusion, services, reproduction, the simulator):
-
-    from beyond_self.cognition.gestures import load_models, StreamingRecognizer, gesture_features
-    models = load_models("models.json")          # or the article's .mat; default_models()
-    x = extract_features(hand, torso)            # (T, 3): the hand in body units (metres in)
-    features = gesture_features(models.features, x, start, stop)   # the models' feature space
-    rec = StreamingRecognizer(models)            # priors=None: equal priors
-    for f in features:
-        r = rec.push(f)
-        r.posterior                              # P_HMM(A | G_1^t) in models.actions order
-
-For a live or recorded stream, `cognition.episodes.GestureTracker` does it all frame by frame:
-the segmenter (`GestureSegmenter`: one gesture per execution, rest, drift and tracker failures
-withdrawn), the features as the gesture unfolds, and a cancel for a movement no model fits. For
-the article's hand logs: positions = the logged values times 0.001 (`hand_log_stream`).
-`BatchRecognizer` updates many streams at once; `recognize_sequence` runs a whole gesture;
-`synthesize_gesture`/`synthesize_continuous` make seeded skeleton streams. Heavy dependencies
-(hmmlearn, scipy.io) are imported only by the functions that need them.
+`load_models` (ours or the article's .mat; `default_models()`), `extract_features` and
+`gesture_features` (the models' feature space), `StreamingRecognizer` (one `push` per frame,
+`posterior` in `models.actions` order), `BatchRecognizer` (many streams at once),
+`recognize_sequence` (a whole gesture), `synthesize_gesture`/`synthesize_continuous` (seeded
+skeleton streams). For a live or recorded stream, `cognition.episodes.GestureTracker` does it all
+frame by frame, with the segmenter. The article's hand logs are in mm (`hand_log_stream` scales
+them). hmmlearn and scipy.io are imported only by the functions that need them.
 """
 
 from beyond_self.cognition.gestures.evaluation import (

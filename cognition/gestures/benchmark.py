@@ -1,15 +1,10 @@
 """Gesture models side by side on recordings of people (`beyond gesture evaluate compare`).
 
-One call evaluates, on a folder of the article's hand recordings:
-- our default models (trained on synthetic gestures only) on every execution the segmenter
-  finds: what `beyond up --log` describes;
-- leave-one-recording-out cross-validation on the recordings alone, and on the recordings
-  mixed with the robot's synthetic experience (no model sees the recording it is tested on);
-- leave-one-gesture-out cross-validation on the recordings alone (other executions of the same
-  recording may train the model: easier, and what the article's data allows for every action);
-- the article's own HMMs (`HMM_M3_Q6_mixsplit.mat`, in the "position" space) and our default
-  models on the article's own hand-picked ranges (`ARTICLE_RANGES`), the only gestures the
-  article ever tested its models on.
+On a folder of the article's hand recordings: our default models on every execution the
+segmenter finds (what `beyond up --log` describes); leave-one-recording-out cross-validation on
+the recordings alone and mixed with synthetic gestures; leave-one-gesture-out on the recordings
+alone; and the article's HMMs and ours on the article's own hand-picked ranges
+(`ARTICLE_RANGES`), the only gestures the article tested its models on.
 """
 
 from __future__ import annotations

@@ -1,20 +1,11 @@
 """Labelled gestures from the places the CLI accepts: synthetic, or recordings on disk.
 
-- `synthetic`: the seeded generator (`cognition.gestures.synthetic`), N gestures per action,
-  each cut by the default segmenter as a robot watching would cut it.
-- a folder of the article's hand recordings (like `human_data/`): every sub-folder named
-  `<action>...` (grasp1_hand, tap1_hand, touch1_hand, push1_hand, tap_notable_seated_1, ...)
-  holds executions of one action; each is cut into executions by the segmenter. `push`
-  recordings are left out unless `push_as` names the action to count them as (the article used
-  its push model as touch; with real touch recordings at hand, mixing a different movement into
-  touch blurs that class).
-- one recording folder (or its data.log) named the same way.
-- a skeleton stream (joint name -> (T, 3) positions in metres, as in an MCAP recording, which
-  `beyond gesture` reads through `runtime.recording`): `skeleton_gestures` labels its gestures,
-  cut at given frame bounds or by the segmenter.
-
-Every gesture keeps the recording it came from, so cross-validation can leave whole recordings
-out, and its frames in both feature spaces (`in_space`).
+`synthetic` (the seeded generator, cut by the default segmenter), a folder of the article's hand
+recordings whose sub-folders are named after their action (`push` left out unless `push_as` says
+what to count it as: the article used its push model as touch), one such recording, or a
+skeleton stream from an MCAP recording (`skeleton_gestures`, cut at given bounds or by the
+segmenter). Every gesture keeps the recording it came from, so cross-validation can leave whole
+recordings out, and its frames in both feature spaces (`in_space`).
 """
 
 from __future__ import annotations

@@ -1,14 +1,10 @@
 """The gesture models every service and demo uses by default: HMMs trained on synthetic gestures.
 
-They have never seen a recording of a person: they are trained on the simulator's gestures
-(`cognition.gestures.synthetic`, whose shapes and tempi follow the article's recordings:
-`beyond gesture realism` prints the comparison), cut by the default segmenter, in the "motion"
-feature space. Training takes a few minutes, so the result ships with the package. It is
-regenerated, byte for byte, by
-
-    beyond gesture train -o cognition/gestures/data/synthetic_models.json
-
-(60 synthetic gestures per action, seed 0, 6 states, 3 Gaussians, 30 EM iterations at most).
+They have never seen a person: they are trained on the simulator's gestures (whose shapes and
+tempi follow the article's recordings), in the "motion" feature space. Training takes minutes,
+so the result ships with the package; `beyond gesture train -o
+cognition/gestures/data/synthetic_models.json` regenerates it byte for byte (60 gestures per
+action, seed 0, 6 states, 3 Gaussians, at most 30 EM iterations).
 """
 
 from __future__ import annotations

@@ -1,29 +1,13 @@
 """The features gestures are recognised on, the same in training and in recognition.
 
-Everything starts from the hand's position relative to the torso in "body units": x and z divided
-by a horizontal body size (0.33 m), y by a vertical one (0.23 m). This is exactly what the
-recording pipeline of the article wrote into the YARP hand logs (scaled by 1000), so logs (times
-0.001), skeletons and the article's MATLAB models share it; body units make it independent of
-how big the person is and of where they stand or sit relative to the sensor. `body_scale`
-measures the two sizes on a skeleton stream when a per-person normalisation is wanted.
-
-Axes follow the depth sensor (OpenNI/Kinect camera frame): x to the right, y up, z away from the
-sensor; a person facing the sensor reaches towards it with negative z.
-
-Two feature spaces, named in every model file (`GestureModels.features`):
-
-- "position" (D = 3): that position, frame by frame. The article's models were trained on it.
-- "motion" (D = 7): where the hand is relative to where the gesture began, how fast it moves,
-  and how long ago the gesture began: [p_t - p_s, (p_t - p_{t-3}) * 30 / 3, (t - s) / 30]
-  (body units, body units per second and seconds at the nominal 30 frames/s), p the position
-  after a causal 5-frame median (`HandSmoother`, against tracker glitches), s the gesture's
-  first frame. Relative to the start, it does not depend on where the person stands, sits or
-  rests the hand; velocity and time carry the tempo that tells a careful grasp (about 5 s,
-  with a hold) from a quick touch (about 3 s) whose paths are much alike. The default models
-  use it.
-
-Causal on purpose: a streaming recogniser sees one frame at a time, so a feature may not depend
-on the future. Training runs the same functions over whole arrays.
+Everything starts from the hand relative to the torso in "body units" (x, z over 0.33 m, y over
+0.23 m), exactly what the article's hand logs hold (times 1000), in the depth sensor's frame (x
+right, y up, z away). Two spaces, named in every model file: "position" (D = 3, the article's
+models) and "motion" (D = 7: the hand relative to the gesture's first frame, its velocity and
+the time since the start, after a causal 5-frame median). Motion does not depend on where the
+person stands or rests the hand, and its velocity and time carry the tempo that tells a grasp
+(about 5 s, with a hold) from a touch (about 3 s) whose paths are alike. Every feature is causal:
+a streaming recogniser sees one frame at a time.
 """
 
 from __future__ import annotations

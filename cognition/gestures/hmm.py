@@ -1,23 +1,11 @@
 """Left-to-right GMM-HMMs, one per action: the model class, training, and the model file format.
 
-One class holds every gesture model, whether trained here with hmmlearn or loaded from the
-article's MATLAB files, so the recogniser, the evaluation and the services never care where a
-model came from.
-
-Model file format (JSON, never pickle; floats are written with Python's shortest round-trip
-representation, so a save/load cycle is bit-exact):
-
-    {"format": "beyond-self/gesture-models", "version": 2,
-     "features": "motion" | "position",      # the feature space (cognition.gestures.features)
-     "floor": -30.0 | null,                  # below this per-frame log-likelihood under every
-                                             # model, a gesture is no action (cancelled)
-     "actions": ["grasp", "tap", "touch"],
-     "models": {"grasp": {"startprob": [Q], "transmat": [Q][Q] (row = from-state),
-                          "weights": [Q][M], "means": [Q][M][D], "covars": [Q][M][D][D]}, ...},
-     "extra": {"garbage": {...same...}},   # models kept out of the action posterior
-     "meta": {...provenance: source, training configuration, sequence counts...}}
-
-Version 1 files (no "features", no "floor") hold "position" models and still load.
+One class holds every gesture model, trained here or loaded from the article's MATLAB files, so
+nothing downstream cares where a model came from. A model file is JSON, never pickle, with floats
+written in shortest round-trip form so a save/load cycle is bit-exact: its feature space, its
+floor (below it under every model a gesture is no action), the actions and each model's start
+probabilities, transitions, weights, means and covariances (docs/science/gestures.md).
+Version 1 files hold "position" models and still load.
 """
 
 from __future__ import annotations

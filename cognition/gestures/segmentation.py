@@ -1,34 +1,13 @@
 """Cutting a continuous hand stream into gestures: one per execution, cut to the movement.
 
-Every action on an object is an excursion of the hand: it leaves where it rests, reaches
-forward to the object, acts, and comes back. The segmenter follows that, on the torso-relative
-trajectory in body units (`cognition.gestures.features`), smoothed by a causal median against
-tracker glitches:
-
-- rest: the hand stays within `rest_radius` of one place for `rest_frames` frames; that place
-  is the rest pose (re-estimated at every rest, so slow drift is followed). No gesture starts
-  before the hand has been seen resting once.
-- start: the hand goes `leave` further forward (-z) than its rest pose. The gesture is placed
-  back to the last frame the hand was within `near` of the rest pose (at most `max_lead` frames
-  earlier): the movement's onset, not the moment it was noticed.
-- end: a gesture must reach `reach` forward; it is over when the hand is on its way back, its
-  distance to the rest pose fallen below (1 - `back`) of the farthest it went. The end is placed
-  back where the hand had come `turn` of the way: the movement at the object is kept, most of
-  the way home is not (on the article's `tap1_hand` this recovers the hand-picked ranges
-  216-351, 401-511 and 557-664 within a few frames).
-- not gestures: an excursion that comes back without reaching (drift, fidgeting), one whose
-  frames are more than `max_jumps` tracker jumps (steps above `jump` per frame, which no hand
-  makes), one shorter than `min_gesture` or longer than `max_gesture` frames. A gesture
-  reported as started and then found to be one of these is reported `Discarded`, with why.
-  No gesture starts while a jump is still inside the median's window: a tracker that has lost
-  the hand starts nothing.
-
-After an end the segmenter waits for the hand to rest again (or to come back near its rest
-pose) before another gesture can start, so the way home never starts one.
-
-The segmenter is causal: `GestureSegmenter.push` reports each gesture as soon as its end is
-known (a third of a second or so after the end it places), so services use it on live streams;
-`segment_gestures` runs it over an array.
+Every action on an object is an excursion of the hand from its rest pose and back. On the
+smoothed torso-relative trajectory: the rest pose is where the hand stays still (re-estimated at
+every rest, so drift is followed); a gesture starts when the hand goes `leave` forward of it,
+placed back to where it left; it must reach `reach` and ends on the way back, placed where the
+hand had come `turn` of the way. An excursion that never reaches, is mostly tracker jumps, or is
+too short or long is reported `Discarded`, with why. After an end the hand must rest again. The
+segmenter is causal: `GestureSegmenter.push` reports a gesture once its end is known, so services
+use it live; `segment_gestures` runs it over an array. docs/science/gestures.md gives the figures.
 """
 
 from __future__ import annotations

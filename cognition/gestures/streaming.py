@@ -1,22 +1,12 @@
 """Frame-by-frame recognition: P_HMM(A | G_1^t) updated at every frame t.
 
-Scaled forward recursion, once per frame and per model (O(Q^2)): alpha_t = (alpha_{t-1} A) * b(x_t),
-normalised to sum 1, with the log of each normaliser accumulated, so log L(G_1^t | A) is a running
-sum and nothing under- or overflows however long the stream. Emissions are computed as log
-densities and shifted by their per-model maximum before exponentiation; in the rare frame where
-every reachable state's emission underflows even so, that model's update is redone in the log
-domain. Results agree with hmmlearn's `score` on every prefix (a test checks 1e-6).
-
-All K models (padded to a common Q and M) are evaluated together: the K*Q*M Gaussian log
-densities of a frame are one matrix product of a quadratic feature vector with a precomputed
-table, so one stream costs a handful of numpy calls per frame and many streams
-(`BatchRecognizer`) share the same calls.
-
-Usage:
-    rec = StreamingRecognizer(models)            # equal priors; or priors=[...] in action order
-    for x in features:                           # x: one feature vector (D,)
-        r = rec.push(x)                          # r.t, r.loglik, r.normalized, r.posterior
-    recognize_sequence(models, features)         # the same for a whole (T, D) array at once
+A scaled forward recursion per frame and model, with the log of each normaliser accumulated, so
+log L(G_1^t | A) is a running sum and nothing under- or overflows however long the stream; a
+frame whose every emission underflows is redone in the log domain. It agrees with hmmlearn's
+`score` on every prefix (1e-6). All models are evaluated together: a frame's Gaussian log
+densities are one matrix product of a quadratic feature vector with a precomputed table, so many
+streams (`BatchRecognizer`) share the same few numpy calls. `StreamingRecognizer.push` takes a
+frame; `recognize_sequence` a whole (T, D) array.
 """
 
 from __future__ import annotations

@@ -1,25 +1,12 @@
 """Seeded synthetic skeleton streams of a seated person doing grasp, tap and touch on a table.
 
-The embedded default data set for training and testing without the article's recordings, and
-the source of `beyond simulate`'s human skeleton.
-
-Coordinate frame (as a Kinect/OpenNI depth sensor reports it, and as the article's logs are):
-metres, origin at the sensor, x to the right, y up, z away from the sensor. The person sits
-facing the sensor about 2 m away, so reaching forward means decreasing z; the acting hand is the
-right one, on the +x side of the torso (OpenNI mirrors the image, as in the article's logs). The
-table top is below the torso joint and the object lies on it between the person and the sensor.
-`SkeletonStream.joints["right_hand"]` is the hand position an object segmenter wants;
-`SkeletonStream.object_xyz` is the object's centre.
-
-Gestures, each from rest back to rest, with minimum-jerk motion between key poses:
-- grasp: vertical approach from above, close (hold), lift with the object, put it down, release,
-  retract;
-- tap: lateral approach at table height from the side, brief fast stroke that pushes the object
-  away along -x (it slides or rolls, then stops), retract;
-- touch: vertical approach from above, brief contact, retract.
-Variability: speed (global and per phase), amplitude of every offset, person size and position,
-object and rest positions, sensor noise (white jitter plus slow drift), optional tracking
-glitches.
+The default data set for training and testing without the article's recordings, and the person in
+`beyond simulate`. The frame is the depth sensor's (metres, x right, y up, z away; the person
+about 2 m away, acting with the right hand on the +x side, as the article's mirrored logs are).
+Each gesture goes from rest to rest with minimum-jerk motion between key poses: grasp from above
+with a hold and a lift, tap sideways at table height pushing the object along -x, touch from
+above with a brief contact. Speed, amplitude, person size and position, object and rest
+positions, sensor jitter and drift and tracking glitches vary.
 """
 
 from __future__ import annotations

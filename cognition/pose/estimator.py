@@ -1,5 +1,5 @@
 """The pose model: MediaPipe 0.10.14's BlazePose (`solutions.pose`), the full landmark network,
-run from the files its wheel bundles (README, "Watching a person through a camera").
+run from the files its wheel bundles (docs/decisions.md: why this version).
 
 For a video the model tracks (`static_image_mode=False`): the person detector runs only when the
 landmarks of the previous frame are lost, and the landmarks are smoothed over frames, so the

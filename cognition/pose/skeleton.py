@@ -1,23 +1,13 @@
 """MediaPipe's 33 pose landmarks -> the joints of the article's Kinect/OpenNI skeletons.
 
-The gesture models read a skeleton the way the article's depth sensor wrote it
-(`cognition.gestures.synthetic`, `cognition.gestures.features`): joints named `head`, `neck`,
-`torso`, `{left,right}_{shoulder,elbow,hand}`, in metres, x to the person's right (OpenNI
-mirrors the image), y up, z away from the sensor; the features take the hand relative to the
-torso. MediaPipe's `pose_world_landmarks` are metres too, with the origin between the hips, x
-to the image's right, y down and z away from the camera (smaller is nearer). A person facing a
-camera has their right side on the image's left, so the mapping is a half turn about the
-optical axis, then a shift putting the torso at the origin:
-
-    (x, y, z)_ours = (-x, -y, z)_mediapipe - torso
-
-A joint OpenNI has and BlazePose has not is the mean of the landmarks that bound it (`neck`:
-the shoulders; `torso`: shoulders and hips, OpenNI's mid-spine; `head`: the ears, the head's
-centre rather than the nose on its surface; a `hand`: wrist, index and little-finger knuckles,
-the palm's centre as OpenNI tracks it), with the least confidence of them. A landmark's
-confidence is MediaPipe's `visibility` (the probability that it is in the image and not
-occluded), so a wrist outside the frame is there, guessed, with a confidence near 0, as an
-OpenNI "inferred" joint is.
+The gesture models read `head`, `neck`, `torso`, `{left,right}_{shoulder,elbow,hand}` in metres,
+x to the person's right (OpenNI mirrors the image), y up, z away, the hand taken relative to the
+torso. MediaPipe's world landmarks have x to the image's right and y down, and a person facing
+the camera has their right side on the image's left: so ours = (-x, -y, z) of MediaPipe's, minus
+the torso. A joint BlazePose lacks is the mean of the landmarks that bound it (neck: shoulders;
+torso: shoulders and hips; head: ears; hand: wrist and two knuckles), with their least
+confidence; a confidence is MediaPipe's `visibility`, so a wrist outside the frame is there,
+guessed, with a confidence near 0, as an OpenNI "inferred" joint.
 """
 
 from __future__ import annotations

@@ -1,19 +1,11 @@
 """The table model: what each pixel looks like with nothing on the table.
 
-Two ways to get it, because the robot does not always see an empty table first:
-- `BackgroundModel.fit(frames)`: from a few frames of the empty table (per-pixel median), the
-  classic background-subtraction model, exact about texture and vignetting;
-- `BackgroundModel.from_frame(frame)`: from the frame itself, assuming the objects cover a small
-  part of it. The frame is reduced to block means (8×8 px at 320×240), a wide median gives a first
-  table estimate, blocks that differ from it (objects, hands, their shadows) are masked and filled
-  by normalised convolution from the surrounding table, and the result is interpolated back to
-  full resolution. Smooth illumination (fall-off to the corners) is kept; objects are not.
-
-Comparison with the frame uses the brightness/chromaticity decomposition of Horprasert et al.
-(1999): a pixel I against its background B has brightness alpha = <I, B> / <B, B> (a shadow has
-alpha < 1) and chromaticity distortion |I - alpha B| / |B| (near 0 for a shadow, large for a
-coloured object). Shadows darken the table without changing its colour, so they are told apart
-from objects here rather than by their shape.
+`BackgroundModel.fit(frames)` takes the per-pixel median of a few frames of the empty table;
+`BackgroundModel.from_frame(frame)` estimates it from the frame itself (block means, a wide
+median, objects masked and filled from the surrounding table), since a robot does not always see
+an empty table first. A pixel is compared with it by Horprasert et al.'s (1999) brightness and
+chromaticity distortion: a shadow darkens the table without changing its colour, so shadows are
+told from objects here rather than by their shape (README.md in this folder).
 """
 
 from __future__ import annotations

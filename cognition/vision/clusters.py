@@ -1,26 +1,11 @@
 """Learned discretisation: continuous measurements -> the network's values, by clusters.
 
-As in the article, the robot first explores (many experiments), then clusters each measurement
-(k-means) into as many clusters as the variable has values, and a person names the clusters. Here
-the "person" naming clusters of synthetic data is the exploration's ground truth: each cluster
-gets the value most of its members truly had (a one-to-one assignment by the Hungarian method on
-the contingency table). The names are plain strings in the JSON file, so a person can rename
-them by editing it (or with `ClusterModel.rename`).
-
-Per variable: which features, a transform (`log` for speeds, durations and sizes, which spread
-over decades), an optional standardisation (z-scores with the exploration's mean and spread, for
-features of different units), the cluster centres in that space, and each cluster's spread (for
-a soft assignment). Nothing is a hand-set threshold: boundaries fall half-way between learned
-centres.
-
-File format (JSON, versioned; `FORMAT`, `VERSION`):
-    {"format": "beyond-self/vision-clusters", "version": 1, "created_by": "...",
-     "camera": {...}, "feature_definitions": {...},
-     "variables": {"Color": {"features": ["L", "a", "b"], "transform": "none",
-                             "standardize": false, "offset": [...], "scale": [...],
-                             "centers": [[...], ...], "spread": [...], "names": [...]},
-                   ...},
-     "training": {...}}
+As in the article, the robot explores, clusters each measurement (k-means, as many clusters as
+the variable has values) and a person names the clusters; here the exploration's truth names
+them (Hungarian assignment on the contingency table), as plain strings a person can edit. Per
+variable: its features, a transform (`log` for quantities spread over decades), an optional
+standardisation, the centres and spreads. No hand-set thresholds: boundaries fall half-way between
+learned centres. The JSON file format is in README.md in this folder.
 """
 
 from __future__ import annotations

@@ -1,19 +1,10 @@
-"""The effects of an action, measured on tracks: object speed, hand speed, object–hand relative
-speed and contact duration (continuous), then discretised by the learned clusters.
+"""The effects of an action, measured on tracks, then discretised by the learned clusters.
 
-Definitions (the same ones the synthetic world's `Effects` are defined by, so measurement and
-truth can agree):
-- object speed: the peak speed of the object's centroid over the recording;
-- hand speed: the peak hand speed before the first contact (the approach);
-- relative speed: the peak of |v_object - v_hand| from the first contact (2 frames in, so the
-  approach does not count) to `post_s` (0.3 s) after the last one: how the object leaves the hand
-  (pushed away, carried, left behind);
-- contact: the longest run of frames in which the hand is within 2 px of the object's blob (gaps
-  of one frame bridged), in seconds.
-Pixels become metres through the camera model before anything is differentiated: the object at
-the table plane, the hand at its height (from the skeleton, else an assumed 5 cm above the
-table), so perspective does not inflate the speed of a hand nearer the camera. Velocities are
-central differences of lightly smoothed positions (`tracking.velocities`).
+Object speed (its peak), hand speed (the approach's peak), object–hand relative speed (from just
+after contact to 0.3 s after the last) and contact duration, defined as the synthetic world's
+`Effects` are, so measurement and truth can agree. Pixels become metres through the camera model
+before anything is differentiated (the object at the table plane, the hand at its height), so
+perspective does not inflate the speed of a hand nearer the camera.
 """
 
 from __future__ import annotations

@@ -1,22 +1,11 @@
 """Continuous features of one segmented object: where it is, how big, what colour, what shape.
 
-Shape descriptors are chosen to be scale-, rotation- and position-invariant, so the clusters
-learned on the synthetic table transfer to a real camera:
-- circularity 4πA/P², 1 for a disc, π/4 ≈ 0.785 for a square, lower for elongated shapes. The
-  perimeter P is the Cauchy–Crofton estimate from boundary crossings in eight directions, which,
-  unlike counting boundary pixels, is nearly unbiased (≈1%) for digitised discs and boxes at
-  any orientation;
-- rectangularity A / (area of the minimum-area enclosing rectangle), 1 for a box, π/4 for a
-  disc or an ellipse of any elongation: the most telling descriptor of box versus round;
-- convexity: perimeter of the convex hull / perimeter (1 for convex shapes), and solidity
-  A / (convex hull area);
-- eccentricity of the ellipse with the same second moments, 0 for a disc.
-Hull and enclosing rectangle are computed on pixel centres and grown by half a pixel (Steiner's
-formula, A + P/2 + π/4, and +1 px per side), which undoes the shrinking of small shapes.
-
-Colour is the mean CIELAB of the object's pixels. Size is the equivalent diameter (the diameter of
-a disc of the same area) in metres at the table plane, through the camera's pixels-per-metre
-(`tabletop.Camera`, whose default matches a 320×240 view of a 1 m wide table).
+Shape descriptors are scale-, rotation- and position-invariant, so clusters learned on the
+synthetic table transfer to a real camera: circularity (with a Cauchy–Crofton perimeter, nearly
+unbiased at any orientation), rectangularity (the most telling of box versus round), convexity,
+solidity and eccentricity; hull and rectangle are grown by half a pixel, which undoes the
+shrinking of small shapes. Colour is the mean CIELAB; size the equivalent diameter in metres at
+the table plane (README.md in this folder).
 """
 
 from __future__ import annotations

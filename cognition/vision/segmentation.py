@@ -1,19 +1,11 @@
 """From a frame to object blobs (and the hand's blob): foreground, shadows, components.
 
-The steps, each for a reason:
-1. compare every pixel with the table model (`background.py`): brightness alpha and chromaticity
-   distortion. A pixel is a candidate when its colour differs from the table's (chromaticity
-   distortion above `chroma_low`) or it is much darker or brighter than any shadow or highlight
-   (alpha outside [`dark`, `bright`]). A shadow only darkens the table, so it is not a candidate;
-2. skin-coloured candidates are the hand (a fixed, documented skin chromaticity region), kept
-   apart so that a hand touching an object does not merge with it;
-3. the remaining candidates are opened (3×3, by reconstruction) against speckle and labelled
-   (8-connected);
-4. each component keeps only its pixels whose chromaticity is closer to its own core colour
-   (pixels with a strong distortion, `chroma_core`) than to the table under it: this trims
-   coloured shadows and inter-reflections that touch the object, which a global threshold cannot;
-5. components that are too small, too thin (largest inscribed disc) or cut by the image border
-   (cannot be measured whole) are dropped; holes are filled (textured objects).
+A pixel is a candidate when its colour differs from the table model's or it is darker or
+brighter than any shadow or highlight (a shadow only darkens, so it is not one); skin-coloured
+candidates are the hand, kept apart so a hand touching an object does not merge with it; the rest
+are opened and labelled; each component keeps the pixels closer to its own core colour than to
+the table (trimming coloured shadows a global threshold cannot); too small, too thin or
+border-cut components are dropped. The steps' reasons are in README.md in this folder.
 """
 
 from __future__ import annotations

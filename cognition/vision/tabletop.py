@@ -1,40 +1,12 @@
 """A synthetic tabletop camera: one object, a hand that acts on it, frames a segmenter can read.
 
-Why it exists: the object segmenter has to be tested and its clusters learned on recordings whose
-truth is known, and the rest of the synthetic pipeline (`beyond simulate`) needs camera frames that
-agree with the effects the network was trained on. Every quantity comes from `cognition.world`:
-the renderer animates the object and the hand with `simulate_effects(...)`'s object speed, hand
-speed, object–hand relative speed and contact duration, so measuring the frames gives back the
-world's labels.
-
-Camera (documented, fixed): a pinhole camera `elevation_m` (1 m) above the table looking straight
-down, image axes aligned with the table. Table frame: origin on the table under the camera,
-x to the image's right, y towards the image's top (the far side of the table, where a human
-demonstrator stands), z up towards the camera, metres. A point (x, y, z) projects to
-
-    u = cx + f * x / (elevation - z),   v = cy - f * y / (elevation - z),
-    f = width * elevation / view_width,
-
-with (cx, cy) the image centre, (width - 1) / 2 and (height - 1) / 2, pixel (row i, column j)
-centred on (u, v) = (j, i), so at the table plane the scale is `width / view_width_m` px/m
-(320 px/m for the default 320×240 view of a 1 m wide table) and anything lifted towards the
-camera looks slightly bigger.
-Light comes from above, slightly from the left and the far side; shadows are soft.
-
-The scene: a light grey table with a fixed texture, a smooth illumination fall-off towards the
-corners and per-frame sensor noise; one object of a colour cluster (green1 a yellowish green, green2
-a bluish green, yellow, blue), a size (small / medium / big = 4.5 / 6.5 / 9 cm across) and a shape
-(circle = a shaded sphere, box = a possibly rotated rectangle of the same footprint area); the hand
-is a skin-coloured ellipse (9 × 7 cm) that approaches from the far side along a minimum-jerk path
-(aimed slightly beyond the object, so it arrives moving),
-touches the object for `contact_s` and then:
-- tap: pushes it away (object at `object_speed` along the approach direction), then withdraws so
-  that the object leaves the hand at `relative_speed`;
-- grasp: lifts it and carries it towards the far side and towards the camera at `object_speed`
-  (moving up in the image and growing slightly), the object wobbling in the hand at
-  `relative_speed`, then puts it down and leaves at `relative_speed`;
-- touch: rests on it (the object creeps at `object_speed`, about 1 cm/s) and withdraws at
-  `relative_speed`.
+The object segmenter is tested and its clusters learned on frames whose truth is known, and
+`beyond simulate` needs camera frames that agree with the effects the network was trained on:
+the renderer animates object and hand with `cognition.world.simulate_effects`' speeds and
+contact, so measuring the frames gives back the world's labels. A fixed pinhole camera 1 m above
+the table looks straight down (320 px/m at the table for the default 320×240 view of a 1 m wide
+table); objects are shaded spheres or rotated boxes of the network's colours and sizes, the hand
+a skin-coloured ellipse that taps, grasps or touches. README.md in this folder gives the geometry.
 """
 
 from __future__ import annotations
