@@ -53,6 +53,7 @@ COMMANDS: dict[str, str] = {
     "ask": "ask",
     "keys": "keys",
     "health": "health",
+    "ros2": "ros2",
 }
 
 
