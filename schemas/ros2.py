@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from beyond_self.core.errors import InputError
 from beyond_self.schemas.keys import check_name
 
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"  # rmw_zenoh's router (rmw_zenohd)
 STRING = "std_msgs/msg/String"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"

@@ -104,19 +104,7 @@ class SpeechSynthesizer(Service):
         )
 
     def _take_what_the_run_said(self) -> None:
-        """A restarted instance: the sentences of its run's speech log count as said. The
-        first: its run's part of the log starts at the log's present end."""
-        start = self.ledgers.predecessor().get(LOG_START)
-        if start is not None:
-            keys = self.bus.keys
-            gestures = self.said.gestures_since(start)
-            for gesture in gestures:
-                said = Identity(keys.robot, gesture, "description")
-                self.ledgers.handled.add(keys.description, said)
-            event(self.log, logging.INFO, "took the speech log", said=len(gestures))
-        else:
-            start = self.said.size()
-        self.ledgers.checkpoint({}, {LOG_START: start})
+        take_what_the_run_said(self, self.said)
 
     def on_description(self, msg: Description) -> None:
         if not msg.final or not msg.sentences:
@@ -147,3 +135,21 @@ class SpeechSynthesizer(Service):
         """Play the sentence (once it is logged as said)."""
         if self.espeak is not None:
             subprocess.run([self.espeak, "-v", self.voice, "-s", str(self.wpm), text], timeout=30)
+
+
+def take_what_the_run_said(service: Service, said: SpeechLog) -> None:
+    """A restarted instance of `service`: the sentences of its run's part of log `said` count
+    as said (handled descriptions). The first: its run's part starts at the log's present end,
+    kept in its checkpoint (LOG_START)."""
+    start = service.ledgers.predecessor().get(LOG_START)
+    if start is not None:
+        keys = service.bus.keys
+        gestures = said.gestures_since(start)
+        for gesture in gestures:
+            service.ledgers.handled.add(
+                keys.description, Identity(keys.robot, gesture, "description")
+            )
+        event(service.log, logging.INFO, "took the log of what was said", said=len(gestures))
+    else:
+        start = said.size()
+    service.ledgers.checkpoint({}, {LOG_START: start})

@@ -6,8 +6,11 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from beyond_self.commands import argtypes
+from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.schemas.ros2 import DEFAULT_CONNECT
 
 HELP = "ROS 2: export a recording as a rosbag2 bag, or bridge a deployment to rmw_zenoh"
 
@@ -23,8 +26,59 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the robot namespace of the topics (default: the recording's robot)",
     )
 
+    bridge = sub.add_parser(
+        "bridge", help="join a running deployment to a ROS 2 graph (rmw_zenoh) until SIGINT"
+    )
+    add_ros2_arguments(bridge, flag=False)
+    bridge.add_argument(
+        "--out-dir",
+        type=Path,
+        default=Path("out/ros2"),
+        help="where the bridge logs the sentences it said (a restart says none again)",
+    )
+    add_bus_arguments(bridge)
+
+
+def add_ros2_arguments(parser: argparse.ArgumentParser, *, flag: bool) -> None:
+    """The ROS 2 options, the same for `beyond ros2 bridge` and `beyond up --ros2`."""
+    group = parser.add_argument_group("ROS 2", "joining a ROS 2 graph over rmw_zenoh")
+    if flag:
+        group.add_argument(
+            "--ros2",
+            action="store_true",
+            help="also run the ROS 2 bridge: descriptions, skeleton and cameras as standard "
+            "ROS 2 topics under /ROBOT (docs/how-to/ros2.md)",
+        )
+    group.add_argument(
+        "--ros2-connect",
+        metavar="ENDPOINT",
+        default=DEFAULT_CONNECT,
+        help=f"rmw_zenoh's router (default {DEFAULT_CONNECT})",
+    )
+    group.add_argument(
+        "--ros2-domain",
+        type=argtypes.count(0, 232, "ROS 2 domain"),
+        default=None,
+        metavar="N",
+        help="ROS 2 domain id (default $ROS_DOMAIN_ID, else 0)",
+    )
+
+
+def ros2_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The bridge service's options (services.ros2_bridge) from the ROS 2 arguments."""
+    options: dict[str, Any] = {"connect": args.ros2_connect}
+    if args.ros2_domain is not None:
+        options["domain_id"] = int(args.ros2_domain)
+    return options
+
 
 def run(args: argparse.Namespace) -> int:
+    if args.ros2_command == "bridge":
+        from beyond_self.services.ros2_bridge import Ros2Bridge
+
+        Ros2Bridge.main(
+            config=config_from_args(args), out_dir=str(args.out_dir), **ros2_options(args)
+        )
     from beyond_self.runtime.recording import require_mcap
     from beyond_self.runtime.ros2_bag import export
 
