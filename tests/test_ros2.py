@@ -10,8 +10,8 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 from mcap_ros2.reader import read_ros2_messages
+from ros2util import STORE, zero
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from beyond_self.cli import main
 from beyond_self.runtime.recording import read_recording
@@ -21,7 +21,6 @@ from beyond_self.schemas.messages import CompressedCameraFrame, SkeletonFrame
 
 RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"
 THREE = RECORDINGS / "three-actions.mcap"
-STORE = get_typestore(Stores.ROS2_JAZZY)
 STRING_HASH = STORE.hash_rihs01("std_msgs/msg/String")
 
 # ros2/rmw_zenoh docs/design.md, "Topic and Service name mapping" and "Graph Cache"
@@ -158,7 +157,7 @@ def _markers(msg: SkeletonFrame, header: object, k4abt: dict[str, int]) -> bytes
     t = STORE.types
     markers = []
     for name, joint in msg.joints.items():
-        fields = {n: _zero(node) for n, node in STORE.fielddefs["visualization_msgs/msg/Marker"][1]}
+        fields = {n: zero(node) for n, node in STORE.fielddefs["visualization_msgs/msg/Marker"][1]}
         fields.update(
             header=header,
             id=100 + k4abt[name],
@@ -172,22 +171,6 @@ def _markers(msg: SkeletonFrame, header: object, k4abt: dict[str, int]) -> bytes
         markers.append(t["visualization_msgs/msg/Marker"](**fields))
     array = t[r.MARKER_ARRAY](markers=markers)
     return bytes(STORE.serialize_cdr(array, r.MARKER_ARRAY))
-
-
-def _zero(node: tuple[int, object]) -> object:
-    from rosbags.interfaces import Nodetype
-
-    kind, detail = node
-    if kind == Nodetype.NAME:
-        assert isinstance(detail, str)
-        fields = STORE.fielddefs[detail][1]
-        return STORE.types[detail](**{n: _zero(sub) for n, sub in fields})
-    if kind == Nodetype.BASE:
-        assert isinstance(detail, tuple)
-        return "" if detail[0] == "string" else False if detail[0] == "bool" else 0
-    assert isinstance(detail, tuple)
-    inner = detail[0]
-    return np.zeros(0, np.uint8) if inner[0] == Nodetype.BASE else []
 
 
 @pytest.mark.parametrize("tf", [False, True], ids=["azure-kinect-markers", "openni-tf"])

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 import zenoh
 from busutil_net import env_for, free_port, private_config
-from rosbags.typesys import Stores, get_typestore
+from ros2util import STORE, zero
 from zenoh_ros2_sdk.attachment import Attachment
 
 from beyond_self.cli import main
@@ -27,7 +27,6 @@ from beyond_self.schemas import ros2 as r
 from beyond_self.services.launcher import BEYOND
 
 THREE = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"
-STORE = get_typestore(Stores.ROS2_JAZZY)
 
 
 def test_attachment_is_the_design_documents_layout() -> None:
@@ -144,3 +143,68 @@ def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
     assert len(heard) == 3
     said = (tmp_path / "out" / "ros2" / "said.log").read_text().splitlines()
     assert [line.split("\t")[3] for line in said] == heard
+
+
+async def test_ros2_body_markers_and_camera_are_a_live_source(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The ingest's ROS 2 plug-in reads what a plain Zenoh session publishes on rmw_zenoh's
+    data keys in CDR rosbags serialized (no code of ours on that side): the Azure Kinect
+    driver's markers (K4ABT ids, no names) become joints under our names, a CompressedImage
+    an RGB image."""
+    import asyncio
+
+    import numpy as np
+    from PIL import Image
+
+    from beyond_self.services.ros2_source import source
+
+    port = free_port()
+    robot = "rosbot"
+    monkeypatch.setenv("BEYOND_ROBOT", robot)
+    monkeypatch.setenv("BEYOND_ROS2_CONNECT", f"tcp/127.0.0.1:{port}")
+    monkeypatch.setenv("ROS_DOMAIN_ID", "3")
+    t = STORE.types
+    stamp = t["builtin_interfaces/msg/Time"](sec=1, nanosec=5)
+    header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="depth_camera_link")
+    marker = STORE.fielddefs["visualization_msgs/msg/Marker"][1]
+
+    def one(k4abt: int, xyz: tuple[float, float, float]) -> object:
+        fields = {n: zero(node) for n, node in marker}
+        point = t["geometry_msgs/msg/Point"](*xyz)
+        fields.update(header=header, id=k4abt, type=2)
+        fields["pose"] = t["geometry_msgs/msg/Pose"](
+            position=point, orientation=t["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0)
+        )
+        fields["color"] = t["std_msgs/msg/ColorRGBA"](1.0, 1.0, 1.0, 1.0)
+        return t["visualization_msgs/msg/Marker"](**fields)
+
+    markers = t[r.MARKER_ARRAY](markers=[one(15, (0.1, 0.2, 1.5)), one(1, (0.0, 0.0, 2.0))])
+    jpeg = io.BytesIO()
+    Image.fromarray(np.full((8, 12, 3), 200, np.uint8)).save(jpeg, "JPEG")
+    image = t[r.COMPRESSED_IMAGE](
+        header=header, format="jpeg", data=np.frombuffer(jpeg.getvalue(), np.uint8)
+    )
+    samples = [
+        (f"3/{robot}/body_tracking_data", r.MARKER_ARRAY, markers),
+        (f"3/{robot}/camera/image/compressed", r.COMPRESSED_IMAGE, image),
+    ]
+    with plain_router(port) as router:
+        items = source()
+        first = asyncio.ensure_future(anext(items))
+        got: list[tuple[str, object]] = []
+        for _ in range(100):  # until the plug-in's subscriptions are declared
+            await asyncio.sleep(0.05)
+            tokens = [reply.ok for reply in router.liveliness().get("@ros2_lv/3/**")]
+            if sum(1 for tok in tokens if tok is not None and "/MS/" in str(tok.key_expr)) >= 3:
+                break
+        for key, ros_type, message in samples:
+            typed = f"{key}/{r.dds_type(ros_type)}/{STORE.hash_rihs01(ros_type)}"
+            router.put(typed, bytes(STORE.serialize_cdr(message, ros_type)))
+        got.append(await asyncio.wait_for(first, 10))
+        got.append(await asyncio.wait_for(anext(items), 10))
+        await items.aclose()
+    kinds = dict(got)
+    assert kinds["skeleton"] == {"right_hand": (0.1, 0.2, 1.5, 1.0), "torso": (0.0, 0.0, 2.0, 1.0)}
+    camera = kinds["camera"]
+    assert isinstance(camera, np.ndarray) and camera.shape == (8, 12, 3)
