@@ -49,11 +49,15 @@ def msgdef(ros_type: str) -> str:
     return store().generate_msgdef(ros_type, ros_version=2)[0]
 
 
+@cache
+def _defaults(ros_type: str) -> dict[str, Any]:
+    """Every field of `ros_type` zero or empty (rosbags needs them all), shared between the
+    messages made from them: a field a message sets is given a new value, never changed."""
+    return {name: _default_field(node) for name, node in store().fielddefs[ros_type][1]}
+
+
 def _default(ros_type: str) -> Any:
-    """A message of `ros_type` with every field zero or empty (rosbags needs them all)."""
-    ts = store()
-    values = {name: _default_field(node) for name, node in ts.fielddefs[ros_type][1]}
-    return ts.types[ros_type](**values)
+    return store().types[ros_type](**_defaults(ros_type))
 
 
 def _default_field(node: Any) -> Any:
@@ -100,21 +104,29 @@ def skeleton_markers(frame: SkeletonFrame) -> Any:
     ts = store()
     markers = []
     extra = len(r.K4ABT_JOINTS)
+    t = ts.types
+    header = _header(frame.header.stamp, frame.frame_id)
+    base = _defaults("visualization_msgs/msg/Marker")
+    scale = t["geometry_msgs/msg/Vector3"](0.05, 0.05, 0.05)
+    lifetime = t["builtin_interfaces/msg/Duration"](0, 250_000_000)
+    upright = t["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0)
     for name, joint in frame.joints.items():
         index = r.K4ABT_OF_OPENNI.get(name)
         if index is None:
             index, extra = extra, extra + 1
-        marker = _default("visualization_msgs/msg/Marker")
-        marker.header = _header(frame.header.stamp, frame.frame_id)
-        marker.id = frame.user * r.BODY_ID_STRIDE + index
-        marker.type = 2  # SPHERE
-        marker.pose.position = ts.types["geometry_msgs/msg/Point"](*joint.position)
-        marker.pose.orientation.w = 1.0
-        marker.scale = ts.types["geometry_msgs/msg/Vector3"](0.05, 0.05, 0.05)
-        marker.color = ts.types["std_msgs/msg/ColorRGBA"](0.0, 0.6, 1.0, joint.confidence)
-        marker.lifetime = ts.types["builtin_interfaces/msg/Duration"](0, 250_000_000)
-        marker.text = name
-        markers.append(marker)
+        pose = t["geometry_msgs/msg/Pose"](t["geometry_msgs/msg/Point"](*joint.position), upright)
+        fields = {
+            **base,
+            "header": header,
+            "id": frame.user * r.BODY_ID_STRIDE + index,
+            "type": 2,  # SPHERE
+            "pose": pose,
+            "scale": scale,
+            "color": t["std_msgs/msg/ColorRGBA"](0.0, 0.6, 1.0, joint.confidence),
+            "lifetime": lifetime,
+            "text": name,
+        }
+        markers.append(t["visualization_msgs/msg/Marker"](**fields))
     return ts.types[r.MARKER_ARRAY](markers=markers)
 
 

@@ -108,7 +108,10 @@ class Ros2Node:
             reliability=zenoh.Reliability.RELIABLE
             if qos.reliable
             else zenoh.Reliability.BEST_EFFORT,
-            congestion_control=zenoh.CongestionControl.DROP,
+            # rmw_zenoh blocks only a reliable keep-all publisher; a sentence is not dropped
+            congestion_control=zenoh.CongestionControl.BLOCK
+            if qos.reliable
+            else zenoh.CongestionControl.DROP,
         )
         token = self.session.liveliness().declare_token(token_key)
         self._closers.append(pub.undeclare)

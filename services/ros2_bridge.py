@@ -5,9 +5,9 @@ stamp (schemas.ros2 names topics and types, runtime.ros2_convert converts, runti
 speaks rmw_zenoh).
 
 A sentence is said once, across a SIGKILL, as the speech service says it (services.speech): a
-consumer in exactly-once (`once=True`), and its own log, written and synced before the
-sentence is published, read back by a restarted bridge. A kill between the two loses that
-sentence rather than saying it twice."""
+consumer in exactly-once (`once=True`), and its own log, written before the sentence is
+published and read back by a restarted bridge. A kill between the two loses that sentence
+rather than saying it twice; the log is not synced, so a power loss may let one be said again."""
 
 from __future__ import annotations
 
@@ -68,7 +68,9 @@ class Ros2Bridge(Service):
         self.renamed = dict(topics or {})
         self.node: Ros2Node | None = None
         self.out: dict[str, Ros2Publisher] = {}
-        self.said = SpeechLog(self.out_dir / "said.log")
+        # written before each sentence is published, not synced: a kill cannot lose a write
+        # already made, and a synced one took milliseconds a description should not wait
+        self.said = SpeechLog(self.out_dir / "said.log", sync=False)
         self.published = 0
 
     async def setup(self) -> None:
