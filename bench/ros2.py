@@ -44,18 +44,12 @@ RECORDING = Path(DEMO_RECORDING).with_name("three-actions.mcap")
 ROUNDS = 300
 
 
-def router(port: int) -> zenoh.Session:
+def session(port: int, mode: str = "peer") -> zenoh.Session:
+    """A router listening on `port` (mode "router"), or a peer of it, on loopback."""
     config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("router"))
-    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
-
-
-def peer(port: int) -> zenoh.Session:
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("peer"))
-    config.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("mode", json.dumps(mode))
+    side = "listen" if mode == "router" else "connect"
+    config.insert_json5(f"{side}/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
     config.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(config)
 
@@ -101,7 +95,7 @@ def per_message(
 ) -> dict[str, float]:
     """CPU-s per message: raw hop and the bridge's path, each over the same payloads."""
     items = (items * (ROUNDS // len(items) + 1))[:ROUNDS]
-    a, b = peer(port), peer(port)
+    a, b = session(port), session(port)
     stream = {"skeleton": "skeleton", "camera": "camera_compressed"}.get(kind, "description")
     node = Ros2Node("bench", "/bench", connect=f"tcp/127.0.0.1:{port}", domain=0)
     try:
@@ -151,7 +145,7 @@ def timed(fn: Callable[[], None]) -> float:
 
 def latency(port: int, log: Path) -> dict[str, float]:
     """p50/p99 seconds of one description at a time: raw hop and through the bridge."""
-    a, b = peer(port), peer(port)
+    a, b = session(port), session(port)
     node = Ros2Node("bench_latency", "/bench", connect=f"tcp/127.0.0.1:{port}", domain=0)
     arrived = threading.Event()
     try:
@@ -259,7 +253,7 @@ def main() -> None:
     with socket() as s:
         s.bind(("127.0.0.1", 0))
         port = int(s.getsockname()[1])
-    hub = router(port)
+    hub = session(port, "router")
     results: dict[str, Any] = {}
     try:
         with tempfile.TemporaryDirectory() as tmp:

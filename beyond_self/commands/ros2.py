@@ -9,8 +9,10 @@ from pathlib import Path
 from typing import Any
 
 from beyond_self.commands import argtypes
+from beyond_self.core.errors import InputError
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.schemas.ros2 import DEFAULT_CONNECT
+from beyond_self.schemas.keys import DEFAULT_ROBOT
+from beyond_self.schemas.ros2 import DEFAULT_CONNECT, Ros2Topics
 
 HELP = "ROS 2: export a recording as a rosbag2 bag, or bridge a deployment to rmw_zenoh"
 
@@ -56,6 +58,14 @@ def add_ros2_arguments(parser: argparse.ArgumentParser, *, flag: bool) -> None:
         help=f"rmw_zenoh's router (default {DEFAULT_CONNECT})",
     )
     group.add_argument(
+        "--ros2-topic",
+        action="append",
+        default=[],
+        metavar="STREAM=TOPIC",
+        help="publish a stream on another topic (streams: description, skeleton, camera, "
+        "camera_compressed, person_camera; a relative topic goes under /ROBOT; repeat)",
+    )
+    group.add_argument(
         "--ros2-domain",
         type=argtypes.count(0, 232, "ROS 2 domain"),
         default=None,
@@ -67,6 +77,15 @@ def add_ros2_arguments(parser: argparse.ArgumentParser, *, flag: bool) -> None:
 def ros2_options(args: argparse.Namespace) -> dict[str, Any]:
     """The bridge service's options (services.ros2_bridge) from the ROS 2 arguments."""
     options: dict[str, Any] = {"connect": args.ros2_connect}
+    renamed = {}
+    for item in args.ros2_topic:
+        stream, sep, topic = item.partition("=")
+        if not sep or not topic:
+            raise InputError(f"--ros2-topic expects STREAM=TOPIC; got {item!r}")
+        renamed[stream] = topic
+    if renamed:
+        Ros2Topics(DEFAULT_ROBOT, renamed)  # refused here, on one line, before anything starts
+        options["topics"] = renamed
     if args.ros2_domain is not None:
         options["domain_id"] = int(args.ros2_domain)
     return options
