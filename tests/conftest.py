@@ -131,6 +131,7 @@ LONG_FILES = (
     "test_bus_fuzz.py",
     "test_live_load.py",
     "test_soak.py",
+    "test_ros2_bridge.py",
 )
 
 
