@@ -21,6 +21,7 @@ from busutil_net import env_for, free_port, private_config
 from ros2util import STORE, zero
 from zenoh_ros2_sdk.attachment import Attachment
 
+from beyond_self.runtime.recording import read_recording
 from beyond_self.runtime.ros2_node import attachment, read_attachment
 from beyond_self.schemas import ros2 as r
 from beyond_self.services.launcher import BEYOND
@@ -93,6 +94,18 @@ def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
         first.set()
 
     with plain_router(port) as router:
+        # everything the bridge publishes, as any Zenoh session on the graph receives it
+        samples: list[tuple[str, bytes, bytes]] = []
+        router.declare_subscriber(
+            f"0/{config.robot}/**",
+            lambda s: samples.append(
+                (
+                    str(s.key_expr),
+                    s.payload.to_bytes(),
+                    s.attachment.to_bytes() if s.attachment else b"",
+                )
+            ),
+        )
         subscriber = ROS2Subscriber(
             topic=topic,
             msg_type=r.STRING,
@@ -133,6 +146,23 @@ def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
     said_by_up = [line.split(": ", 1)[1].strip('"') for line in out.splitlines() if ': "' in line]
     assert heard == said_by_up  # each once, in order, as `up` printed them (analyse's lines)
     assert len(heard) == 3
+    by_type: dict[str, int] = {}
+    stamps = {item.publish_time for item in read_recording(THREE)}
+    for key, payload, extra in samples:  # rosbags decodes each, the key's hash is rosbags'
+        dds, type_hash = key.split("/")[-2:]
+        package, kind, name = dds.split("::")[0], dds.split("::")[1], dds.split("::")[3]
+        ros_type = f"{package}/{kind}/{name.rstrip('_')}"
+        assert type_hash == STORE.hash_rihs01(ros_type), key
+        message = STORE.deserialize_cdr(payload, ros_type)
+        attached = Attachment.from_bytes(extra)  # zenoh-ros2-sdk's parser
+        assert len(attached.gid) == 16
+        if ros_type != r.STRING:  # a sensor frame: its own stamp, in header and attachment
+            header = message.markers[0].header if ros_type == r.MARKER_ARRAY else message.header
+            stamp = header.stamp.sec * 10**9 + header.stamp.nanosec
+            assert stamp in stamps and attached.timestamp_ns == stamp
+        by_type[ros_type] = by_type.get(ros_type, 0) + 1
+    assert by_type[r.STRING] == 3
+    assert by_type[r.MARKER_ARRAY] > 300 and by_type[r.COMPRESSED_IMAGE] > 150, by_type
     said = (tmp_path / "out" / "ros2" / "said.log").read_text().splitlines()
     assert [line.split("\t")[3] for line in said] == heard
 
