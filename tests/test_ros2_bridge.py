@@ -81,6 +81,7 @@ def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
     tmp_path: Path,
 ) -> None:
     from zenoh_ros2_sdk import ROS2Subscriber
+    from zenoh_ros2_sdk.discovery import get_topic_names_and_types
     from zenoh_ros2_sdk.session import ZenohSession
 
     port = free_port()
@@ -131,6 +132,16 @@ def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
                          f"std_msgs::msg::dds_::String_/{string_hash}/::,10:,:,:,,")  # fmt: skip
             assert any(t.endswith(node) for t in tokens), tokens
             assert any(t.endswith(publisher) for t in tokens), tokens
+            # and as zenoh-ros2-sdk's `ros2 topic list -t` reads them
+            ns = f"/{config.robot}"
+            listed = dict(get_topic_names_and_types(0, "127.0.0.1", port, timeout=1.0))
+            assert {t: listed.get(t) for t in (f"{ns}/description", f"{ns}/body_tracking_data",
+                    f"{ns}/camera/image/compressed", f"{ns}/person/image/compressed")} == {
+                f"{ns}/description": [r.STRING],
+                f"{ns}/body_tracking_data": [r.MARKER_ARRAY],
+                f"{ns}/camera/image/compressed": [r.COMPRESSED_IMAGE],
+                f"{ns}/person/image/compressed": [r.COMPRESSED_IMAGE],
+            }  # fmt: skip
             bridge = child_running(up.pid, "ros2")
             assert bridge is not None
             os.kill(bridge, signal.SIGKILL)
