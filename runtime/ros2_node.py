@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -34,12 +33,6 @@ def domain(text: str | int) -> int:
     if not 0 <= value <= 232:
         raise InputError(f"ROS 2 domain {text!r}; valid: 0..232")
     return value
-
-
-def ros_name(name: str) -> str:
-    """A robot or service name as a ROS 2 name token (letters, digits, '_')."""
-    token = re.sub(r"[^A-Za-z0-9_]", "_", name)
-    return token if token[:1].isalpha() or token[:1] == "_" else f"_{token}"
 
 
 def attachment(seq: int, stamp: int, gid: bytes) -> bytes:
@@ -83,7 +76,7 @@ class Ros2Node:
         config.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"]))
         config.insert_json5("scouting/multicast/enabled", "false")
         self.session = zenoh.open(config)
-        self.domain, self.name, self.namespace = domain, ros_name(name), namespace
+        self.domain, self.name, self.namespace = domain, r.ros_name(name), namespace
         self.zid = str(self.session.info.zid())
         self._entities = 0
         self._tokens: list[zenoh.LivelinessToken] = []

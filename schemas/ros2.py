@@ -7,6 +7,7 @@ conversion is runtime.ros2_convert's, the type hashes (RIHS01) come from rosbags
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass, field
 
 from beyond_self.core.errors import InputError
@@ -77,8 +78,9 @@ def openni_joint(child_frame_id: str) -> tuple[str, int] | None:
 
 @dataclass(frozen=True)
 class Ros2Topics:
-    """The ROS 2 topics of one robot: `/<robot>/<relative>` for each stream (TOPICS), with
-    any of them renamed (an absolute name is kept as it is)."""
+    """The ROS 2 topics of one robot: `/<robot>/<relative>` for each stream (TOPICS; the
+    robot's name as a ROS name, ros_name), with any of them renamed (an absolute name is kept
+    as it is)."""
 
     robot: str
     renamed: dict[str, str] = field(default_factory=dict)
@@ -94,11 +96,17 @@ class Ros2Topics:
 
     def topic(self, stream: str) -> str:
         name = self.renamed.get(stream, TF_TOPIC if stream == "tf" else TOPICS[stream][0])
-        return name if name.startswith("/") else f"/{self.robot}/{name}"
+        return name if name.startswith("/") else f"/{ros_name(self.robot)}/{name}"
 
     def streams(self) -> dict[str, str]:
         """Fully qualified topic -> stream, for every stream with a topic (tf included)."""
         return {self.topic(s): s for s in (*TOPICS, "tf")}
+
+
+def ros_name(name: str) -> str:
+    """A robot or service name as a ROS 2 name token (letters, digits, '_')."""
+    token = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return token if token[:1].isalpha() or token[:1] == "_" else f"_{token}"
 
 
 def check_topic(name: str) -> str:

@@ -24,7 +24,6 @@ from beyond_self.runtime.ros2_node import (
     Ros2Publisher,
     default_domain,
     domain,
-    ros_name,
 )
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ros2 as r
@@ -75,11 +74,11 @@ class Ros2Bridge(Service):
 
     async def setup(self) -> None:
         keys = self.bus.keys
-        topics = r.Ros2Topics(ros_name(keys.robot), self.renamed)
+        topics = r.Ros2Topics(keys.robot, self.renamed)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         take_what_the_run_said(self, self.said)
         node = self.node = Ros2Node(
-            f"beyond_{keys.robot}", f"/{ros_name(keys.robot)}", connect=self.connect,
+            f"beyond_{keys.robot}", f"/{r.ros_name(keys.robot)}", connect=self.connect,
             domain=self.domain,
         )  # fmt: skip
         for stream, (relative, ros_type) in r.TOPICS.items():

@@ -19,7 +19,7 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.accounting import LogOnce
 from beyond_self.runtime.images import image_from_message
 from beyond_self.runtime.ros2_convert import FromRos
-from beyond_self.runtime.ros2_node import Ros2Node, default_domain, ros_name
+from beyond_self.runtime.ros2_node import Ros2Node, default_domain
 from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.keys import DEFAULT_ROBOT
 from beyond_self.schemas.messages import CameraFrame, CompressedCameraFrame, SkeletonFrame
@@ -39,7 +39,7 @@ def topics_from_env(robot: str) -> dict[str, tuple[str, str, str]]:
     """Topic -> (variable, stream, ROS 2 type) to read: each variable's topic, or the default
     of schemas.ros2 (`/<robot>/body_tracking_data`, `/tf`, `/<robot>/camera/image/compressed`;
     no raw camera unless named)."""
-    defaults = r.Ros2Topics(ros_name(robot))
+    defaults = r.Ros2Topics(robot)
     out: dict[str, tuple[str, str, str]] = {}
     for variable, (stream, ros_type) in INPUTS.items():
         fallback = "" if stream == "camera" else defaults.topic(stream)
@@ -70,7 +70,7 @@ async def source() -> AsyncIterator[tuple[str, Any]]:
     robot = os.environ.get("BEYOND_ROBOT", DEFAULT_ROBOT)
     node = Ros2Node(
         f"beyond_{robot}_source",
-        f"/{ros_name(robot)}",
+        f"/{r.ros_name(robot)}",
         connect=os.environ.get("BEYOND_ROS2_CONNECT", r.DEFAULT_CONNECT),
         domain=default_domain(),
     )

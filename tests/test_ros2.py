@@ -14,6 +14,7 @@ from ros2util import STORE, zero
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
 from beyond_self.cli import main
+from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording import inspect_recording, read_recording
 from beyond_self.runtime.ros2_bag import export
 from beyond_self.schemas import ros2 as r
@@ -50,6 +51,17 @@ def test_liveliness_tokens_are_the_design_documents_examples() -> None:
     listener = r.node_token(2, "aac3178e146ba6f1fc6e6a4085e77f21", 0, "/", "listener")
     assert listener == DESIGN_LISTENER_NODE
     assert r.SENSOR_QOS.keyexpr() == "2::,5:,:,:,,"  # best effort, depth 5
+
+
+def test_topics_are_ros_names_under_the_robot() -> None:
+    topics = r.Ros2Topics("lab-1", {"description": "/tts/say", "person_camera": "eyes"})
+    assert topics.topic("description") == "/tts/say"
+    assert topics.topic("person_camera") == "/lab_1/eyes"
+    assert topics.topic("skeleton") == "/lab_1/body_tracking_data"
+    assert topics.topic("tf") == "/tf"
+    for bad in ("", "/a//b", "/9lives", "/a-b"):
+        with pytest.raises(InputError, match="invalid ROS 2 topic name"):
+            r.check_topic(bad)
 
 
 def _analyse(path: Path, capsys: pytest.CaptureFixture[str]) -> list[str]:
