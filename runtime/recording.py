@@ -18,15 +18,9 @@ from mcap.writer import MCAP0_MAGIC
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording_damage import Losses
-from beyond_self.runtime.recording_format import (
-    JSON,
-    JSONSCHEMA,
-    META_FORM,
-    META_TYPE,
-    META_VIEW,
-)
+from beyond_self.runtime.recording_format import JSON, JSONSCHEMA, META_FORM, META_TYPE, META_VIEW
 from beyond_self.runtime.recording_scan import Walk, mapped
-from beyond_self.runtime.ros2_bag import CDR, ROS2_SCHEMAS, Ros2Channels, bag_file
+from beyond_self.runtime.ros2_bag import Pair, Ros2Channels, bag_file
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import (
     RECORDING_JSON_FORM,
@@ -35,9 +29,7 @@ from beyond_self.schemas.codec import (
     from_recording_json,
     wire_encoding,
 )
-from beyond_self.schemas.keys import forward_only, type_for_key
-
-ROS2_CHANNELS = 1 << 16  # ids of the channels a rosbag2 bag is read into (MCAP ids are 16-bit)
+from beyond_self.schemas.keys import forward_only
 
 
 @dataclass(slots=True, frozen=True)
@@ -136,18 +128,7 @@ class _Scanner:
                 yield from self._handle(record)
             for record in walk.records():
                 yield from self._handle(record)
-            for key, stamp, data in self.ros2.flush():
-                channel = self._ours(key)
-                yield from self._count(
-                    channel,
-                    McapMessage(
-                        channel_id=channel.id,
-                        log_time=stamp,
-                        data=data,
-                        publish_time=stamp,
-                        sequence=0,
-                    ),
-                )
+            yield from self._read_as_ours(self.ros2.flush())
             info.chunks = walk.chunks
             info.complete = walk.complete
             info.readable_bytes = walk.readable
@@ -166,30 +147,25 @@ class _Scanner:
                     f"channel {record.channel_id} at {info.losses.at(t)}",
                 )
                 return
-            if record.channel_id in self.ros2.routes:
-                yield from self._from_ros2(record)
-                return
-            if channel.id in self.counts:  # else a rosbag2 topic no stream of ours is read from
+            if record.channel_id in self.ros2.routes:  # a rosbag2 bag's, read as ours
+                try:
+                    yield from self._read_as_ours(self.ros2.convert(record))
+                except InputError as exc:  # dropped and counted as any undecodable message
+                    where = f"{self.ros2.routes[record.channel_id][0]} at {info.losses.at(t)}"
+                    info.losses.drop(UNDECODABLE, f"{where}: {exc}")
+            elif channel.id in self.counts:  # else a rosbag2 topic no stream of ours reads
                 yield from self._count(channel, record)
         elif isinstance(record, Statistics):
             if record.message_count and info.losses.first_stamp is None:
                 info.losses.first_stamp = record.message_start_time
         elif isinstance(record, Schema):
             self.schemas[record.id] = record
-        elif isinstance(record, Channel):
+        elif isinstance(record, Channel) and record.id not in self.channels:
             schema = self.schemas.get(record.schema_id)
-            if (
-                record.message_encoding == CDR
-                and schema is not None
-                and schema.encoding in ROS2_SCHEMAS
-                and record.id not in self.channels
-            ):
-                self.channels[record.id] = record
-                key = self.ros2.route(record.id, record.topic, schema.name)
-                if key is not None:
-                    self._ours(key)
-            elif record.id not in self.channels:
+            if self.ros2.route(record, schema) is None:  # ours, or not ROS 2's
                 self._handle_channel(record, schema)
+            else:
+                self.channels[record.id] = record
         elif isinstance(record, McapHeader):
             info.library = record.library
         elif isinstance(record, Metadata):
@@ -221,9 +197,7 @@ class _Scanner:
             info.channels.append(counts)
         self.counts[record.id] = counts
 
-    def _count(
-        self, channel: Channel, record: McapMessage
-    ) -> Iterator[tuple[Channel, McapMessage]]:
+    def _count(self, channel: Channel, record: McapMessage) -> Iterator[Pair]:
         """Count a message read on one of our channels (every reader's damage report says what
         it read, not 0), and yield it."""
         info, t = self.info, record.publish_time
@@ -236,41 +210,11 @@ class _Scanner:
         ci.last_stamp = t if ci.last_stamp is None else max(ci.last_stamp, t)
         yield channel, record
 
-    def _ours(self, key: str) -> Channel:
-        """The channel of ours a rosbag2 topic is read into (made on first use)."""
-        cid = ROS2_CHANNELS + sum(1 for c in self.channels if c >= ROS2_CHANNELS)
-        for channel in self.channels.values():
-            if channel.id >= ROS2_CHANNELS and channel.topic == key:
-                return channel
-        cls = type_for_key(key)
-        assert cls is not None  # runtime.ros2_bag routes to sensor streams of ours only
-        meta = {META_TYPE: cls.type_name(), META_FORM: str(RECORDING_JSON_FORM)}
-        channel = Channel(id=cid, schema_id=0, topic=key, message_encoding=JSON, metadata=meta)
-        self._handle_channel(channel, None)
-        return channel
-
-    def _from_ros2(self, record: McapMessage) -> Iterator[tuple[Channel, McapMessage]]:
-        """The messages of ours in one sample of a rosbag2 channel; one that does not convert
-        is dropped and counted as any undecodable message is."""
-        losses = self.info.losses
-        try:
-            converted = list(self.ros2.convert(record.channel_id, record.data))
-        except InputError as exc:
-            key = self.ros2.routes[record.channel_id][0]
-            losses.drop(UNDECODABLE, f"{key} at {losses.at(record.publish_time)}: {exc}")
-            return
-        for key, stamp, data in converted:
-            channel = self._ours(key)
-            yield from self._count(
-                channel,
-                McapMessage(
-                    channel_id=channel.id,
-                    log_time=record.log_time,
-                    data=data,
-                    publish_time=stamp,
-                    sequence=0,
-                ),
-            )
+    def _read_as_ours(self, pairs: Iterable[Pair]) -> Iterator[Pair]:
+        for channel, message in pairs:
+            if channel.id not in self.channels:
+                self._handle_channel(channel, None)
+            yield from self._count(channel, message)
 
 
 def require_magic(path: Path, head: bytes | Any) -> None:

@@ -6,20 +6,25 @@ is the one of our own recordings."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
 from typing import Any
 
 import yaml
+from mcap.records import Channel, Schema
+from mcap.records import Message as McapMessage
 
 from beyond_self.core.errors import InputError
-from beyond_self.schemas.keys import DEFAULT_ROBOT, STREAMS, Keys, split_key
+from beyond_self.runtime.recording_format import JSON, META_FORM, META_TYPE
+from beyond_self.schemas.base import Message
+from beyond_self.schemas.codec import RECORDING_JSON_FORM, to_recording_json
+from beyond_self.schemas.keys import DEFAULT_ROBOT, STREAMS, Keys, split_key, type_for_key
 
 CDR = "cdr"
 ROS2_SCHEMAS = ("ros2msg", "ros2idl")
 METADATA = "metadata.yaml"
+Pair = tuple[Channel, McapMessage]
 
 
 def bag_file(path: Path) -> Path:
@@ -58,6 +63,9 @@ def ros_stream(topic: str, ros_type: str) -> tuple[str, str] | None:
     return None
 
 
+ROS2_CHANNELS = 1 << 16  # ids of the channels a bag is read into (MCAP's are 16-bit)
+
+
 @dataclass
 class Ros2Channels:
     """A ROS 2 bag's channels as channels of ours, for the recording reader: each CDR sample
@@ -66,38 +74,61 @@ class Ros2Channels:
 
     converter: Any = None
     routes: dict[int, tuple[str, str, str]] = field(default_factory=dict)  # id -> key,stream,type
+    ours: dict[str, Channel] = field(default_factory=dict)  # key -> the channel read into
 
-    def route(self, channel_id: int, topic: str, ros_type: str) -> str | None:
-        """Our key for a ROS 2 channel (None: not one we read)."""
-        found = ros_stream(topic, ros_type)
-        if found is None:
+    def route(self, channel: Channel, schema: Schema | None) -> str | None:
+        """For a ROS 2 channel (CDR, ros2msg/ros2idl schema) our key ("": one not read),
+        None for any other channel."""
+        if channel.message_encoding != CDR or schema is None or schema.encoding not in ROS2_SCHEMAS:
             return None
+        found = ros_stream(channel.topic, schema.name)
+        if found is None:
+            return ""
         robot, stream = found
         from beyond_self.runtime.ros2_convert import FromRos, stream_of_ros
 
         if self.converter is None:
             self.converter = FromRos()
         key = Keys(robot).stream(stream_of_ros(stream))
-        self.routes[channel_id] = (key, stream, ros_type)
+        self.routes[channel.id] = (key, stream, schema.name)
         return key
 
-    def convert(self, channel_id: int, data: bytes) -> Iterator[tuple[str, int, bytes]]:
-        """(key, stamp, recording JSON) of each message of ours in one sample."""
-        from beyond_self.schemas.codec import to_recording_json
+    def _channel(self, key: str) -> Channel:
+        """The channel of ours `key` is read into (made on first use)."""
+        found = self.ours.get(key)
+        if found is None:
+            cls = type_for_key(key)
+            assert cls is not None  # ros_stream routes to sensor streams of ours only
+            meta = {META_TYPE: cls.type_name(), META_FORM: str(RECORDING_JSON_FORM)}
+            cid = ROS2_CHANNELS + len(self.ours)
+            found = self.ours[key] = Channel(
+                id=cid, schema_id=0, topic=key, message_encoding=JSON, metadata=meta
+            )
+        return found
 
-        key, stream, ros_type = self.routes[channel_id]
-        for message in self.converter.convert(stream, ros_type, data):
-            yield key, message.header.stamp, to_recording_json(message)
+    def _pairs(self, key: str, messages: list[Message], log_time: int | None) -> list[Pair]:
+        channel = self._channel(key)
+        return [
+            (channel, McapMessage(
+                channel_id=channel.id, log_time=m.header.stamp if log_time is None else log_time,
+                data=to_recording_json(m), publish_time=m.header.stamp, sequence=0,
+            ))
+            for m in messages
+        ]  # fmt: skip
 
-    def flush(self) -> Iterator[tuple[str, int, bytes]]:
-        from beyond_self.schemas.codec import to_recording_json
+    def convert(self, record: McapMessage) -> list[Pair]:
+        """Our messages in one sample, on our channels; InputError if it does not convert."""
+        key, stream, ros_type = self.routes[record.channel_id]
+        return self._pairs(
+            key, self.converter.convert(stream, ros_type, record.data), record.log_time
+        )
 
+    def flush(self) -> list[Pair]:
+        """The skeleton frame TF samples left open at the end of the bag, if any."""
         if self.converter is None:
-            return
+            return []
         keys = {stream: key for key, stream, _ in self.routes.values()}
-        for message in self.converter.flush():
-            key = keys.get("tf", Keys().skeleton)
-            yield key, message.header.stamp, to_recording_json(message)
+        return self._pairs(keys.get("tf", Keys().skeleton), self.converter.flush(), None)
 
 
 # ---------------------------------------------------------------- export
