@@ -1,8 +1,8 @@
 """A ROS 2 body tracker and camera as the pipeline's live source: the ingest's plug-in
 (`beyond up --live-source beyond_self.services.ros2_source:source`) reads body markers (the
 Azure Kinect driver's MarkerArray), openni_tracker's TF frames and a camera (Image or
-CompressedImage) from an rmw_zenoh graph, and yields skeleton joints and RGB images, which the
-ingest stamps and publishes as any live source's. Where and what it reads are environment
+CompressedImage) from an rmw_zenoh graph, and yields skeleton joints and RGB images with their
+own stamps, which the ingest publishes as any live source's. Where and what it reads are environment
 variables (a plug-in takes no arguments): BEYOND_ROS2_CONNECT, ROS_DOMAIN_ID, and the topics
 BEYOND_ROS2_SKELETON, BEYOND_ROS2_TF, BEYOND_ROS2_CAMERA (compressed) or
 BEYOND_ROS2_CAMERA_RAW; a topic set to "" is not read."""
@@ -49,20 +49,20 @@ def topics_from_env(robot: str) -> dict[str, tuple[str, str, str]]:
     return out
 
 
-def items_of(messages: list[Any]) -> list[tuple[str, Any]]:
-    """The ingest's plug-in items (kind, payload) of our converted messages."""
-    items: list[tuple[str, Any]] = []
+def items_of(messages: list[Any]) -> list[tuple[str, Any, int]]:
+    """The ingest's plug-in items (kind, payload, the message's own stamp) of our messages."""
+    items: list[tuple[str, Any, int]] = []
     for m in messages:
+        stamp = m.header.stamp
         if isinstance(m, SkeletonFrame):
-            items.append(
-                ("skeleton", {n: (*j.position, j.confidence) for n, j in m.joints.items()})
-            )
+            joints = {n: (*j.position, j.confidence) for n, j in m.joints.items()}
+            items.append(("skeleton", joints, stamp))
         elif isinstance(m, CameraFrame | CompressedCameraFrame):
-            items.append(("camera", image_from_message(m)))
+            items.append(("camera", image_from_message(m), stamp))
     return items
 
 
-async def source() -> AsyncIterator[tuple[str, Any]]:
+async def source() -> AsyncIterator[tuple[str, Any, int]]:
     """Items as they come from the ROS 2 graph, until cancelled; a sample that does not
     decode is logged (once per kind of problem) and skipped."""
     loop = asyncio.get_running_loop()

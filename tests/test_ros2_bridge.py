@@ -225,7 +225,7 @@ async def test_ros2_body_markers_and_camera_are_a_live_source(
     with plain_router(port) as router:
         items = source()
         first = asyncio.ensure_future(anext(items))
-        got: list[tuple[str, object]] = []
+        got: list[tuple[str, object, int]] = []
         for _ in range(100):  # until the plug-in's subscriptions are declared
             await asyncio.sleep(0.05)
             tokens = [reply.ok for reply in router.liveliness().get("@ros2_lv/3/**")]
@@ -237,7 +237,8 @@ async def test_ros2_body_markers_and_camera_are_a_live_source(
         got.append(await asyncio.wait_for(first, 10))
         got.append(await asyncio.wait_for(anext(items), 10))
         await items.aclose()
-    kinds = dict(got)
+    kinds = {kind: payload for kind, payload, _ in got}
+    assert {stamp for _, _, stamp in got} == {1_000_000_005}  # the messages' own stamp
     assert kinds["skeleton"] == {"right_hand": (0.1, 0.2, 1.5, 1.0), "torso": (0.0, 0.0, 2.0, 1.0)}
     camera = kinds["camera"]
     assert isinstance(camera, np.ndarray) and camera.shape == (8, 12, 3)
