@@ -49,6 +49,7 @@ COMMANDS: dict[str, str] = {
     "ask": "ask",
     "keys": "keys",
     "health": "health",
+    "ros2": "ros2",
 }
 
 

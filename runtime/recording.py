@@ -18,8 +18,9 @@ from mcap.writer import MCAP0_MAGIC
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording_damage import Losses
-from beyond_self.runtime.recording_format import JSON, META_FORM, META_TYPE, META_VIEW
+from beyond_self.runtime.recording_format import JSON, JSONSCHEMA, META_FORM, META_TYPE, META_VIEW
 from beyond_self.runtime.recording_scan import Walk, mapped
+from beyond_self.runtime.ros2_bag import Pair, Ros2Channels, bag_file
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import (
     RECORDING_JSON_FORM,
@@ -99,7 +100,7 @@ class _Scanner:
     schemas and channels it meets and counting what it reads."""
 
     def __init__(self, path: str | Path, losses: Losses | None = None) -> None:
-        self.path = Path(path)
+        self.path = bag_file(Path(path))
         if not self.path.is_file():
             raise InputError(f"recording {self.path} does not exist")
         size = self.path.stat().st_size
@@ -115,6 +116,7 @@ class _Scanner:
         self.types: dict[int, type[Message] | None] = {}
         self.forms: dict[int, int] = {}
         self.views: set[int] = set()
+        self.ros2 = Ros2Channels()  # a rosbag2 bag's channels, read as ours
 
     def messages(self) -> Iterator[tuple[Channel, McapMessage]]:
         info = self.info
@@ -126,6 +128,7 @@ class _Scanner:
                 yield from self._handle(record)
             for record in walk.records():
                 yield from self._handle(record)
+            yield from self._read_as_ours(self.ros2.flush())
             info.chunks = walk.chunks
             info.complete = walk.complete
             info.readable_bytes = walk.readable
@@ -144,50 +147,74 @@ class _Scanner:
                     f"channel {record.channel_id} at {info.losses.at(t)}",
                 )
                 return
-            # counted here, so every reader's damage report says what it read (not 0)
-            info.messages += 1
-            info.start = t if info.start is None else min(info.start, t)
-            info.end = t if info.end is None else max(info.end, t)
-            ci = self.counts[channel.id]
-            ci.count += 1
-            ci.first_stamp = t if ci.first_stamp is None else min(ci.first_stamp, t)
-            ci.last_stamp = t if ci.last_stamp is None else max(ci.last_stamp, t)
-            yield channel, record
+            if record.channel_id in self.ros2.routes:  # a rosbag2 bag's, read as ours
+                try:
+                    yield from self._read_as_ours(self.ros2.convert(record))
+                except InputError as exc:  # dropped and counted as any undecodable message
+                    where = f"{self.ros2.routes[record.channel_id][0]} at {info.losses.at(t)}"
+                    info.losses.drop(UNDECODABLE, f"{where}: {exc}")
+            elif channel.id in self.counts:  # else a rosbag2 topic no stream of ours reads
+                yield from self._count(channel, record)
         elif isinstance(record, Statistics):
             if record.message_count and info.losses.first_stamp is None:
                 info.losses.first_stamp = record.message_start_time
         elif isinstance(record, Schema):
             self.schemas[record.id] = record
-        elif isinstance(record, Channel):
-            if record.id not in self.channels:
+        elif isinstance(record, Channel) and record.id not in self.channels:
+            schema = self.schemas.get(record.schema_id)
+            if self.ros2.route(record, schema) is None:  # ours, or not ROS 2's
+                self._handle_channel(record, schema)
+            else:
                 self.channels[record.id] = record
-                schema = self.schemas.get(record.schema_id)
-                cls = None
-                type_name = record.metadata.get(META_TYPE)
-                if record.message_encoding == JSON and type_name in REGISTRY:
-                    cls = REGISTRY[type_name]
-                self.types[record.id] = cls
-                if META_VIEW in record.metadata:
-                    self.views.add(record.id)
-                form = record.metadata.get(META_FORM, "1")
-                self.forms[record.id] = int(form) if form.isdigit() else -1
-                counts = ChannelInfo(
-                    topic=record.topic,
-                    message_encoding=record.message_encoding,
-                    schema_name=schema.name if schema else "",
-                    schema_encoding=schema.encoding if schema else "",
-                )
-                same = [c for c in info.channels if (c.topic, c.message_encoding) == (
-                    counts.topic, counts.message_encoding)]  # fmt: skip
-                if same:  # one topic in one encoding is one channel to a reader
-                    counts = same[0]
-                else:
-                    info.channels.append(counts)
-                self.counts[record.id] = counts
         elif isinstance(record, McapHeader):
             info.library = record.library
         elif isinstance(record, Metadata):
             info.metadata[record.name] = dict(record.metadata)
+
+    def _handle_channel(self, record: Channel, schema: Schema | None) -> None:
+        info = self.info
+        self.channels[record.id] = record
+        cls = None
+        type_name = record.metadata.get(META_TYPE)
+        if record.message_encoding == JSON and type_name in REGISTRY:
+            cls = REGISTRY[type_name]
+        self.types[record.id] = cls
+        if META_VIEW in record.metadata:
+            self.views.add(record.id)
+        form = record.metadata.get(META_FORM, "1")
+        self.forms[record.id] = int(form) if form.isdigit() else -1
+        counts = ChannelInfo(
+            topic=record.topic,
+            message_encoding=record.message_encoding,
+            schema_name=schema.name if schema else (cls.schema_name() if cls else ""),
+            schema_encoding=schema.encoding if schema else (JSONSCHEMA if cls else ""),
+        )
+        same = [c for c in info.channels if (c.topic, c.message_encoding) == (
+            counts.topic, counts.message_encoding)]  # fmt: skip
+        if same:  # one topic in one encoding is one channel to a reader
+            counts = same[0]
+        else:
+            info.channels.append(counts)
+        self.counts[record.id] = counts
+
+    def _count(self, channel: Channel, record: McapMessage) -> Iterator[Pair]:
+        """Count a message read on one of our channels (every reader's damage report says what
+        it read, not 0), and yield it."""
+        info, t = self.info, record.publish_time
+        info.messages += 1
+        info.start = t if info.start is None else min(info.start, t)
+        info.end = t if info.end is None else max(info.end, t)
+        ci = self.counts[channel.id]
+        ci.count += 1
+        ci.first_stamp = t if ci.first_stamp is None else min(ci.first_stamp, t)
+        ci.last_stamp = t if ci.last_stamp is None else max(ci.last_stamp, t)
+        yield channel, record
+
+    def _read_as_ours(self, pairs: Iterable[Pair]) -> Iterator[Pair]:
+        for channel, message in pairs:
+            if channel.id not in self.channels:
+                self._handle_channel(channel, None)
+            yield from self._count(channel, message)
 
 
 def require_magic(path: Path, head: bytes | Any) -> None:
@@ -209,12 +236,13 @@ def require_mcap(path: str | Path) -> Path:
     read)."""
     p = Path(path)
     try:
+        p = bag_file(p)
         with open(p, "rb") as f:
             head = f.read(len(MCAP0_MAGIC))
     except FileNotFoundError:
         raise InputError(f"recording {p} does not exist") from None
     except IsADirectoryError:
-        raise InputError(f"recording {p} is a folder; valid: an MCAP file") from None
+        raise InputError(f"recording {p} is a folder; valid: an MCAP file or a bag") from None
     except OSError as exc:
         raise InputError(f"cannot read recording {p}: {exc.strerror}") from None
     require_magic(p, head)

@@ -19,7 +19,11 @@ Format decisions (see runtime/README.md):
   before the stream has started) that comes before any stamped one waits for it and is logged
   at its stamp; later, or not ours, at its receive time moved onto the stamps' clock (by the
   offset of the last stamped sample), never before the last message of its channel, never at
-  0. A live recorder writes each chunk in log-time order. Replay follows publish_time.
+  0. A live recorder writes each chunk in log-time order, and what comes since a flush waits
+  for the next one, so an output that comes after newer inputs (a gesture's final belief,
+  stamped at the gesture's end) is written in its place. A channel's log times never step
+  back: one later than that is logged at its channel's last log time, its publish_time and
+  contents its own. Replay follows publish_time.
 - No attachment index and, without metadata, no metadata index: an empty index group with a
   summary offset pointing at it is an error to `mcap doctor`. The data-section CRC is written.
 - Chunked and compressed (zstd); the file is written unbuffered and the open chunk is closed at

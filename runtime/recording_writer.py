@@ -133,8 +133,10 @@ class RecordingWriter:
         # a live recording's messages wait here to be written in log-time order, chunk by chunk
         # (outputs copy their input's stamp and arrive after newer inputs)
         self._pending: list[_Pending] = []
+        self._aging: list[_Pending] = []  # came before the last flush: written at the next
         self._stamp_offset: int | None = None  # last stamp minus its receive time
         self._last_on: dict[str, int] = {}  # last log time per channel
+        self._logged: dict[int, int] = {}  # last log time written per MCAP channel id
         self._held: list[tuple[str, int, Callable[[int], None]]] = []  # before any stamp
         self._views: dict[str, int] = {}  # view topic -> channel id
         self._with_views = foxglove_views
@@ -264,23 +266,38 @@ class RecordingWriter:
             self.flush()
 
     def _put(self, record: _Pending) -> None:
+        # a channel's log times never step back (ROS and Foxglove players assume it): a message
+        # stamped before the last one written on its channel, later than the flushes wait for
+        # (flush), is logged at that last time, its publish time and contents its own
+        log_time = max(record.log_time, self._logged.get(record.channel, record.log_time))
+        self._logged[record.channel] = log_time
         self._writer.add_message(
             channel_id=record.channel,
-            log_time=record.log_time,
+            log_time=log_time,
             publish_time=record.publish_time,
             data=record.data,
             sequence=record.seq,
         )
 
-    def flush(self) -> None:
+    def flush(self, *, last: bool = False) -> None:
         """Write what waits, in log-time order, and close the open chunk now, so it is on disk
-        even if this process is killed."""
+        even if this process is killed. What came since the previous flush waits for the next
+        one (`last`: not), unless it goes before something written now: an output that comes
+        after newer inputs (a gesture's final belief, stamped at its end) is written in its
+        place if it comes within a flush interval, so log times hold its stamp and never step
+        back; at most two intervals of messages wait."""
         self._last_flush = time.monotonic()
-        pending, self._pending = self._pending, []
-        pending.sort(key=lambda r: r.log_time)  # stable: arrival order among equal times
-        for record in pending:
+        waiting = sorted(self._aging + self._pending, key=lambda r: r.log_time)  # stable
+        if last:
+            ready, self._aging = waiting, []
+        else:
+            cut = max((r.log_time for r in self._aging), default=None)
+            ready = [r for r in waiting if cut is not None and r.log_time <= cut]
+            self._aging = [r for r in waiting if cut is None or r.log_time > cut]
+        self._pending = []
+        for record in ready:
             self._put(record)
-        if pending:
+        if ready:
             # mcap-python has no public "close this chunk" call; its private one is stable
             # across 1.x. Without it only size-full chunks would be written before finish().
             finalize = getattr(self._writer, "_Writer__finalize_chunk", None)
@@ -291,7 +308,7 @@ class RecordingWriter:
         """Flush if the interval has passed (call when idle)."""
         if (
             self._flush_interval is not None
-            and self._pending
+            and (self._pending or self._aging)
             and time.monotonic() - self._last_flush >= self._flush_interval
         ):
             self.flush()
@@ -304,7 +321,7 @@ class RecordingWriter:
         held, self._held = self._held, []
         for _, received, store in held:  # no stamp ever came: the wall clock is the only one
             store(received)
-        self.flush()
+        self.flush(last=True)
         self._writer.finish()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
         if self._file is not None:
             self._file.close()

@@ -48,7 +48,7 @@ from beyond_self.services.launcher import (
 )
 from beyond_self.services.link_watch import SILENT_S, LinkWatch
 from beyond_self.services.options import check_options
-from beyond_self.services.registry import SERVICES, service_class
+from beyond_self.services.registry import PIPELINE, service_class
 from beyond_self.services.supervision import RestartPolicy, Restarts, how_it_ended
 
 if TYPE_CHECKING:
@@ -191,7 +191,7 @@ class Deployment:
             self.health_watch = HealthWatch(bus, self.processes, self.on_stuck)
             self.health_watch.start()
         if self.router is not None and self.restart is not None:
-            remote = [name for name in SERVICES if name not in self.services]
+            remote = [name for name in PIPELINE if name not in self.services]
             self.link_watch = LinkWatch(
                 bus, remote, self.restart_router, silent_s=self.link_silent_s
             )

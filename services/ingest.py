@@ -11,8 +11,9 @@ source plug-in.
 - plug-in (`module:function`): the function returns an async iterator of `("skeleton", {joint:
   (x, y, z)})` (or `(x, y, z, confidence)`), `("camera", rgb_uint8_array)` (the tabletop camera)
   or `("person", services.pose_source.PersonFrame)` (a frame through the pose model: its image,
-  skeleton and pose in the image, one stamp for the three) items; ingest stamps them with the
-  clock and numbers them.
+  skeleton and pose in the image, one stamp for the three) items, a skeleton or camera item
+  with its own stamp (ns) third if it has one (a ROS 2 source, services.ros2_source); ingest
+  stamps the others with the clock, and numbers them.
 - video file or camera (`video=FILE`, `camera=INDEX`): the pose source (services.pose_source),
   a plug-in of that shape run here, so the pose model runs where the camera is.
 A bounded queue sits between a live source and the bus: when the bus cannot keep up the oldest
@@ -334,7 +335,7 @@ class SensorIngest(Service):
             pose = PoseSource(video=self.video, camera=self.camera_index)
             self.pose_counts = pose.counts
             source = aiter(pose)
-        queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue(self.queue_size)
+        queue: asyncio.Queue[tuple[Any, ...]] = asyncio.Queue(self.queue_size)
         done = object()
 
         async def pump() -> None:
@@ -349,17 +350,17 @@ class SensorIngest(Service):
         frame = 0
         try:
             while True:
-                kind, payload = await queue.get()
+                kind, payload, *own = await queue.get()
                 if payload is done:
                     break
                 frame += 1
                 if kind == "skeleton":
-                    header = self.header(SkeletonFrame)
+                    header = self.header(SkeletonFrame, *own)
                     joints = joints_of(payload)
                     self.skeleton.put(SkeletonFrame(header=header, frame=frame, joints=joints))
                     self._sent("skeleton", header.stamp)
                 elif kind == "camera":
-                    header = self.header(CameraFrame)
+                    header = self.header(CameraFrame, *own)
                     self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
                     self._sent("camera", header.stamp)
                 elif kind == "person" and isinstance(payload, PersonFrame):

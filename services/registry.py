@@ -17,9 +17,13 @@ SERVICES: dict[str, str] = {
     "reasoner": "beyond_self.services.reasoner:AffordanceReasoner",
     "describer": "beyond_self.services.describer:DescriptionGenerator",
     "speech": "beyond_self.services.speech:SpeechSynthesizer",
+    # the ROS 2 face (`beyond up --ros2`, `beyond ros2 bridge`): started only when asked for
+    "ros2": "beyond_self.services.ros2_bridge:Ros2Bridge",
 }
+OPTIONAL = ("ros2",)
+PIPELINE = tuple(n for n in SERVICES if n not in OPTIONAL)  # what every deployment runs
 PROFILES: dict[str, tuple[str, ...]] = {
-    "all": tuple(SERVICES),
+    "all": PIPELINE,
     "robot": ("ingest", "gestures", "objects"),
     "workstation": ("reasoner", "describer", "speech"),
     # a fleet: each robot its source and its voice, one workstation the rest for many robots
@@ -29,8 +33,8 @@ PROFILES: dict[str, tuple[str, ...]] = {
 # what may run on each side, in either layout: a robot with its own pipeline (PROFILES), or a
 # fleet's robot, whose gestures and objects are served by a workstation for many robots
 SIDES: dict[str, tuple[str, ...]] = {
-    "robot": ("ingest", "gestures", "objects", "speech"),
-    "workstation": ("gestures", "objects", "reasoner", "describer", "speech"),
+    "robot": ("ingest", "gestures", "objects", "speech", "ros2"),
+    "workstation": ("gestures", "objects", "reasoner", "describer", "speech", "ros2"),
 }
 
 

@@ -30,8 +30,9 @@ LOG_START = "log_start"  # checkpoint: the speech log's size when this run's spe
 class SpeechLog:
     """`speech.log`: one line per sentence said (stamp, gesture, WAV or '-', text)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, *, sync: bool = True) -> None:
         self.path = path
+        self.sync = sync  # also survive a power loss, not only a kill (a synced write costs ms)
 
     def size(self) -> int:
         return self.path.stat().st_size if self.path.exists() else 0
@@ -48,8 +49,8 @@ class SpeechLog:
         return [int(f[1]) for f in fields if len(f) >= 4 and f[1].isdigit()]
 
     def append(self, stamp: int, gesture: int, wav: str, text: str) -> None:
-        """One write on an append-only descriptor (a SIGKILL cannot tear it), then synced; on
-        a line of its own even after one a power loss cut short."""
+        """One write on an append-only descriptor (a SIGKILL cannot tear it), then synced
+        (`sync`); on a line of its own even after one a power loss cut short."""
         line = f"{stamp}\t{gesture}\t{wav}\t{text}\n".encode()
         fd = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o644)
         try:
@@ -57,7 +58,8 @@ class SpeechLog:
             if size and os.pread(fd, 1, size - 1) != b"\n":
                 line = b"\n" + line
             os.write(fd, line)
-            os.fsync(fd)
+            if self.sync:
+                os.fsync(fd)
         finally:
             os.close(fd)
 
@@ -97,19 +99,7 @@ class SpeechSynthesizer(Service):
         )
 
     def _take_what_the_run_said(self) -> None:
-        """A restarted instance: the sentences of its run's speech log count as said. The
-        first: its run's part of the log starts at the log's present end."""
-        start = self.ledgers.predecessor().get(LOG_START)
-        if start is not None:
-            keys = self.bus.keys
-            gestures = self.said.gestures_since(start)
-            for gesture in gestures:
-                said = Identity(keys.robot, gesture, "description")
-                self.ledgers.handled.add(keys.description, said)
-            event(self.log, logging.INFO, "took the speech log", said=len(gestures))
-        else:
-            start = self.said.size()
-        self.ledgers.checkpoint({}, {LOG_START: start})
+        take_what_the_run_said(self, self.said)
 
     def on_description(self, msg: Description) -> None:
         if not msg.final or not msg.sentences:
@@ -140,3 +130,21 @@ class SpeechSynthesizer(Service):
         """Play the sentence (once it is logged as said)."""
         if self.espeak is not None:
             subprocess.run([self.espeak, "-v", self.voice, "-s", str(self.wpm), text], timeout=30)
+
+
+def take_what_the_run_said(service: Service, said: SpeechLog) -> None:
+    """A restarted instance of `service`: the sentences of its run's part of log `said` count
+    as said (handled descriptions). The first: its run's part starts at the log's present end,
+    kept in its checkpoint (LOG_START)."""
+    start = service.ledgers.predecessor().get(LOG_START)
+    if start is not None:
+        keys = service.bus.keys
+        gestures = said.gestures_since(start)
+        for gesture in gestures:
+            service.ledgers.handled.add(
+                keys.description, Identity(keys.robot, gesture, "description")
+            )
+        event(service.log, logging.INFO, "took the log of what was said", said=len(gestures))
+    else:
+        start = said.size()
+    service.ledgers.checkpoint({}, {LOG_START: start})

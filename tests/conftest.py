@@ -132,6 +132,7 @@ LONG_FILES = (
     "test_live_load.py",
     "test_soak.py",
     "test_docs_blocks.py",
+    "test_ros2_bridge.py",
 )
 
 

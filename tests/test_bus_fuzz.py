@@ -32,7 +32,7 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.config import BusConfig
 from beyond_self.services.launcher import BEYOND
-from beyond_self.services.registry import SERVICES
+from beyond_self.services.registry import PIPELINE as SERVICES  # what `up` starts
 
 RECORDING = REPO / "recordings" / "tap-ball-grasp-box.mcap"  # 14.3 s, two gestures
 FUZZ_RATE_HZ = 300.0  # ten times the skeleton's 30 fps

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 from busutil_net import REPO, env_for, private_config, run_beyond, skeleton_recording
+from mcap.reader import make_reader
 from third_party_readers import assert_trusted, doctor, js_reports, unsafe_integers
 
 import beyond_self.schemas as s
@@ -192,7 +193,12 @@ async def test_up_from_a_folder_of_decoys_prints_the_readme_and_records_on_one_c
     root = f"beyond/{config.robot}"
     for key in ("clock", "health/ingest", "health/speech", "progress/objects", "sensors/end"):
         assert f"{root}/{key}" in times, sorted(times)
-    for key, logged in times.items():
+    written: dict[str, list[int]] = {}  # as written: what a ROS or Foxglove player walks
+    with open(out, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            written.setdefault(channel.topic, []).append(message.log_time)
+    assert written.keys() == times.keys()
+    for key, logged in written.items():
         assert logged == sorted(logged), f"{key} steps back in time"
     found = doctor(out)
     assert [f["code"] for f in found["findings"]] == ["NO_ATTACHMENTS"], found

@@ -258,3 +258,30 @@ def test_a_live_recording_has_one_timeline(tmp_path: Path) -> None:
     with open(path, "rb") as f:  # as written, chunk by chunk: never back in time
         written = [m.log_time for _, _, m in make_reader(f).iter_messages(log_time_order=False)]
     assert written == sorted(written) and len(written) == 6
+
+
+def test_a_channels_log_times_never_step_back(tmp_path: Path) -> None:
+    """A gesture's final belief, stamped at the gesture's end, reaches the recorder after the
+    beliefs of later frames: within a flush interval it is written in its place (log time =
+    its stamp); later than the flushes wait for, at its channel's last log time (ROS and
+    Foxglove players assume a channel's log times never step back), its stamp, publish time
+    and contents its own. Either way it is read back in stamp order."""
+    frames = skeleton_frames(6)
+    stamps = [f.header.stamp for f in frames]
+    key, enc = ROBOT_KEYS.skeleton, s.wire_encoding(s.SkeletonFrame)
+    for flushes, late_log in ((1, stamps[4]), (2, stamps[5])):
+        path = tmp_path / f"late{flushes}.mcap"
+        with RecordingWriter(path, flush_interval=3600.0) as w:
+            for i in (0, 1, 2, 3, 5, 4):  # 4 comes after 5
+                if i == 4:
+                    for _ in range(flushes):  # idle flushes (the recorder's, each interval)
+                        w.flush()
+                w.write_wire(key, s.encode(frames[i]), enc, 0)
+        with open(path, "rb") as f:
+            written = {m.publish_time: m.log_time for _, _, m in make_reader(f).iter_messages(
+                log_time_order=False)}  # fmt: skip
+        logs = list(written.values())
+        assert logs == sorted(logs), flushes
+        assert written[stamps[4]] == late_log, flushes
+        assert all(written[stamps[i]] == stamps[i] for i in (0, 1, 2, 3, 5))
+        assert [r.message() for r in read_recording(path)] == frames

@@ -18,7 +18,7 @@ from beyond_self.runtime.process import exit_process
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import SERVICES, service_class
 
-HELP = "run one service (ingest, gestures, objects, reasoner, describer, speech)"
+HELP = "run one service (ingest, gestures, objects, reasoner, describer, speech, ros2)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -67,6 +67,7 @@ from rich.live import Live
 from beyond_self.cognition.paths import DEMO_RECORDING
 from beyond_self.cognition.pose.video import CAMERA_INDEX_MAX, Video
 from beyond_self.commands import argtypes
+from beyond_self.commands.ros2 import add_ros2_arguments, ros2_options
 from beyond_self.core.errors import InputError, unknown
 from beyond_self.live_view import render
 from beyond_self.monitor import PipelineMonitor
@@ -177,6 +178,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="exit once the (remote) source has ended and every gesture is described",
     )
+    add_ros2_arguments(parser, flag=True)
     add_bus_arguments(parser)
     parser.epilog = (
         "Every service dies with `up`, however `up` ends (SIGKILL too). A second `up` for a "
@@ -385,7 +387,11 @@ def deployment(
     """The side's Deployment, and whether it replays a finite source."""
     skip, without = service_names(args.skip), service_names(args.without)
     names = [n for n in PROFILES[args.profile] if n not in skip and n not in without]
+    if args.ros2:
+        names.append("ros2")
     options, replayed = service_options(args, names)
+    if args.ros2:
+        options["ros2"].update(ros2_options(args))
     router = None
     if config.secure is not None:
         router, local = secure_router(config, names, args.profile)

@@ -1,0 +1,105 @@
+"""A ROS 2 body tracker and camera as the pipeline's live source: the ingest's plug-in
+(`beyond up --live-source beyond_self.services.ros2_source:source`) reads body markers (the
+Azure Kinect driver's MarkerArray), openni_tracker's TF frames and a camera (Image or
+CompressedImage) from an rmw_zenoh graph, and yields skeleton joints and RGB images with their
+own stamps, which the ingest publishes as any live source's. Where and what it reads are environment
+variables (a plug-in takes no arguments): BEYOND_ROS2_CONNECT, ROS_DOMAIN_ID, and the topics
+BEYOND_ROS2_SKELETON, BEYOND_ROS2_TF, BEYOND_ROS2_CAMERA (compressed) or
+BEYOND_ROS2_CAMERA_RAW; a topic set to "" is not read."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+from collections.abc import AsyncIterator, Callable
+from typing import Any
+
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.accounting import LogOnce
+from beyond_self.runtime.images import image_from_message
+from beyond_self.runtime.ros2_convert import FromRos
+from beyond_self.runtime.ros2_node import Ros2Node, default_domain
+from beyond_self.schemas import ros2 as r
+from beyond_self.schemas.keys import DEFAULT_ROBOT
+from beyond_self.schemas.messages import CameraFrame, CompressedCameraFrame, SkeletonFrame
+
+log = logging.getLogger("beyond.ros2_source")
+QUEUE = 64  # samples waiting for the ingest; beyond it the oldest is dropped
+# environment variable -> (our input stream, ROS 2 type)
+INPUTS = {
+    "BEYOND_ROS2_SKELETON": ("skeleton", r.MARKER_ARRAY),
+    "BEYOND_ROS2_TF": ("tf", r.TF_MESSAGE),
+    "BEYOND_ROS2_CAMERA": ("camera_compressed", r.COMPRESSED_IMAGE),
+    "BEYOND_ROS2_CAMERA_RAW": ("camera", r.IMAGE),
+}
+
+
+def topics_from_env(robot: str) -> dict[str, tuple[str, str, str]]:
+    """Topic -> (variable, stream, ROS 2 type) to read: each variable's topic, or the default
+    of schemas.ros2 (`/<robot>/body_tracking_data`, `/tf`, `/<robot>/camera/image/compressed`;
+    no raw camera unless named)."""
+    defaults = r.Ros2Topics(robot)
+    out: dict[str, tuple[str, str, str]] = {}
+    for variable, (stream, ros_type) in INPUTS.items():
+        fallback = "" if stream == "camera" else defaults.topic(stream)
+        topic = os.environ.get(variable, fallback).strip()
+        if topic:
+            out[r.check_topic(topic)] = (variable, stream, ros_type)
+    return out
+
+
+def items_of(messages: list[Any]) -> list[tuple[str, Any, int]]:
+    """The ingest's plug-in items (kind, payload, the message's own stamp) of our messages."""
+    items: list[tuple[str, Any, int]] = []
+    for m in messages:
+        stamp = m.header.stamp
+        if isinstance(m, SkeletonFrame):
+            joints = {n: (*j.position, j.confidence) for n, j in m.joints.items()}
+            items.append(("skeleton", joints, stamp))
+        elif isinstance(m, CameraFrame | CompressedCameraFrame):
+            items.append(("camera", image_from_message(m), stamp))
+    return items
+
+
+async def source() -> AsyncIterator[tuple[str, Any, int]]:
+    """Items as they come from the ROS 2 graph, until cancelled; a sample that does not
+    decode is logged (once per kind of problem) and skipped."""
+    loop = asyncio.get_running_loop()
+    queue: asyncio.Queue[tuple[str, str, bytes]] = asyncio.Queue(QUEUE)
+    robot = os.environ.get("BEYOND_ROBOT", DEFAULT_ROBOT)
+    node = Ros2Node(
+        f"beyond_{robot}_source",
+        f"/{r.ros_name(robot)}",
+        connect=os.environ.get("BEYOND_ROS2_CONNECT", r.DEFAULT_CONNECT),
+        domain=default_domain(),
+    )
+
+    def enqueue(item: tuple[str, str, bytes]) -> None:
+        if queue.full():
+            queue.get_nowait()
+        queue.put_nowait(item)
+
+    def receiver(stream: str, ros_type: str) -> Callable[[bytes], None]:
+        def receive(cdr: bytes) -> None:  # on Zenoh's thread
+            loop.call_soon_threadsafe(enqueue, (stream, ros_type, cdr))
+
+        return receive
+
+    try:
+        for topic, (_, stream, ros_type) in topics_from_env(robot).items():
+            node.subscribe(topic, ros_type, r.SENSOR_QOS, receiver(stream, ros_type))
+        convert = FromRos()
+        once = LogOnce()
+        while True:
+            stream, ros_type, cdr = await queue.get()
+            try:
+                converted = convert.convert(stream, ros_type, cdr)
+            except InputError as exc:  # one bad sample is not the end of the source
+                if once.first(stream, str(exc)):
+                    log.warning("ROS 2 sample skipped: %s", exc)
+                continue
+            for item in items_of(converted):
+                yield item
+    finally:
+        node.close()
