@@ -1,7 +1,8 @@
 """Speech: speaks the best sentence of every final description with a real synthesizer.
 
 The synthesizer is espeak-ng through its command line: each sentence is rendered to a WAV file
-in `out_dir` (named by robot time stamp and gesture), listed in `speech.log` next to it, and with
+in `out_dir` (named by robot time stamp and gesture; default `speech/` under the run's output
+folder, runtime.outputs), listed in `speech.log` next to it, and with
 `play` on spoken aloud. Without espeak-ng the service says so once and prints the sentences
 instead. To drop in another synthesizer, subclass and override `synthesize` (see the README's
 recipe): everything else — subscription, health, malformed input, saying each sentence once —
@@ -18,6 +19,7 @@ again, one after it may cut the sentence short but never repeats it.
 
 from __future__ import annotations
 
+import argparse
 import logging
 import os
 import shutil
@@ -27,6 +29,7 @@ from typing import Any
 
 from beyond_self.runtime.delivery import EVENTS
 from beyond_self.runtime.log import event
+from beyond_self.runtime.outputs import DESCRIPTION, service_out_dir
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import Description
 from beyond_self.schemas.identity import Identity
@@ -78,20 +81,35 @@ class SpeechSynthesizer(Service):
     def __init__(
         self,
         *,
-        out_dir: str = "out/speech",
+        out_dir: str | None = None,
         voice: str = "en",
         words_per_minute: int = 150,
         play: bool = False,
         **base: Any,
     ) -> None:
         super().__init__(**base)
-        self.out_dir = Path(out_dir)
+        self.out_dir = Path(out_dir) if out_dir is not None else service_out_dir("speech")
         self.voice = voice
         self.wpm = words_per_minute
         self.play = play
         self.espeak = shutil.which("espeak-ng")
         self.spoken = 0
         self.said = SpeechLog(self.out_dir / "speech.log")
+
+    @classmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument(
+            "--out-dir",
+            metavar="DIR",
+            help=f"where the WAVs and speech.log go (default: speech/ under {DESCRIPTION})",
+        )
+        parser.add_argument("--voice", help="espeak-ng voice (default en)")
+        parser.add_argument(
+            "--words-per-minute", type=int, metavar="N", help="speaking rate (default 150)"
+        )
+        parser.add_argument(
+            "--play", action="store_true", default=None, help="also play each sentence aloud"
+        )
 
     async def setup(self) -> None:
         self.out_dir.mkdir(parents=True, exist_ok=True)
