@@ -21,6 +21,7 @@ from busutil_net import REPO, env_for, free_port, private_config
 from beyond_self.runtime import keystore
 from beyond_self.runtime.config import describe, load_config
 from beyond_self.runtime.outputs import OUT_DIR_VAR, out_dir
+from beyond_self.runtime.recording import inspect_recording, read_recording
 from beyond_self.services import registry
 from beyond_self.services.launcher import BEYOND
 from beyond_self.services.speech import SpeechSynthesizer
@@ -154,3 +155,33 @@ def test_up_out_dir_is_handed_to_the_services(tmp_path: Path) -> None:
     assert out_dir_env(args) == {OUT_DIR_VAR: str(tmp_path / "runs")}
     assert (tmp_path / "runs").is_dir()
     assert out_dir_env(parser.parse_args([])) == {}
+
+
+def test_export_of_a_shipped_recording_fills_the_layout_s_views(tmp_path: Path) -> None:
+    """The shipped recording holds sensor streams only: the export adds what the pipeline
+    publishes for it (`beyond analyse`'s analysis), with the views the layout's panels show,
+    and says in one line why a view stays empty. Exported again, nothing is derived twice."""
+    out = tmp_path / "views.mcap"
+    done = beyond("foxglove", "--export", str(RECORDING), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    assert "view pose is empty: the recording has no person pose" in done.stdout
+    assert not re.search(r"view (scene|objects|posterior|affordance|log) is empty", done.stdout)
+    counts = {c.topic: c.count for c in inspect_recording(out).channels}
+    root = "beyond/robot/foxglove"
+    for view in ("objects", "posterior", "affordance", "log"):
+        assert counts.get(f"{root}/{view}", 0) > 0, (view, counts)
+    cameras = counts["beyond/robot/sensors/camera/compressed"]
+    assert counts[f"{root}/objects"] == counts["beyond/robot/vision/objects"] == cameras
+    described = [
+        f'gesture {r.message().segment_id}: "{r.message().sentences[0].text}"'
+        for r in read_recording(out)
+        if r.key.endswith("/language/description")
+    ]
+    analysed = beyond("analyse", str(RECORDING))
+    assert described and described == [
+        line for line in analysed.stdout.splitlines() if line.endswith('"')
+    ]
+    again = tmp_path / "again.mcap"
+    assert beyond("foxglove", "--export", str(out), "-o", str(again)).returncode == 0
+    twice = {c.topic: c.count for c in inspect_recording(again).channels}
+    assert twice == counts
