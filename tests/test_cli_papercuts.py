@@ -185,3 +185,16 @@ def test_export_of_a_shipped_recording_fills_the_layout_s_views(tmp_path: Path) 
     assert beyond("foxglove", "--export", str(out), "-o", str(again)).returncode == 0
     twice = {c.topic: c.count for c in inspect_recording(again).channels}
     assert twice == counts
+
+
+@pytest.mark.skipif(not (REPO / ".git").exists(), reason="not a git checkout")
+def test_what_python_m_build_leaves_is_ignored() -> None:
+    leftovers = ["dist/beyond_self-0.tar.gz", "build/lib/x.py", "beyond_self.egg-info/PKG-INFO"]
+    done = subprocess.run(
+        ["git", "check-ignore", "--no-index", *leftovers],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.stdout.split() == leftovers, done.stderr
