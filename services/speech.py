@@ -103,10 +103,6 @@ class SpeechSynthesizer(Service):
             metavar="DIR",
             help=f"where the WAVs and speech.log go (default: speech/ under {DESCRIPTION})",
         )
-        parser.add_argument("--voice", help="espeak-ng voice (default en)")
-        parser.add_argument(
-            "--words-per-minute", type=int, metavar="N", help="speaking rate (default 150)"
-        )
         parser.add_argument(
             "--play", action="store_true", default=None, help="also play each sentence aloud"
         )
