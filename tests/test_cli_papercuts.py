@@ -157,6 +157,7 @@ def test_up_out_dir_is_handed_to_the_services(tmp_path: Path) -> None:
     assert out_dir_env(parser.parse_args([])) == {}
 
 
+@pytest.mark.slow
 def test_export_of_a_shipped_recording_fills_the_layout_s_views(tmp_path: Path) -> None:
     """The shipped recording holds sensor streams only: the export adds what the pipeline
     publishes for it (`beyond analyse`'s analysis), with the views the layout's panels show,

@@ -173,6 +173,7 @@ LOG_NAMES = (
 )  # fmt: skip
 
 
+@pytest.mark.slow
 def test_the_readme_s_data_set_names_work_from_any_folder(
     shared_data: Path,
     tmp_path: Path,

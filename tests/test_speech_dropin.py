@@ -54,6 +54,7 @@ def test_help_says_what_it_needs() -> None:
     assert "--out-dir DIR" in done.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng is not installed")
 async def test_it_says_what_up_describes_beside_up_skip_speech(tmp_path: Path) -> None:
     config = private_config()
