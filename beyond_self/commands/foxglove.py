@@ -4,7 +4,8 @@ bus's rendezvous port, as in every command (until 0.3 it was the WebSocket port 
 bus's was `--bus-port`, still accepted).
 
 `beyond foxglove --export IN.mcap -o OUT.mcap` adds the same views to a recording made without
-them (`beyond record --foxglove` writes them as it records)."""
+them (`beyond record --foxglove` writes them as it records), and what the pipeline publishes
+for a recording of sensors alone, from the offline analysis (commands/foxglove_export.py)."""
 
 from __future__ import annotations
 
@@ -36,7 +37,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--host", default="127.0.0.1", help="address the WebSocket listens on (default: loopback)"
     )
     parser.add_argument(
-        "--export", metavar="IN.mcap", help="write IN.mcap plus its Foxglove views to -o FILE"
+        "--export",
+        metavar="IN.mcap",
+        help="write IN.mcap plus its Foxglove views to -o FILE, with the pipeline's analysis "
+        "(objects, posteriors, predictions, descriptions) where IN.mcap has sensors only",
     )
     argtypes.add_output(parser, "file written by --export")
     parser.add_argument(
