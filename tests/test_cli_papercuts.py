@@ -59,6 +59,11 @@ def test_keys_show_takes_the_keystore_as_keys_init_does(store: Path) -> None:
     assert re.search(r"^speech\s+valid", positional.stdout, re.M)
     both = beyond("keys", "show", str(store), "--dir", str(store.parent))
     assert both.returncode == 2 and "two keystores given" in both.stderr
+    rules = beyond("keys", "acl", str(store))
+    assert (
+        rules.returncode == 0 and rules.stdout == beyond("keys", "acl", "--dir", str(store)).stdout
+    )
+    assert '"ws-1"' in rules.stdout  # the rules of this keystore, not the default ones
 
 
 def test_keys_show_prints_a_workstation_s_robots_as_typed(store: Path) -> None:

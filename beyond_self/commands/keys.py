@@ -5,7 +5,7 @@
     beyond keys add ROBOT --robot                        a fleet robot's own certificate
     beyond keys add NAME --workstation PATTERN           a workstation serving robots PATTERN
     beyond keys show [DIR]                               every certificate, its robots, expiry
-    beyond keys acl [--dir DIR]                          the router's access_control block
+    beyond keys acl [DIR]                                the router's access_control block
 
 Identities are the services' names, the sides' (`router`, `robot`, `workstation`) and `tools`
 (read-only: `echo`, `topics`, `ask`, `record`), each bound to the robots it may act for (a robot
@@ -60,10 +60,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         )
     show = sub.add_parser("show", help="the certificates in the keystore, their robots, expiry")
     acl = sub.add_parser("acl", help="print the router's access_control block, generated")
-    # DIR as `keys init DIR` spells it; --dir too, as `add` and `acl` take it
-    show.add_argument(
-        "directory", nargs="?", type=Path, metavar="DIR", help="keystore ($BEYOND_ZENOH_SECURE)"
-    )
+    # DIR as `keys init DIR` spells it; --dir too, as `add` takes it
+    for p in (show, acl):
+        p.add_argument(
+            "directory", nargs="?", type=Path, metavar="DIR", help="keystore ($BEYOND_ZENOH_SECURE)"
+        )
     for p in (add, show, acl):
         p.add_argument("--dir", type=Path, help="keystore directory ($BEYOND_ZENOH_SECURE)")
 
