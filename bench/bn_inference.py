@@ -23,6 +23,7 @@ Last line: one JSON object with every figure.
 
 from __future__ import annotations
 
+import argparse
 import json
 import statistics
 import time
@@ -170,6 +171,11 @@ def inference(model: BayesNet, tag: str) -> dict[str, dict[str, float]]:
 
 
 def main() -> None:
+    # no options: --help says what it measures and exits
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.parse_args()
     warnings.simplefilter("ignore", FutureWarning)
     dataset, name = load()
     model = learn_network(dataset)

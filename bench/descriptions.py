@@ -15,6 +15,7 @@ The last line printed is one JSON object with every figure.
 
 from __future__ import annotations
 
+import argparse
 import json
 import statistics
 import time
@@ -52,6 +53,11 @@ def timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, list[float]]:
 
 
 def main() -> None:
+    # no options: --help says what it measures and exits
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.parse_args()
     rng = np.random.default_rng(SEED)
     probs = {
         w: float(p)

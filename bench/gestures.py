@@ -13,6 +13,7 @@ synthetic 94-frame gesture. The last line is one JSON object with every figure.
 
 from __future__ import annotations
 
+import argparse
 import json
 import platform
 import time
@@ -90,6 +91,11 @@ def batched_step(models: GestureModels, x: np.ndarray, n: int, steps: int) -> fl
 
 
 def main() -> None:
+    # no options: --help says what it measures and exits
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.parse_args()
     models, x, source = workload()
     with threadpool_limits(limits=1, user_api="blas"):
         # correctness first: the fast paths agree with hmmlearn on the final prefix

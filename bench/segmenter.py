@@ -19,6 +19,7 @@ Ends with one line of JSON.
 
 from __future__ import annotations
 
+import argparse
 import os
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -88,6 +89,11 @@ def fps(fn: Callable[[np.ndarray], int], frames: list[np.ndarray]) -> tuple[floa
 
 
 def main() -> None:
+    # no options: --help says what it measures and exits
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     results: dict[str, float | int | str] = {"bench": "segmenter", "cores": 1}

@@ -47,3 +47,26 @@ def require_shared_data(relative: str = "") -> Path:
     if not path.exists():
         raise InputError(f"missing data file {path}; it comes from {SOURCES}")
     return path
+
+
+def data_set(spec: str, keep: tuple[str, ...] = ()) -> str:
+    """DATA as a user types it: a name in `keep` (`synthetic`), a file or folder here, or the
+    name of a folder of the article's data (`human_data` is saponaro2019/human_data there, as
+    the README writes it); else an InputError saying where to get the data and how to point at
+    it. A path of the current folder wins over a data set of the same name."""
+    if spec in keep:
+        return spec
+    if Path(spec).expanduser().exists():
+        return str(Path(spec).expanduser())
+    root = shared_data_dir()
+    if root is not None and spec.strip() and not Path(spec).is_absolute():
+        found = sorted(p for p in (root / spec, *root.glob(f"*/{spec}")) if p.exists())
+        if found:
+            return str(found[0])
+    where = str(root) if root else f"none in $BEYOND_DATA or {ROOT.parent / 'shared' / 'data'}"
+    valid = "".join(f"'{k}', " for k in keep)
+    raise InputError(
+        f"{spec} is not a file or folder here, nor a data set of the article's data folder "
+        f"({where}); valid: {valid}a path, or a data set name such as human_data with the data "
+        f"from {SOURCES} in ../shared/data beside the project or in $BEYOND_DATA"
+    )

@@ -351,8 +351,17 @@ def _file_endpoints(zc: zenoh.Config, path: str) -> list[str]:
 
 
 def describe(config: BusConfig) -> str:
-    """One line for logs: mode, robot and endpoints."""
+    """One line for logs: mode, robot and endpoints (with a config file, those it lists where
+    no option overrides them: the endpoints the session is given)."""
     listen, connect = config.endpoints()
+    if config.config_file is not None:
+        try:
+            zc = zenoh_config(config)
+        except InputError:  # a bad file: its own error says why; this line names no endpoint
+            pass
+        else:
+            listen = _file_endpoints(zc, "listen/endpoints")
+            connect = _file_endpoints(zc, "connect/endpoints")
     source = f" file={config.config_file}" if config.config_file else ""
     if config.secure is not None:
         source += f" secure={config.secure} identity={config.identity or '-'}"

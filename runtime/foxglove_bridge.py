@@ -46,6 +46,9 @@ class BridgeStats:
     malformed: int = 0
 
 
+SDK_SERVER_LOG = "foxglove.websocket.server"
+
+
 class FoxgloveBridge:
     """Serve the bus of `bus.keys.robot` on ws://host:port until `run` is stopped."""
 
@@ -54,6 +57,9 @@ class FoxgloveBridge:
         self.stats = BridgeStats()
         self._context = foxglove.Context()
         sock = listening_socket(host, port)  # InputError at once if the port is taken
+        # the SDK's server announces its own port, which only our front connects to: its
+        # notices would name a port no user can open (the front's is logged by the caller)
+        logging.getLogger(SDK_SERVER_LOG).setLevel(logging.WARNING)
         try:
             self._server = foxglove.start_server(
                 name=f"beyond-self ({bus.keys.robot})",

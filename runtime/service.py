@@ -18,11 +18,12 @@ runtime/README.md shows a whole service.
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import logging
 import time
 import zlib
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Sequence
 from typing import Any, NoReturn, TypeVar, overload
 
 from beyond_self.runtime import heap, process
@@ -44,6 +45,7 @@ from beyond_self.runtime.self_report import (
     restarts,
     stop_counts,
 )
+from beyond_self.runtime.service_cli import options_from_command_line
 from beyond_self.runtime.subscription import Handler, Received, Subscription, consume
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
@@ -427,11 +429,25 @@ class Service:
             self._bus = None
 
     @classmethod
-    def main(cls, *args: Any, **kwargs: Any) -> NoReturn:
-        """Entry point for a service process: logging, run until SIGINT/SIGTERM, then leave
-        with status 0 (2 for bad input such as a bad option).
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        """The service's own options on its command line (`python my_service.py --help`), beside
+        the bus options; each parsed value that is not None is passed to the constructor as the
+        keyword argument its `dest` names."""
+
+    @classmethod
+    def check_requirements(cls) -> None:
+        """Raise InputError (one line: what is missing, how to get it) when something the
+        service needs outside Python is absent; `main` says it and exits 2 before starting."""
+
+    @classmethod
+    def main(cls, *args: Any, argv: Sequence[str] | None = None, **kwargs: Any) -> NoReturn:
+        """Entry point for a service process: its command line (`argv`, default the process's:
+        `--help`, the bus options of every `beyond` command, `add_arguments`'), logging, run
+        until SIGINT/SIGTERM, then leave with status 0 (2 for bad input such as a bad option).
+        A caller that parsed its own command line (`beyond service`) passes `argv=()`.
 
         It leaves through `process.exit_process`, not by returning to the interpreter: once the
         session is closed, the interpreter's own teardown of Zenoh's native threads can abort a
         process that stopped cleanly (SIGABRT, "FATAL: exception not rethrown")."""
-        process.exit_process(process.run_to_completion(lambda: cls(*args, **kwargs).run()))
+        service = options_from_command_line(cls, argv, kwargs)
+        process.exit_process(process.run_to_completion(lambda: cls(*args, **service).run()))

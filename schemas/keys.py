@@ -72,6 +72,11 @@ def robot_pattern(text: str) -> str:
     return chunk
 
 
+def typed_pattern(pattern: str) -> str:
+    """`pattern` (robot_pattern's) as a person types it: `lab-$*` is shown as `lab-*`."""
+    return pattern.replace("$*", "*")
+
+
 def for_robots(pattern: str, key: str) -> str:
     """`key` (of any one robot, e.g. `Keys().alive("ingest")`) for every robot `pattern`
     (robot_pattern's) names: its robot chunk replaced, the rest as `Keys` made it."""

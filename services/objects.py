@@ -214,7 +214,7 @@ class ObjectSegmenter(Service):
             DetectedObjects(
                 header=self.derive(msg.header, DetectedObjects),
                 frame=msg.header.seq,
-                objects=[_detected(o) for o in objects],
+                objects=[detected_object(o) for o in objects],
                 skipped=skipped,
             )
         )
@@ -273,7 +273,7 @@ class ObjectSegmenter(Service):
             self.publish_progress()
 
 
-def _detected(o: FoundObject) -> DetectedObject:
+def detected_object(o: FoundObject) -> DetectedObject:
     f = o.features
     return DetectedObject(
         id=o.id,

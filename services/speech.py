@@ -1,16 +1,17 @@
 """Speech: speaks the best sentence of every final description with a real synthesizer.
 
-espeak-ng renders each sentence to a WAV in `out_dir`, listed in `speech.log` beside it, and with
-`play` spoken aloud; without espeak-ng the service says so once and prints the sentences. Another
-synthesizer: subclass and override `synthesize` (docs/how-to/speech-synthesizer.md). Once, across
-a SIGKILL: the bus ledger reaches the others a moment after the sentence, so the speech log is the
-record that cannot lag: render, then append the line and sync (the commit), then play. A
-restarted service reads the lines its run wrote and does not say them again; a kill after the
-commit may cut a sentence short but never repeats it.
+espeak-ng renders each sentence to a WAV in `out_dir` (default `speech/` under the run's output
+folder, runtime.outputs), listed in `speech.log` beside it, and with `play` spoken aloud; without
+espeak-ng the service says so once and prints the sentences. Another synthesizer: subclass and
+override `synthesize` (docs/how-to/speech.md). Once, across a SIGKILL: the bus ledger reaches the
+others a moment after the sentence, so the speech log is the record that cannot lag: render, then
+append the line and sync (the commit), then play. A restarted service reads the lines its run
+wrote and does not say them again; a kill after the commit cuts a sentence short at worst.
 """
 
 from __future__ import annotations
 
+import argparse
 import logging
 import os
 import shutil
@@ -20,6 +21,7 @@ from typing import Any
 
 from beyond_self.runtime.delivery import EVENTS
 from beyond_self.runtime.log import event
+from beyond_self.runtime.outputs import DESCRIPTION, service_out_dir
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import Description
 from beyond_self.schemas.identity import Identity
@@ -73,20 +75,31 @@ class SpeechSynthesizer(Service):
     def __init__(
         self,
         *,
-        out_dir: str = "out/speech",
+        out_dir: str | None = None,
         voice: str = "en",
         words_per_minute: int = 150,
         play: bool = False,
         **base: Any,
     ) -> None:
         super().__init__(**base)
-        self.out_dir = Path(out_dir)
+        self.out_dir = Path(out_dir) if out_dir is not None else service_out_dir("speech")
         self.voice = voice
         self.wpm = words_per_minute
         self.play = play
         self.espeak = shutil.which("espeak-ng")
         self.spoken = 0
         self.said = SpeechLog(self.out_dir / "speech.log")
+
+    @classmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument(
+            "--out-dir",
+            metavar="DIR",
+            help=f"where the WAVs and speech.log go (default: speech/ under {DESCRIPTION})",
+        )
+        parser.add_argument(
+            "--play", action="store_true", default=None, help="also play each sentence aloud"
+        )
 
     async def setup(self) -> None:
         self.out_dir.mkdir(parents=True, exist_ok=True)

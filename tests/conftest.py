@@ -12,6 +12,21 @@ from busutil_net import busy_loops
 from netns_util import TwoHosts, unavailable
 
 from beyond_self.cognition.paths import SOURCES, shared_data_dir
+from beyond_self.runtime.outputs import OUT_DIR_VAR
+
+
+@pytest.fixture(scope="session", autouse=True)
+def run_outputs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """What the services the tests start write (runtime.outputs) goes to a folder of the
+    session's, never into the state folder of the user running the suite."""
+    folder = tmp_path_factory.mktemp("outputs")
+    before = os.environ.get(OUT_DIR_VAR)
+    os.environ[OUT_DIR_VAR] = str(folder)
+    yield folder
+    if before is None:
+        os.environ.pop(OUT_DIR_VAR, None)
+    else:
+        os.environ[OUT_DIR_VAR] = before
 
 
 @pytest.fixture(scope="session")

@@ -171,3 +171,36 @@ LOG_NAMES = (
     "grasp1_hand", "touch1_hand", "push1_hand", "tap1_hand", "tap_notable_seated_1",
     "norobotview_tap_notable_seated_2",
 )  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_readme_s_data_set_names_work_from_any_folder(
+    shared_data: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """`human_data`, as the README types it, from a folder that holds no such thing: the
+    article's data folder is looked in; `-o` is the current spelling (no deprecation note)."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("BEYOND_DATA", str(shared_data))
+    argv = ["gesture", "train", "--data", "synthetic", "--data", "human_data", "--push-as",
+            "touch", "--count", "2", "--states", "3", "--mix", "1", "--iter", "2",
+            "-o", "m.json"]  # fmt: skip
+    assert main(argv) == 0
+    assert "deprecated" not in capsys.readouterr().err
+    human = str(shared_data / "saponaro2019" / "human_data")
+    assert load_models(tmp_path / "m.json").meta["data"] == ["synthetic", human]
+    assert main(["gesture", "realism", "human_data", "--push-as", "touch", "--count", "3"]) == 0
+    assert (tmp_path / "gesture-evaluation" / "realism.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_an_unknown_data_set_is_one_line_saying_where_to_get_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    for command in (["evaluate", "compare"], ["evaluate", "default"], ["realism"]):
+        assert main(["gesture", *command, "no_such_data"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("beyond gesture: error: no_such_data is not")
+        assert "$BEYOND_DATA" in err[0] and "gsaponaro/tcds-gestures" in err[0]

@@ -21,6 +21,7 @@ import pytest
 from busutil_net import REPO, env_for, private_config
 
 import beyond_self
+from beyond_self.runtime.outputs import OUT_DIR_VAR
 
 LAYERS = ("cognition", "core", "runtime", "schemas", "services")
 DECOYS = (*LAYERS, "beyond", "beyond_self")
@@ -137,6 +138,8 @@ def test_the_installed_demo_runs_from_an_empty_folder(installed: Path, tmp_path:
         (work / name).mkdir()
         (work / name / "__init__.py").write_text("raise ImportError('decoy imported')\n")
     env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text", "PYTHONPATH": ""}
+    env.pop(OUT_DIR_VAR, None)  # the demo's outputs go to the user's state folder
+    env["XDG_STATE_HOME"] = str(tmp_path / "state")
     beyond = str(installed / "bin" / "beyond")
     version = subprocess.run([beyond, "--version"], capture_output=True, text=True, cwd=work)
     assert version.stdout.strip() == f"beyond-self {beyond_self.__version__}"
@@ -151,6 +154,11 @@ def test_the_installed_demo_runs_from_an_empty_folder(installed: Path, tmp_path:
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     printed = [line for line in done.stdout.splitlines() if line.startswith("gesture ")]
     assert printed == readme_demo_lines()
+    # nothing written into the folder it ran from: what it said is in the state folder
+    assert sorted(p.name for p in work.iterdir()) == sorted(DECOYS)
+    said = (tmp_path / "state" / "beyond" / "speech" / "speech.log").read_text().splitlines()
+    described = [line.split(': "', 1)[1][:-1] for line in printed if ': "' in line]
+    assert [line.split("\t")[-1] for line in said] == described
 
 
 def test_our_package_imports_beside_decoy_layers(installed: Path, tmp_path: Path) -> None:

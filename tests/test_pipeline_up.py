@@ -38,7 +38,7 @@ def run_up(
 ) -> subprocess.CompletedProcess[str]:
     env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
     cmd = [*BEYOND, "up", "--recording", str(recording), "--rate", rate,
-           "--no-live", "--timeout", "90"]  # fmt: skip
+           "--no-live", "--timeout", "90", "--out-dir", str(tmp / "out")]  # fmt: skip
     return subprocess.run(cmd, env=env, cwd=tmp, capture_output=True, text=True, timeout=150)
 
 

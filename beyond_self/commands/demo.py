@@ -31,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--top", type=argtypes.count(1, 10_000), default=8, help="with --network: words to list"
     )
     parser.add_argument("--no-live", action="store_true", help="event lines only, no live view")
+    from beyond_self.commands.up import add_out_dir
+
+    add_out_dir(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
     parser = argparse.ArgumentParser(prog="beyond demo")
     up.add_arguments(parser)
     argv = ["--recording", str(DEMO_RECORDING), *(["--no-live"] if args.no_live else [])]
+    if args.out_dir is not None:
+        argv += ["--out-dir", str(args.out_dir)]
     return up.run(parser.parse_args(argv))
 
 

@@ -3,7 +3,8 @@ connection to ws://localhost:8765; see docs/tutorial.md, "Watch it in Foxglove")
 bus's rendezvous port, as in every command (`--bus-port`, its spelling before 0.3, still works).
 
 `beyond foxglove --export IN.mcap -o OUT.mcap` adds the same views to a recording made without
-them (`beyond record --foxglove` writes them as it records)."""
+them (`beyond record --foxglove` writes them as it records), and what the pipeline publishes
+for a recording of sensors alone, from the offline analysis (commands/foxglove_export.py)."""
 
 from __future__ import annotations
 
@@ -19,8 +20,6 @@ from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.foxglove_bridge import DEFAULT_PORT, FoxgloveBridge
 from beyond_self.runtime.log import setup_logging
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.recording_writer import RecordingWriter
 
 HELP = "serve the bus to Foxglove over its WebSocket protocol"
 
@@ -37,7 +36,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--host", default="127.0.0.1", help="address the WebSocket listens on (default: loopback)"
     )
     parser.add_argument(
-        "--export", metavar="IN.mcap", help="write IN.mcap plus its Foxglove views to -o FILE"
+        "--export",
+        metavar="IN.mcap",
+        help="write IN.mcap plus its Foxglove views to -o FILE, with the pipeline's analysis "
+        "(objects, posteriors, predictions, descriptions) where IN.mcap has sensors only",
     )
     argtypes.add_output(parser, "file written by --export")
     parser.add_argument(
@@ -46,24 +48,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write the Foxglove layout for --robot to FILE (import it in Foxglove) and exit",
     )
     argtypes.deprecated(parser, "--bus-port", add_bus_arguments(parser))
-
-
-def export(source: str, target: str) -> int:
-    """Copy `source` into `target` with the Foxglove views; returns the messages copied."""
-    if Path(target).resolve() == Path(source).resolve():
-        raise InputError(f"--export would overwrite its input {source}; give another -o")
-    info = inspect_recording(source)
-    if info.error:
-        raise InputError(info.damage())
-    copied = 0
-    with RecordingWriter(target, metadata=info.metadata.get("beyond"), foxglove_views=True) as w:
-        for item in read_recording(source):
-            if item.cls is None:
-                w.write_raw(item.key, item.data, item.encoding, item.log_time)
-            else:
-                w.write(item.key, item.message(), log_time=item.log_time)
-            copied += 1
-    return copied
 
 
 def run(args: argparse.Namespace) -> int:
@@ -78,8 +62,16 @@ def run(args: argparse.Namespace) -> int:
     if args.export or args.output:
         if not (args.export and args.output):
             raise InputError("--export IN.mcap needs -o OUT.mcap (and -o needs --export)")
-        copied = export(args.export, args.output)
-        print(f"wrote {copied} messages and their Foxglove views to {args.output}")
+        from beyond_self.commands.analyse import _inputs
+        from beyond_self.commands.foxglove_export import export
+
+        done = export(args.export, args.output, lambda p: _inputs(p, "right_hand", "torso"))
+        print(f"wrote {done.copied} messages and their Foxglove views to {args.output}")
+        if done.derived:
+            added = ", ".join(f"{n} {stream}" for stream, n in done.derived.items())
+            print(f"added the pipeline's analysis (beyond analyse's) with its views: {added}")
+        for view, why in done.empty.items():
+            print(f"view {view} is empty: {why}")
         return 0
     config = config_from_args(args)
     if args.port is not None:  # the one spelling whose meaning changed: say so

@@ -36,6 +36,7 @@ from beyond_self.cognition.gestures.features import (
 )
 from beyond_self.cognition.gestures.hmm import GestureModels, load_models, save_models, train_models
 from beyond_self.cognition.gestures.logs import check_positions, parse_frames, read_hand_log
+from beyond_self.cognition.paths import data_set
 from beyond_self.commands import argtypes
 from beyond_self.commands.gesture_reports import evaluate_command, realism_command
 from beyond_self.commands.hmm_options import add_training_options, training_config
@@ -75,7 +76,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=None,
         help="'synthetic' (default), a folder of hand recordings (grasp1_hand/ ...), or MCAP "
-        "recordings (a .mcap file or a folder of them); give it several times to train on all",
+        "recordings (a .mcap file or a folder of them); a name such as human_data is also looked "
+        "up in the article's data folder ($BEYOND_DATA); give it several times to train on all",
     )
     argtypes.add_output(train, "model file to write (.json)", required=True, old="--out")
     add_training_options(train, mix=3, iterations=30, states="HMM states per action")
@@ -106,7 +108,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="model file, 'default', 'cv' (cross-validation) or 'compare' (default models, "
         "cross-validation and the article's models side by side)",
     )
-    ev.add_argument("data", help="'synthetic', a folder of hand recordings, or MCAP recordings")
+    ev.add_argument(
+        "data",
+        help="'synthetic', a folder of hand recordings, or MCAP recordings; a name such as "
+        "human_data is also looked up in the article's data folder ($BEYOND_DATA)",
+    )
     ev.add_argument("--json", action="store_true", help="print the report as JSON")
     ev.add_argument(
         "--folds",
@@ -138,7 +144,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     _data_args(ev, EVAL_SEED)
 
     realism = sub.add_parser("realism", help="the simulator's gestures next to recorded ones")
-    realism.add_argument("data", help="a folder of hand recordings, or MCAP recordings")
+    realism.add_argument(
+        "data",
+        help="a folder of hand recordings, or MCAP recordings; a name such as human_data is also "
+        "looked up in the article's data folder ($BEYOND_DATA)",
+    )
     argtypes.add_output(
         realism,
         "folder for the PNG plot (default ./gesture-evaluation)",
@@ -214,7 +224,9 @@ def _mcap_gestures(path: Path, push_as: str | None) -> list[LabelledGesture]:
 
 
 def gestures(args: argparse.Namespace, spec: str) -> list[LabelledGesture]:
-    """DATA as labelled gestures: synthetic, recording folders, or MCAP recordings."""
+    """DATA as labelled gestures: synthetic, recording folders, or MCAP recordings (a name
+    such as human_data is looked up in the article's data folder, cognition.paths.data_set)."""
+    spec = data_set(spec, keep=(SYNTHETIC,))
     path = Path(spec)
     mcaps = [path] if path.suffix.lower() == ".mcap" else []
     if not mcaps and spec != SYNTHETIC and path.is_dir() and not (path / "data.log").exists():
@@ -234,7 +246,7 @@ def _train(args: argparse.Namespace) -> int:
     if args.output.suffix.lower() != ".json":
         raise InputError(f"--output {args.output} must end in .json")
     cfg = training_config(args)
-    sources = args.data or [SYNTHETIC]
+    sources = [data_set(spec, keep=(SYNTHETIC,)) for spec in args.data or [SYNTHETIC]]
     data: dict[str, list[Any]] = {}
     for spec in sources:
         with console.status(f"loading gestures from {spec}"):

@@ -93,9 +93,10 @@ def show_report(console: Console, report: EvaluationReport, title: str = "") -> 
 def _compare(args: argparse.Namespace, models_from: Models) -> int:
     from beyond_self.cognition.gestures.benchmark import ARTICLE_MODELS, compare_on_recordings
     from beyond_self.cognition.gestures.evaluation import plot_report
+    from beyond_self.cognition.paths import data_set
     from beyond_self.core.errors import InputError
 
-    folder = Path(args.data)
+    folder = Path(data_set(args.data))
     if not folder.is_dir():
         raise InputError(f"{folder} is not a folder; 'compare' needs a folder of hand recordings")
     article_path = args.article or folder / ARTICLE_MODELS

@@ -51,21 +51,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         )
     show = sub.add_parser("show", help="the certificates in the keystore, their robots, expiry")
     acl = sub.add_parser("acl", help="print the router's access_control block, generated")
+    # DIR as `keys init DIR` spells it; --dir too, as `add` takes it
+    for p in (show, acl):
+        p.add_argument(
+            "directory", nargs="?", type=Path, metavar="DIR", help="keystore ($BEYOND_ZENOH_SECURE)"
+        )
     for p in (add, show, acl):
         p.add_argument("--dir", type=Path, help="keystore directory ($BEYOND_ZENOH_SECURE)")
 
 
 def _directory(args: argparse.Namespace, required: bool = True) -> Path | None:
-    given = args.dir or os.environ.get("BEYOND_ZENOH_SECURE")
+    positional = getattr(args, "directory", None)
+    if positional is not None and args.dir is not None and positional != args.dir:
+        raise InputError(f"two keystores given ({positional} and --dir {args.dir}); give one")
+    given = positional or args.dir or os.environ.get("BEYOND_ZENOH_SECURE")
     if not given and not required:
         return None
     if not given:
-        raise InputError("no keystore given; pass --dir DIR or set BEYOND_ZENOH_SECURE")
+        raise InputError("no keystore given; pass DIR (or --dir DIR) or set BEYOND_ZENOH_SECURE")
     return Path(given)
 
 
 def run(args: argparse.Namespace) -> int:
     from beyond_self.runtime import keystore
+    from beyond_self.schemas.keys import typed_pattern
     from beyond_self.services import registry
 
     if args.keys_command == "acl":
@@ -84,7 +93,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     for entry in keystore.show(directory):
         state = "EXPIRED" if entry.expired else "valid"
-        bound = f"{entry.binding.role} of {entry.binding.robots}" if entry.binding else "CA"
+        bound = (
+            f"{entry.binding.role} of {typed_pattern(entry.binding.robots)}"
+            if entry.binding
+            else "CA"
+        )
         print(
             f"{entry.name:<12} {state:<7} until {entry.not_after:%Y-%m-%d %H:%M} UTC  "
             f"{bound:<28} issuer {entry.issuer!r}  {entry.path}"

@@ -15,6 +15,7 @@ import time
 
 from rich.console import Console
 
+from beyond_self.cognition.paths import data_set
 from beyond_self.commands import argtypes
 from beyond_self.commands.hmm_options import add_training_options, training_config
 from beyond_self.commands.terminal import progress_bar
@@ -40,12 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--robot-data",
         default="synthetic",
         help="'synthetic' (default), a salvi2012 folder or a bag table with "
-        "networkDefinition.txt beside it",
+        "networkDefinition.txt beside it (a name such as salvi2012 is also looked up in the "
+        "article's data folder, $BEYOND_DATA)",
     )
     parser.add_argument(
         "--human-data",
         default="synthetic",
-        help="'synthetic' (default) or a folder of hand recordings (grasp1_hand/ ...)",
+        help="'synthetic' (default) or a folder of hand recordings (grasp1_hand/ ...); a name "
+        "such as human_data is also looked up in the article's data folder ($BEYOND_DATA)",
     )
     argtypes.add_output(
         parser,
@@ -109,7 +112,9 @@ def run(args: argparse.Namespace) -> int:
         def report(what: str, units: int) -> None:
             progress.update(task, description=what, advance=units)
 
-        results = run_learning(config, args.robot_data, args.human_data, progress=report)
+        robot_data = data_set(args.robot_data, keep=("synthetic",))
+        human_data = data_set(args.human_data, keep=("synthetic",))
+        results = run_learning(config, robot_data, human_data, progress=report)
         progress.update(task, description="writing report and plots")
         paths = write_outputs(results, args.output)
     acc = {s: results.main.accuracy(s) for s in ("hmm_inferred", "hmm_true", "network", "fused")}

@@ -1,8 +1,8 @@
 """`beyond replay FILE.mcap`: publish a recording on the bus with its original timing.
 
 From a terminal, space pauses and resumes, and `s` (or any other key but `q`) publishes the next
-message while paused; `--start-paused` waits for the first key. Keys are read from a pipe too
-when started paused (so a script can drive it)."""
+message while paused; `--start-paused` waits for the first key. Keys are read from a pipe or a
+file too when started paused (so a script can drive it); the end of stdin plays on."""
 
 from __future__ import annotations
 
@@ -99,24 +99,24 @@ def _names(text: str) -> list[str]:
 
 @contextlib.contextmanager
 def keyboard(control: ReplayControl, *, paused: bool) -> Iterator[None]:
-    """Feed key presses from stdin to `control`: a terminal in cbreak mode, or a pipe when
-    started paused (otherwise a pipe is left alone: it may belong to someone else)."""
-    fd = sys.stdin.fileno() if sys.stdin is not None else -1
+    """Feed key presses from stdin to `control`: a terminal in cbreak mode, or, when started
+    paused, a pipe or a file (otherwise stdin is left alone: it may belong to someone else).
+    The end of stdin plays on, since nothing could resume a pause after it."""
+    fd = sys.stdin.fileno() if sys.stdin is not None and not sys.stdin.closed else -1
     is_tty = fd >= 0 and os.isatty(fd)
+    if fd < 0 and paused:
+        raise InputError("--start-paused reads its keys from stdin, which is closed; give it one")
     if fd < 0 or not (is_tty or paused):
         yield
         return
     loop = asyncio.get_running_loop()
     saved = termios.tcgetattr(fd) if is_tty else None
 
-    def on_key() -> None:
-        try:
-            data = os.read(fd, 64)
-        except OSError:
-            data = b""
-        if not data:  # end of a pipe: play on, nobody can resume us any more
+    def take(data: bytes) -> None:
+        if not data:
             loop.remove_reader(fd)
             control.close()
+            print("stdin ended: playing on", file=sys.stderr, flush=True)
             return
         for char in data.decode(errors="replace"):
             if char == " ":
@@ -128,9 +128,21 @@ def keyboard(control: ReplayControl, *, paused: bool) -> Iterator[None]:
             elif char not in "\r\n":
                 control.step()
 
+    def on_key() -> None:
+        try:
+            data = os.read(fd, 64)
+        except OSError:
+            data = b""
+        take(data)
+
     if saved is not None:
         tty.setcbreak(fd)
-    loop.add_reader(fd, on_key)
+    try:
+        loop.add_reader(fd, on_key)
+    except PermissionError:  # a file or /dev/null, which epoll refuses: read now, never blocks
+        while data := os.read(fd, 4096):
+            take(data)
+        take(b"")
     try:
         yield
     finally:

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     cls = service_class(args.name)
     config = config_from_args(args)
     if config.robots is None:
-        cls.main(config=config, **options)
+        cls.main(argv=(), config=config, **options)
     if not cls.fleet:  # a robot's source or voice
         raise InputError(f"service {args.name!r} serves one robot (its --robot), not a fleet")
     from beyond_self.runtime.fleet import Fleet, takeover_latest_s

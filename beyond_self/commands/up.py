@@ -5,7 +5,7 @@
               [--profile all|robot|workstation|fleet-robot|fleet-workstation]
               [--robots PATTERN [--standby PATTERN]] [--rate R] [--no-live] [--timeout S]
               [--skip NAME] [--without NAME] [--wait-for NAME,...] [--until-stream-end]
-              [bus options]
+              [--out-dir DIR] [bus options]
 
 Starts the services of the profile on the configured bus (default: Zenoh peers on loopback), the
 source last (it waits for their liveliness before it publishes), as a `services.deployment.
@@ -20,6 +20,9 @@ silent while it runs, a live camera paused for an hour or a gap in a recording p
 is never timed out: the pipeline waits for it, and describes the next gesture. A service that
 dies is started again (services.supervision), said on stderr and counted in the live view; one
 that keeps dying is given up on, and `up` ends.
+
+What the services write (the speech WAVs and `speech.log`) goes under `--out-dir`, else the
+state folder runtime.outputs names (`~/.local/state/beyond`), never the current folder.
 
 `--skip NAME`: NAME runs elsewhere (your own synthesizer, another machine): it is not started
 here, and the others still expect it. `--without NAME`: the deployment has no NAME at all: it is
@@ -71,6 +74,7 @@ from beyond_self.commands.ros2 import add_ros2_arguments, ros2_options
 from beyond_self.core.errors import InputError, unknown
 from beyond_self.live_view import render
 from beyond_self.monitor import PipelineMonitor
+from beyond_self.runtime import outputs
 from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.config import BusConfig
@@ -138,6 +142,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="speed factor of a replayed source (default 1; 0: as fast as possible)",
     )
     parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
+    add_out_dir(parser)
     parser.add_argument(
         "--foxglove",
         nargs="?",
@@ -188,6 +193,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "gestures (cut: their frames were lost) or sensor frames (dropped as stale), as its "
         "summary says."
     )
+
+
+def add_out_dir(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--out-dir",
+        type=argtypes.output_dir,
+        metavar="DIR",
+        help=f"where the services write (the speech WAVs and speech.log in DIR/speech; default: "
+        f"{outputs.DESCRIPTION})",
+    )
+
+
+def out_dir_env(args: argparse.Namespace) -> dict[str, str]:
+    """The services' output folder (runtime.outputs), when --out-dir names one."""
+    out = getattr(args, "out_dir", None)
+    return {outputs.OUT_DIR_VAR: str(out.resolve())} if out is not None else {}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -401,7 +422,7 @@ def deployment(
         config,
         names,
         options=options,
-        env=fleet_env(config, args.profile),
+        env=fleet_env(config, args.profile) | out_dir_env(args),
         wait_for=wait_list(args.wait_for) + [n for n in skip if n in PROFILES[args.profile]],
         watcher=monitor_name(args.profile),
         clock="recording" if replayed else "wall",

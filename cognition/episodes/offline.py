@@ -50,7 +50,7 @@ class CameraInput:
 @dataclass
 class OfflineRun:
     lines: list[str] = field(default_factory=list)
-    outcomes: list[Outcome[None]] = field(default_factory=list)
+    outcomes: list[Outcome[int]] = field(default_factory=list)  # ref: the final belief's stamp
     sentences: dict[int, list[tuple[str, float]]] = field(default_factory=dict)
     object_at_start: dict[int, ObjectAtStart[None]] = field(default_factory=dict)
     effects: dict[int, GestureEffects[None]] = field(default_factory=dict)
@@ -71,20 +71,25 @@ def analyse_stream(
     camera_deadline_s: float = 5.0,
     objects_deadline_s: float = 30.0,
     on_line: Callable[[str], None] | None = None,
+    on_event: Callable[[Belief[None] | Anticipation[int] | Outcome[int]], None] | None = None,
 ) -> OfflineRun:
-    """Items must come in stamp order within each kind (a recording's order is fine)."""
+    """Items must come in stamp order within each kind (a recording's order is fine).
+    `on_event` sees every belief and every fused output (the ref of an output is the stamp of
+    the belief it fuses), in order: what the services publish, for `foxglove --export`."""
     tracker: GestureTracker[None] = GestureTracker(gesture_models)
     watch: ObjectWatch[None] = ObjectWatch(
         clusters, lead_s=lead_s, fps=fps, deadline_s=camera_deadline_s
     )
-    join: FusionJoin[None] = FusionJoin(network, deadline_s=objects_deadline_s)
+    join: FusionJoin[int] = FusionJoin(network, deadline_s=objects_deadline_s)
     join.objects_alive(True)  # the watch below is always there
     report = GestureReport()
     run = OfflineRun()
     actions = list(gesture_models.actions)
 
-    def joined(outputs: list[Anticipation[None] | Outcome[None]]) -> None:
+    def joined(outputs: list[Anticipation[int] | Outcome[int]]) -> None:
         for out in outputs:
+            if on_event is not None:
+                on_event(out)
             if isinstance(out, Anticipation):
                 report.anticipation(out.segment_id, out.frame, out.prediction.effects)
                 continue
@@ -112,12 +117,14 @@ def analyse_stream(
                 watched(watch.started(ev.segment_id, ev.stamp, None))
                 joined(join.started(ev.segment_id, ev.stamp))
             elif isinstance(ev, Belief):
+                if on_event is not None:
+                    on_event(ev)
                 if ev.final:
                     report.believed(ev.segment_id)
                 else:
                     report.belief(ev.segment_id, ev.frame, actions, ev.posterior)
                 belief = dict(zip(actions, ev.posterior, strict=True))
-                joined(join.belief(ev.segment_id, ev.frame, ev.stamp, belief, None, ev.final))
+                joined(join.belief(ev.segment_id, ev.frame, ev.stamp, belief, ev.stamp, ev.final))
             elif isinstance(ev, Ended):
                 report.ended(ev.segment_id, ev.frame)
                 watched(watch.ended(ev.segment_id, ev.start_stamp, ev.end_stamp, ev.frame, None))

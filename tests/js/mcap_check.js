@@ -70,6 +70,10 @@ async function check(path) {
     }
     const stamps = obj.timestamp !== undefined ? [obj.timestamp] : [];
     for (const entity of obj.entities ?? []) stamps.push(entity.timestamp);
+    // an ImageAnnotations (objects, pose) is stamped in each annotation
+    for (const a of [...(obj.circles ?? []), ...(obj.points ?? []), ...(obj.texts ?? [])]) {
+      stamps.push(a.timestamp);
+    }
     if (stamps.some((t) => stampOf(t) !== m.logTime)) {
       report.timestamp_mismatch[channel.topic] = (report.timestamp_mismatch[channel.topic] ?? 0) + 1;
     }

@@ -1,0 +1,32 @@
+"""Where a run leaves what it writes (the speech service's WAVs and its `speech.log`).
+
+A state folder of the user's, never the current folder, which may be anyone's (a checkout, a
+home, a folder a wheel's demo was started from): `$BEYOND_OUT_DIR` when set (what `beyond up
+--out-dir DIR` sets for the services it starts), else `$XDG_STATE_HOME/beyond`, else
+`~/.local/state/beyond` (the XDG base directory default). Each service writes into a folder of
+its own name below it (`speech/`); a service's own option (`out_dir`) still wins.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+OUT_DIR_VAR = "BEYOND_OUT_DIR"
+DESCRIPTION = "$BEYOND_OUT_DIR, else $XDG_STATE_HOME/beyond, else ~/.local/state/beyond"
+
+
+def out_dir(env: Mapping[str, str] | None = None) -> Path:
+    """The folder a run's outputs go under (absolute; not created here)."""
+    env = os.environ if env is None else env
+    if env.get(OUT_DIR_VAR):
+        return Path(env[OUT_DIR_VAR]).expanduser().resolve()
+    state = env.get("XDG_STATE_HOME")
+    base = Path(state) if state and Path(state).is_absolute() else Path.home() / ".local/state"
+    return base / "beyond"
+
+
+def service_out_dir(service: str, env: Mapping[str, str] | None = None) -> Path:
+    """Service `service`'s own folder below `out_dir`."""
+    return out_dir(env) / service
