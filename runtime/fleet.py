@@ -1,38 +1,13 @@
 """One service process for a fleet: every robot a pattern matches, each robot's run its own.
 
-A workstation serving ten robots used to run each service once per robot: sixty processes,
-each with its own session and its own copy of the models. Here a service class runs once per
-process, and what it holds per run (what `setup` builds: a tracker, a join, a watch; and what
-the base keeps: the clock, the ledger, the progress, the publishers and subscriptions) is held
-per robot, in a run of the class on that robot's view of the one session (`Bus.for_robot`).
-Each run is exactly the single-robot service: the same keys (`beyond/<robot>/...`), its own
-clock (event time per robot: one robot's replay never moves another's clock), its own ledger
-and checkpoints (crash-only per robot), its own liveliness token and health, so a robot's
-source and tools see the service they always saw. What costs memory and time to load (models,
-a frame describer process) is loaded once per process by the services (services.shared).
-
-A robot appears with its source: a run starts when the liveliness token of a robot's ingest
-(`beyond/<robot>/alive/ingest`) matching the pattern appears, and is dropped when the token has
-been gone for `leave_after_s` (30 s, or $BEYOND_ROBOT_LEAVE_S: a wall-clock wait, the machine's
-business: a restarted ingest, back within seconds, keeps its robot's run, and so its state; a
-robot back after that starts afresh, as a new stream of its own). The host itself is alive under
-the workstation's own name (`beyond/<robot>/alive/<service>` of its config's `robot`), which
-must not be one of the robots it serves.
-
-Partitioning and failover: one robot's service is served by exactly one workstation. A run
-holds a token saying which host serves it (`Keys.server`); a workstation serves the robots of
-its `robots` pattern at once and those of its `standby` pattern (another workstation's) only
-once no host has served them for `takeover_after_s` (3 s, or $BEYOND_TAKEOVER_S), and never a
-robot another host serves. A stage takes a robot over sink first: it waits, beyond that, until
-each of its `consumers` (the fleet services it feeds) that was seen serving the robot has a run
-for it again (its liveliness token `beyond/<robot>/alive/<consumer>`, declared once the run is
-set up), so that its new run finds its consumers' new instances (which have handled nothing
-yet) and sends them what they need to rebuild, rather than withholding it on the word of the
-dead ones; a consumer that does not come back (the standby does not run it) is waited for
-until `takeover_latest_s` at most. A workstation SIGKILLed mid-gesture loses its tokens with its
-session; its standby's new run is a restarted service (runtime.ledger): it asks the robot's
-ledgers, resumes from the checkpoints and caches, and describes what is left, once. Two hosts
-that both serve a robot (started together, a link back) settle it by name: the greater yields.
+One process per service, not one per robot, so the models load once per process (services.shared).
+What a run holds (what `setup` builds; the base's clock, ledger, progress, publishers) is per
+robot, on that robot's view of the one session (`Bus.for_robot`): each run is exactly the
+single-robot service, on its keys, with its own event time, checkpoints, token and health.
+A run starts when the robot's ingest token appears and ends `leave_after_s` after it has gone.
+One host serves a robot at a time (`Keys.server`); a standby takes a robot over after
+`takeover_after_s`, sink first, so each new run finds its consumers' new instances and sends them
+what they need to rebuild. Failover and its waits: docs/concepts/fleets.md.
 """
 
 from __future__ import annotations

@@ -1,15 +1,12 @@
 """What reading a recording lost, and the one line every command says about it.
 
-One policy for damaged input, the same in `inspect`, `analyse`, `replay` and `up` (issue 21):
-every intact chunk is read (a damaged chunk costs only itself), what is readable is played, and
-what was lost is said in one line; a command exits 2 when anything was lost. Lost are: chunks
-that do not decompress or fail their CRC, bytes skipped to find the next chunk after a damaged
-record, the tail of a truncated file, messages on a channel no intact record defines, messages
-that do not decode or whose values are out of range (a NaN joint), and messages whose stamp is
-not after the previous one on the same key (going backwards or repeated: a consumer would have
-to refuse them, so every command drops them the same way, before anyone sees them).
-
-Times in the line are seconds from the recording's first stamp, as `beyond inspect` shows them.
+One policy for damaged input, the same in `inspect`, `analyse`, `replay` and `up`: every intact
+chunk is read, what is readable is played, and what was lost is said in one line (exit 2). Lost
+are: unreadable chunks and skipped bytes, a truncated tail, messages on a channel no intact
+record defines, messages that do not decode or hold a value out of range (a NaN joint), and
+messages whose stamp is not after the previous one on their key (a consumer would refuse them,
+so every command drops them the same way, before anyone sees them). Times in the line are
+seconds from the recording's first stamp, as `beyond inspect` shows them.
 """
 
 from __future__ import annotations

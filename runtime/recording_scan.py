@@ -1,16 +1,12 @@
 """Walking an MCAP file record by record, past whatever is damaged.
 
-A damaged chunk costs only itself: one flipped bit in chunk 2 used to end the read there and
-hide chunks 3 to 9, which were intact. Here a chunk that does not decompress or fails its CRC
-is counted as lost (its time span, from its header, says what it held) and the walk goes on
-with the next record. A record whose header is damaged (an impossible opcode or length) is
-skipped to the next chunk: found from the summary's chunk index when the file has an intact
-summary, else by looking for the next bytes that parse as a chunk whose CRC holds. A file that
-ends before its data section does is truncated: what came before is read.
-
-Channels and schemas are taken from the summary too when there is one, so messages after a
-damaged chunk that defined their channel are still read. Everything lost is tallied in a
-`runtime.recording_damage.Losses`, which says it in one line.
+A damaged chunk costs only itself: one that does not decompress or fails its CRC is counted as
+lost (its header's time span says what it held) and the walk goes on with the next record. A
+record whose header is damaged (an impossible opcode or length) is skipped to the next chunk,
+found from an intact summary's chunk index, else as the next bytes that parse as a chunk whose
+CRC holds. A truncated file is read up to where it ends. Channels and schemas come from the
+summary too, so messages after a damaged chunk that defined their channel are still read.
+Everything lost is tallied in a `runtime.recording_damage.Losses`.
 """
 
 from __future__ import annotations

@@ -1,27 +1,13 @@
-"""A set of services run as processes on one bus: what `beyond up` starts, watches and stops,
-and what the tests and benchmarks that run several services launch, so a pipeline is run one way.
+"""A set of services run as processes on one bus: what `beyond up`, and every test and benchmark
+that runs several services, starts, watches and stops, so a pipeline is run one way.
 
     deployment = Deployment(config, ["gestures", "reasoner"], options={"reasoner": {...}})
     bus = await deployment.open()  # optional: subscribe here to see the services' first output
-    await deployment.start()  # every process alive on the bus, or exited
+    await deployment.start()  # every process alive on the bus, or exited; the source last
     ending = await deployment.wait(timeout=60, done=lambda: ...)  # why it returned
     codes = await deployment.stop()  # each process's exit code
 
-Order: a secure side's own router first (its clients wait for it), then this process's session,
-then the services in the order given (the source, `ingest`, last). The watcher's liveliness
-token is declared as the first service is launched, after whatever the caller subscribed between
-`open` and `start`: the source waits for it, so nothing it publishes is missed. The source is
-started once the others are alive (why: `start`), and waits itself for every consumer (its
-`wait_for`, remote ones included) before it publishes.
-
-A service that dies is started again (services.supervision: like systemd's
-`Restart=on-failure`, with backoff and a limit per minute, then it gives up and says so); the
-restarted service resumes where its predecessor's outputs stopped (runtime.ledger). A side's own
-router is supervised the same way, and restarted on purpose when its link to the other side
-carries presence but no data (services.link_watch): its clients reconnect to the new one.
-
-It lives in `services/` beside the launcher and the registry it builds on: it runs services and
-prints nothing (what to show is the caller's: `beyond up`'s terminal views are in `beyond/`).
+A service that dies is started again (services.supervision); what to print is the caller's.
 """
 
 from __future__ import annotations
@@ -180,9 +166,9 @@ class Deployment:
 
         The source starts only once the others are alive, each awaited once: its session then
         meets theirs already meshed, and Zenoh routes what it publishes to them directly. Started
-        together, a robot's source sometimes learnt its consumers through the workstation's
-        router first and kept sending them its frames by that detour: a cut link then stalled the
-        robot's own pipeline until Zenoh gave the link up (tests/test_deploy_netns.py)."""
+        together, a robot's source can learn its consumers through the workstation's router
+        first and keep sending them its frames by that detour, and a cut link would then stall
+        the robot's own pipeline until Zenoh gives the link up (tests/test_deploy_netns.py)."""
         bus = await self.open()
         for group in ([n for n in self.services if n != SOURCE], [SOURCE]):
             launched = [await self.launch(name) for name in group if name in self.services]
@@ -391,9 +377,8 @@ def _checked_options(
 
 async def _alive_or_exited(bus: Bus, sp: ServiceProcess, timeout: float) -> None:
     """Until `sp`'s liveliness token is seen (declared after its health queryable, so it then
-    answers health) or it exited (`wait` then reports it). "pipeline up" used to be printed as
-    soon as the source's process was spawned: whoever took the line at its word and asked the
-    source for its health found nothing serving yet."""
+    answers health) or it exited (`wait` then reports it): a process merely spawned serves
+    nothing yet, and whoever takes "pipeline up" at its word asks the services for their health."""
     alive = asyncio.ensure_future(bus.wait_alive(bus.keys.alive(sp.name), timeout=timeout))
     exited = asyncio.ensure_future(sp.process.wait())
     try:

@@ -1,16 +1,11 @@
 """Start services as separate processes, stream their logs with their names, stop them cleanly.
 
 Each service runs as `python -P -m beyond_self service NAME` with the bus settings in its
-environment, exactly as it would on another machine, so `beyond up` exercises the real deployment
-path. `-P` keeps the current folder off the import path: a folder that happens to hold a
-`beyond_self/` (or anything else we import) cannot replace our code in a child process.
-These are the parts `services.deployment.Deployment` runs a set of services with.
-
-A service's output is read in chunks, not lines: any line length and any bytes are fine (a line
-over asyncio's 64 KiB readline limit used to kill the reader; the pipe then filled and the
-service blocked on its next log line, frozen). Lines are cut to LINE_MAX characters and the last
-LINES_KEPT are kept. `HealthWatch` asks every service for its health; one that does not answer
-for STUCK_AFTER queries in a row is reported as stuck and stopped.
+environment, exactly as on another machine, so `beyond up` exercises the real deployment path;
+`-P` keeps the current folder off the import path, so a stray `beyond_self/` there cannot replace
+our code in a child. Output is read in chunks, not lines: a line over asyncio's 64 KiB readline
+limit would end a line reader, and the service would then block on a full pipe. `HealthWatch`
+stops a service that leaves STUCK_AFTER health queries in a row unanswered.
 """
 
 from __future__ import annotations

@@ -1,18 +1,12 @@
 """When a service that died is started again: the restart policy of `beyond up` and of every
-`services.deployment.Deployment`.
+`services.deployment.Deployment` (docker-compose.yml gives the containers the same).
 
-Like systemd's `Restart=on-failure`: a service that dies (killed by a signal, exits with a
-status other than 0, or is stopped by the health watch because it no longer answers) is started
-again, after a delay that doubles with each restart within the last `interval_s` (backoff), at
-most `burst` times in that interval; then the supervisor gives up on it and says so, and the
-deployment ends as if it had exited. A service that exits with status 0, or that someone else
-stopped with SIGTERM or SIGINT, is not restarted (it meant to stop), nor is one that exits with
-status 2: that is bad input, and starting it again would read the same input
-(`RestartPreventExitStatus=2`). docker-compose.yml gives the containers the same policy.
-
-A restarted service resumes (runtime.ledger, runtime.pacing): it neither stalls its
-neighbours nor repeats what its predecessor did. It learns how many times it was restarted from
-`BEYOND_RESTARTS` (runtime.self_report) and reports it in its health.
+Like systemd's `Restart=on-failure`: a service that dies (a signal, a non-zero status, or stopped
+as stuck by the health watch) is started again after a delay that doubles with each restart in
+the last `interval_s`, at most `burst` times in it; then the supervisor gives up and says so. A
+status 0 or SIGTERM/SIGINT meant to stop; status 2 is bad input, which a restart would read
+again (`RestartPreventExitStatus=2`): neither is restarted. A restarted service resumes
+(runtime.ledger) and learns its restart count from `BEYOND_RESTARTS` (runtime.self_report).
 """
 
 from __future__ import annotations
