@@ -1,0 +1,87 @@
+"""A stray message cannot derail a run (issue 42): during `beyond up` of a recording, the
+README's `beyond pub` example (a skeleton frame with no hand, stamped by the wall clock) and the
+same frame with a whole skeleton are refused as another source's, counted in the gesture
+streamer's health, and change nothing: the gesture lines equal `beyond analyse`'s, exit 0."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from pathlib import Path
+
+import pytest
+from busutil_net import env_for, private_config, run_beyond
+
+import beyond_self.schemas as s
+from beyond_self.commands.analyse import _inputs, default_run
+from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.delivery import STATUS
+from beyond_self.services.launcher import BEYOND
+
+RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"
+README_FRAME = '{"frame": 1, "joints": {"head": {"position": [0, 0.4, 2]}}}'
+WHOLE_FRAME = json.dumps(
+    {
+        "frame": 1,
+        "joints": {
+            "head": {"position": [0, 0.4, 2]},
+            "torso": {"position": [0, 0, 2]},
+            "right_hand": {"position": [0.3, 0.1, 1.8]},
+        },
+    }
+)
+
+
+@pytest.mark.slow
+async def test_stray_skeleton_frames_during_up_change_nothing(tmp_path: Path) -> None:
+    config = private_config()
+    env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
+    expected = default_run(_inputs(RECORDING, "right_hand", "torso")).lines
+    skeleton = f"beyond/{config.robot}/sensors/skeleton"
+    seen: list[s.ServiceHealth] = []
+    with Bus.open(config) as bus:
+
+        async def watch_health() -> None:
+            sub = bus.subscribe(bus.keys.health("gestures"), s.ServiceHealth, STATUS)
+            async for received in sub:
+                seen.append(received.message)
+
+        watching = asyncio.get_running_loop().create_task(watch_health())
+        up = await asyncio.create_subprocess_exec(
+            *BEYOND, "up", "--recording", str(RECORDING), "--rate", "1", "--no-live",
+            "--timeout", "90", env=env, cwd=tmp_path,
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        assert up.stdout is not None and up.stderr is not None
+        printed: list[str] = []
+        sent = False
+        try:
+            async with asyncio.timeout(150):
+                while line := (await up.stdout.readline()).decode():
+                    printed.append(line.rstrip("\n"))
+                    if line.startswith("gesture 1") and not sent:
+                        sent = True
+                        # mid-run, while gesture 1 is under way: both frames, as the README
+                        # shows them, from `beyond pub` (source "beyond-pub", wall-clock stamp)
+                        for frame in (README_FRAME, WHOLE_FRAME):
+                            code, out, err = await run_beyond(
+                                ["pub", skeleton, "SkeletonFrame", frame],
+                                env=env, cwd=tmp_path, timeout=60,
+                            )  # fmt: skip
+                            assert code == 0, out + err
+                errors = (await up.stderr.read()).decode()
+                code = await up.wait()
+        finally:
+            if up.returncode is None:
+                up.kill()
+                await up.wait()
+            watching.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await watching
+    gestures = [line for line in printed if line.startswith("gesture ")]
+    assert code == 0, "\n".join(printed) + errors[-3000:]
+    assert gestures == expected, "\n".join(printed) + errors[-3000:]
+    assert max((h.foreign for h in seen), default=0) == 2, (repr(seen[-1]), errors[-3000:])
+    assert max((h.stale for h in seen), default=0) == 0
+    assert "belongs to" in errors  # the one line that says why they were refused
