@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 
 MODES = ("peer", "client", "router")
 DEFAULT_PORT = 7448  # rendezvous port of the default local group (7447 is Zenoh's router port)
+SECURE_PORT = 7447  # a secure bus's router (runtime.secure)
 ROUTER_LISTEN = "tcp/[::]:7447"
 OPEN_WAIT_MS = 100  # open() waits this long to connect, then keeps retrying in the background
 CLIENT_WAIT_MS = 30_000  # a client's open() waits this long for a router, then fails
@@ -147,12 +148,12 @@ class BusConfig:
         """(listen, connect) endpoints actually used."""
         rendezvous = f"tcp/127.0.0.1:{self.port}"
         if self.secure is not None:
-            from beyond_self.runtime.secure import SECURE_ROUTER_CONNECT, SECURE_ROUTER_LISTEN
+            from beyond_self.runtime.secure import router_connect, router_listen
 
             listen, connect = (
-                ([SECURE_ROUTER_LISTEN], [])
+                ([router_listen(self.port)], [])
                 if self.mode == "router"
-                else ([], [SECURE_ROUTER_CONNECT])
+                else ([], [router_connect(self.port)])
             )
         elif self.mode == "peer":
             listen = [rendezvous, "tcp/127.0.0.1:0"]
@@ -225,7 +226,7 @@ def load_config(
         identity=identity or env.get("BEYOND_ZENOH_IDENTITY") or None,
         connect=tuple(connect) if connect else (_split(env_connect) if env_connect else None),
         listen=tuple(listen) if listen else (_split(env_listen) if env_listen else None),
-        port=port or DEFAULT_PORT,
+        port=port or (SECURE_PORT if keystore else DEFAULT_PORT),
         config_file=path,
         routers=tuple(routers) if routers else (_split(env_routers) if env_routers else ()),
     )

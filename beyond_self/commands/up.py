@@ -205,6 +205,7 @@ def secure_router(
     loopback only, on 7447 if free, else on a free port: a second workstation of a fleet on
     the first one's host links to the first one's router there."""
     from beyond_self.runtime import keystore
+    from beyond_self.runtime.secure import router_listen
 
     assert config.secure is not None
     remote = list(config.connect or ()) + list(config.routers)
@@ -219,6 +220,9 @@ def secure_router(
         keystore.check(config.secure, name)
     command = ["router", "--secure", str(config.secure), "--identity", identity]
     if not remote:
+        # on the rendezvous port; everything on one machine (`--profile all`) stays on
+        # loopback, a side meant for other machines listens on every interface
+        command += ["--listen", router_listen(config.port, loopback=profile == "all")]
         return command, None
     local = f"tls/127.0.0.1:{loopback_port(SECURE_LOCAL_PORT)}"
     command += ["--listen", local] + [a for e in remote for a in ("--connect", e)]
