@@ -15,8 +15,9 @@ the config file connects to, so a machine's processes stay one local peer group 
 stays local) that is also linked to the router (deploy/ uses this).
 
 Secure bus (`--secure DIR`, BEYOND_ZENOH_SECURE=DIR): every process is a client of a router
-(or the router), every link mutual TLS with the certificates of the keystore in DIR, and the
-router enforces access rules generated from the services' declarations (runtime/secure.py).
+(or the router) on the bus's port (7447 unless --port or BEYOND_ZENOH_PORT), every link mutual
+TLS with the certificates of the keystore in DIR, and the router enforces access rules generated
+from the services' declarations (runtime/secure.py).
 
 Precedence: built-in defaults < config file (BEYOND_ZENOH_CONFIG) < environment < arguments.
 """

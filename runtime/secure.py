@@ -61,10 +61,10 @@ def tls_settings(
         "close_link_on_expiration": True,
         "connect_certificate": str(cert),
         "connect_private_key": str(key),
+        # any TLS listener, whatever the mode or where it was given, presents the identity's
+        "listen_certificate": str(cert),
+        "listen_private_key": str(key),
     }
-    if mode == "router":
-        tls["listen_certificate"] = str(cert)
-        tls["listen_private_key"] = str(key)
     sets: dict[str, Any] = {"transport/link/tls": tls}
     if mode == "router":
         if access_rules is None:
