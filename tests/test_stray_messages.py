@@ -15,8 +15,11 @@ from busutil_net import env_for, private_config, run_beyond
 
 import beyond_self.schemas as s
 from beyond_self.commands.analyse import _inputs, default_run
+from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import STATUS
+from beyond_self.runtime.clock import Clock
+from beyond_self.runtime.delivery import RELIABLE, STATUS
+from beyond_self.runtime.service import Service
 from beyond_self.services.launcher import BEYOND
 
 RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"
@@ -31,6 +34,70 @@ WHOLE_FRAME = json.dumps(
         },
     }
 )
+
+
+class HandTracker(Service):
+    """A paced skeleton consumer that refuses a frame without a right hand, as the gesture
+    streamer does."""
+
+    name = "hands"
+
+    def __init__(self, **base: object) -> None:
+        super().__init__(**base)  # type: ignore[arg-type]
+        self.handled: list[int] = []
+        self.last = asyncio.Event()
+
+    async def setup(self) -> None:
+        self.subscribe(self.bus.keys.skeleton, s.SkeletonFrame, self.on_frame, paced=True)
+
+    def on_frame(self, frame: s.SkeletonFrame) -> None:
+        if "right_hand" not in frame.joints:
+            raise InputError(f"skeleton frame {frame.frame} has no joint 'right_hand'")
+        self.handled.append(frame.header.stamp)
+        if frame.frame == 99:
+            self.last.set()
+
+
+def _frame(source: str, stamp: int, number: int, *, hand: bool = True) -> s.SkeletonFrame:
+    joints = {"head": s.Joint(position=(0.0, 0.4, 2.0))}
+    if hand:
+        joints["right_hand"] = s.Joint(position=(0.3, 0.1, 1.8))
+    header = s.Header(version=s.SkeletonFrame.VERSION, source=source, seq=number, stamp=stamp)
+    return s.SkeletonFrame(header=header, frame=number, joints=joints)
+
+
+async def test_a_foreign_or_refused_frame_moves_no_time_of_the_owner() -> None:
+    """In one process: the first source accepted owns the key; a bad frame before it claims
+    nothing; another source's frames, whole or not and however late their stamps, are counted
+    as foreign and move neither the stream's time nor the service's clock; the owner's bad
+    frame is refused and its next frames are handled, none stale."""
+    year = 10**18
+    with Bus.open(private_config()) as bus:
+        service = HandTracker(bus=bus, clock=Clock("recording"), health_period=60)
+        task = asyncio.get_running_loop().create_task(service.run(install_signals=False))
+        await asyncio.wait_for(service.started.wait(), 20)
+        pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame, RELIABLE)
+        await pub.wait_matching(timeout=20)
+        for frame in (
+            _frame("beyond-pub", 2 * year, 1, hand=False),  # refused before any owner
+            _frame("sim", 100, 1),
+            _frame("sim", 200, 2),
+            _frame("beyond-pub", 2 * year, 3, hand=False),  # the README's frame
+            _frame("beyond-pub", 2 * year, 4),  # the same, whole
+            _frame("sim", 300, 5, hand=False),  # the owner's own bad frame
+            _frame("sim", 400, 99),
+        ):
+            pub.put(frame)
+        await asyncio.wait_for(service.last.wait(), 20)
+        health = service.health_report()
+        clock = service.clock.now_ns()
+        owner = service.times.owner(bus.keys.skeleton)
+        service.stop()
+        await asyncio.wait_for(task, 10)
+    assert service.handled == [100, 200, 400]
+    assert (health.foreign, health.refused, health.stale) == (2, 2, 0)
+    assert health.errors == 2  # the refusals are bad input, logged and counted
+    assert owner == "sim" and clock == 400
 
 
 @pytest.mark.slow
