@@ -62,6 +62,13 @@ class SourceTimes:
             return Verdict.STALE
         return Verdict.FRESH
 
+    def why_foreign(self, key: str, source: str) -> str:
+        """The one line said (once per source) when `source`'s messages on `key` are refused."""
+        return (
+            f"a message from source {source!r} on {key}, which belongs to "
+            f"{self.owner(key)!r}: a sensor key takes one source (docs/concepts/event-time.md)"
+        )
+
     def take(self, key: str, source: str, stamp: int) -> bool:
         """The handler took the message: the key becomes `source`'s if it had no owner, and
         the owner's time moves to `stamp`. False (nothing moves) for another source's."""

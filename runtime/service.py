@@ -297,11 +297,6 @@ class Service:
         caches after a link failure or a late start, and those no cache held any more."""
         return recovery_of(self.subscriptions)
 
-    @property
-    def stale(self) -> int:
-        """Sensor messages not after the last one handled from their key's source."""
-        return self.times.stale
-
     async def _consume(self, sub: Subscription[Any], handler: Handler[Any]) -> None:
         ledgers, progress, times = self.ledgers, self._progress, self.times
         paced, identified = times.tracked(sub.key), sub.cls in IDENTIFIED
@@ -315,7 +310,7 @@ class Service:
                 header = received.message.header
                 verdict = times.verdict(sub.key, header.source, header.stamp)
                 if verdict is Verdict.FOREIGN:
-                    self._foreign(sub.key, header.source)
+                    self.account.refused(sub.key, times.why_foreign(sub.key, header.source))
                 return verdict is Verdict.FRESH
             return True
 
@@ -325,30 +320,20 @@ class Service:
 
         def done(received: Received[Any]) -> None:
             header = received.message.header
+            refused = bool(refusal) and isinstance(refusal[0], InputError)
             # bad input is counted and forgotten: no time, no owner, no ledger entry
-            if refusal and isinstance(refusal[0], InputError):
+            if refused:
                 times.refuse(sub.key, header.source, header.stamp)
-                if paced:
-                    progress.handled_up_to(sub.key, times.progress(sub.key))
-            else:
-                if not paced or times.take(sub.key, header.source, header.stamp):
-                    self.clock.observe(header.stamp)
-                if identified:
-                    ledgers.record(received.key, received.message)
-                if paced:
-                    progress.handled_up_to(sub.key, times.progress(sub.key))
+            elif times.take(sub.key, header.source, header.stamp):  # the key's own stream
+                self.clock.observe(header.stamp)
+            if identified and not refused:
+                ledgers.record(received.key, received.message)
+            if paced:
+                progress.handled_up_to(sub.key, times.progress(sub.key))
             if progress.wanted:
                 self.publish_progress()
 
         await consume(sub, handler, failed, after=done, accept=fresh)
-
-    def _foreign(self, key: str, source: str) -> None:
-        owner = self.times.owner(key)
-        reason = (
-            f"a message from source {source!r} on {key}, which belongs to {owner!r}: "
-            "a sensor key takes one source (docs/concepts/event-time.md)"
-        )
-        self.account.refused(key, reason)
 
     def _follow_clock(self) -> None:
         """On a replay, follow the player's stream clock (runtime.clock), so that health and

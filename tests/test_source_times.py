@@ -60,3 +60,12 @@ def test_keys_are_apart_and_an_untracked_key_is_always_fresh() -> None:
     assert not times.tracked("beyond/robot/language/description")
     assert times.verdict("beyond/robot/language/description", "x", 0) is Verdict.FRESH
     assert times.take("beyond/robot/language/description", "x", 0)
+
+
+def test_the_line_for_a_foreign_source_names_both_sources() -> None:
+    times = SourceTimes()
+    times.track(KEY)
+    times.take(KEY, "simulator", 1)
+    line = times.why_foreign(KEY, "beyond-pub")
+    assert "'beyond-pub'" in line and "'simulator'" in line and KEY in line
+    assert "\n" not in line
