@@ -5,13 +5,16 @@ the header's `source` of the first message its handler accepts; a message from a
 publisher on it is foreign: refused, counted, never a clock. Within the owner's stream a
 message not after the last one handled is stale (a restarted source repeats itself); a jump
 forward is a pause, which is legitimate. A message the handler refuses as bad input moves
-nothing: no stream time, no owner. docs/concepts/event-time.md says why.
+nothing: no stream time, no owner; only how far a player may count the stream as read.
+docs/concepts/event-time.md says why.
 """
 
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+UNOWNED_SOURCES = 16  # sources whose refused frames are remembered before a key has an owner
 
 
 class Verdict(enum.Enum):
@@ -25,6 +28,7 @@ class _Stream:
     owner: str | None = None
     handled: int = -1  # the owner's last stamp handled: its time
     read: int = -1  # the owner's last stamp taken, handled or refused (flow control)
+    unowned: dict[str, int] = field(default_factory=dict)  # no owner yet: last refused, by source
 
 
 class SourceTimes:
@@ -77,6 +81,8 @@ class SourceTimes:
             return True
         if stream.owner is None:
             stream.owner = source
+            stream.read = stream.unowned.get(source, -1)
+            stream.unowned.clear()
         elif source != stream.owner:
             return False
         stream.handled = max(stream.handled, stamp)
@@ -85,19 +91,33 @@ class SourceTimes:
 
     def refuse(self, key: str, source: str, stamp: int) -> None:
         """The handler refused the message as bad input: counted and forgotten (no time, no
-        owner). Only how far the owner's stream has been read moves, so that a player waiting
-        on this service (runtime.pacing) passes a run of bad frames of its own."""
+        owner). Only how far the stream has been read moves (`progress`), so that a player
+        waiting on this service (runtime.pacing) passes a run of bad frames of its own, also
+        at the start, before the key has an owner."""
         self.refused += 1
         stream = self._streams.get(key)
-        if stream is not None and stream.owner == source:
+        if stream is None:
+            return
+        if stream.owner == source:
             stream.read = max(stream.read, stamp)
+        elif stream.owner is None and (
+            source in stream.unowned or len(stream.unowned) < UNOWNED_SOURCES
+        ):
+            stream.unowned[source] = max(stream.unowned.get(source, -1), stamp)
 
     def handled(self, key: str) -> int:
         """The owner's last stamp handled on `key` (-1: none): what a repeat is compared with."""
         stream = self._streams.get(key)
         return -1 if stream is None else stream.handled
 
-    def progress(self, key: str) -> int:
-        """How far the owner's stream on `key` has been read, handled or refused (-1: none)."""
+    def progress(self, key: str, *, ceiling: int) -> int:
+        """How far the owner's stream on `key` has been read, handled or refused (-1: none).
+        Before the key has an owner, how far its refused frames go, but never past `ceiling`
+        (the service's clock; on a replay, the player's): whose they were is not known yet,
+        and a stranger's stamp must not tell the player more than its own clock does."""
         stream = self._streams.get(key)
-        return -1 if stream is None else stream.read
+        if stream is None:
+            return -1
+        if stream.owner is None:
+            return min(max(stream.unowned.values(), default=-1), ceiling)
+        return stream.read

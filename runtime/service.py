@@ -287,6 +287,9 @@ class Service:
         """How far each paced input is handled, and what was received and published
         (runtime.progress)."""
         stamps = {p.key: p.last_stamp for p in self._publishers}
+        now = self.clock.now_ns()  # as it stands now: it bounds a stream with no owner yet
+        for key in self._progress.paced:
+            self._progress.handled_up_to(key, self.times.progress(key, ceiling=now))
         return self._progress.report(self.published_counts(), self.received_counts(), stamps)
 
     def publish_progress(self) -> None:
@@ -328,8 +331,6 @@ class Service:
                 self.clock.observe(header.stamp)
             if identified and not refused:
                 ledgers.record(received.key, received.message)
-            if paced:
-                progress.handled_up_to(sub.key, times.progress(sub.key))
             if progress.wanted:
                 self.publish_progress()
 

@@ -8,6 +8,7 @@ from beyond_self.runtime.event_time import SourceTimes, Verdict
 
 KEY = "beyond/robot/sensors/skeleton"
 HOUR = 3600 * 10**9
+NEVER = 2**63  # no clock bounds it
 
 
 def test_the_first_source_taken_owns_the_key_and_a_stranger_never_moves_its_time() -> None:
@@ -19,7 +20,7 @@ def test_the_first_source_taken_owns_the_key_and_a_stranger_never_moves_its_time
     # a wall-clock stamp years later from `beyond pub`: foreign, counted, and nothing moves
     assert times.verdict(KEY, "beyond-pub", 10**18) is Verdict.FOREIGN
     assert not times.take(KEY, "beyond-pub", 10**18)
-    assert (times.foreign, times.handled(KEY), times.progress(KEY)) == (1, 10, 10)
+    assert (times.foreign, times.handled(KEY), times.progress(KEY, ceiling=NEVER)) == (1, 10, 10)
     # so the owner's next frame is fresh, not stale
     assert times.verdict(KEY, "simulator", 11) is Verdict.FRESH
     assert times.stale == 0
@@ -38,16 +39,36 @@ def test_a_repeat_of_the_owner_is_stale_and_a_pause_is_not() -> None:
 def test_a_refused_message_claims_nothing_and_moves_no_time() -> None:
     times = SourceTimes()
     times.track(KEY)
-    # the README's incomplete frame before anything else: refused, so it owns nothing
+    # the README's incomplete frame before anything else: refused, so it owns nothing and
+    # moves no time; a player may count the stream read only as far as its own clock (3)
     assert times.verdict(KEY, "beyond-pub", 10**18) is Verdict.FRESH
     times.refuse(KEY, "beyond-pub", 10**18)
-    assert (times.owner(KEY), times.handled(KEY), times.progress(KEY)) == (None, -1, -1)
+    assert (times.owner(KEY), times.handled(KEY)) == (None, -1)
+    assert times.progress(KEY, ceiling=3) == 3
     assert times.take(KEY, "simulator", 5)
     assert times.owner(KEY) == "simulator"
+    assert times.progress(KEY, ceiling=NEVER) == 5  # the stranger's refused stamp is gone
     # the owner's own bad frame: counted, its time stays, only how far it was read moves
     times.refuse(KEY, "simulator", 6)
-    assert (times.refused, times.handled(KEY), times.progress(KEY)) == (2, 5, 6)
+    assert (times.refused, times.handled(KEY), times.progress(KEY, ceiling=NEVER)) == (2, 5, 6)
     assert times.verdict(KEY, "simulator", 6) is Verdict.FRESH
+    # once the key has an owner, another source's refused frame moves nothing at all
+    times.refuse(KEY, "beyond-pub", 10**18)
+    assert (times.refused, times.handled(KEY), times.progress(KEY, ceiling=NEVER)) == (3, 5, 6)
+
+
+def test_a_stream_that_begins_with_bad_frames_is_read_as_far_as_the_clock() -> None:
+    """A recording whose first frames all lack the hand: no owner yet, but a player waiting on
+    the service sees it has read them (up to its own clock), so the replay goes on."""
+    times = SourceTimes()
+    times.track(KEY)
+    for stamp in range(100, 130):
+        times.refuse(KEY, "simulator", stamp)
+    assert (times.owner(KEY), times.handled(KEY)) == (None, -1)
+    assert times.progress(KEY, ceiling=0) == 0  # the player's clock not heard yet
+    assert times.progress(KEY, ceiling=NEVER) == 129
+    assert times.take(KEY, "simulator", 130)
+    assert (times.owner(KEY), times.progress(KEY, ceiling=0)) == ("simulator", 130)
 
 
 def test_keys_are_apart_and_an_untracked_key_is_always_fresh() -> None:

@@ -10,6 +10,7 @@ import contextlib
 import json
 from pathlib import Path
 
+import msgspec
 import pytest
 from busutil_net import env_for, private_config, run_beyond
 
@@ -152,3 +153,41 @@ async def test_stray_skeleton_frames_during_up_change_nothing(tmp_path: Path) ->
     assert max((h.foreign for h in seen), default=0) == 2, (repr(seen[-1]), errors[-3000:])
     assert max((h.stale for h in seen), default=0) == 0
     assert "belongs to" in errors  # the one line that says why they were refused
+
+
+@pytest.mark.slow
+async def test_a_recording_that_begins_with_frames_without_a_hand_plays_to_its_end(
+    tmp_path: Path,
+) -> None:
+    """Refused frames move no time, but the player waiting on the gesture streamer still sees
+    them read: thirty hand-less frames at the start (no owner yet) do not stall `up --rate 0`,
+    and the rest of the recording is described."""
+    from beyond_self.runtime.recording import inspect_recording, read_recording
+    from beyond_self.runtime.recording_writer import RecordingWriter
+
+    bad = tmp_path / "no-hand-at-first.mcap"
+    with RecordingWriter(bad, metadata=inspect_recording(RECORDING).metadata["beyond"]) as out:
+        for item in read_recording(RECORDING):
+            message = item.message()
+            if isinstance(message, s.SkeletonFrame) and message.frame <= 30:
+                joints = {k: v for k, v in message.joints.items() if k != "right_hand"}
+                message = msgspec.structs.replace(message, joints=joints)
+            out.write(item.key, message)
+    env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}
+    up = await asyncio.create_subprocess_exec(
+        *BEYOND, "up", "--recording", str(bad), "--rate", "0", "--no-live", "--timeout", "50",
+        env=env, cwd=tmp_path, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        out_bytes, err_bytes = await asyncio.wait_for(up.communicate(), 60)
+    except TimeoutError:
+        pytest.fail("beyond up stalled on a recording that begins with refused frames")
+    finally:
+        if up.returncode is None:
+            up.kill()
+            await up.wait()
+    printed, errors = out_bytes.decode(), err_bytes.decode()
+    assert await up.wait() == 0, printed + errors[-3000:]
+    said = [line for line in printed.splitlines() if line.startswith("gesture ")]
+    assert said and said[-1].endswith('"the robot touched the ball but the ball is still"'), printed
+    assert "refused=30" in errors  # the gesture streamer's own count, as it stopped
