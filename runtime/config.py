@@ -84,7 +84,7 @@ class BusConfig:
     mode: str = "peer"
     connect: tuple[str, ...] | None = None
     listen: tuple[str, ...] | None = None
-    port: int = DEFAULT_PORT
+    port: int = 0  # 0: the bus's default, DEFAULT_PORT (SECURE_PORT on a secure bus)
     config_file: Path | None = None
     routers: tuple[str, ...] = ()  # connected to in addition to the mode's or file's endpoints
     secure: Path | None = None  # keystore directory: mutual TLS and access rules
@@ -109,6 +109,9 @@ class BusConfig:
                 "a secure bus has no peers (they would bypass the router's access rules); "
                 "valid modes with --secure: client, router"
             )
+        if self.port == 0:
+            secure = self.secure is not None
+            object.__setattr__(self, "port", SECURE_PORT if secure else DEFAULT_PORT)
         if not 0 < self.port < 65536:
             raise InputError(f"port {self.port} out of range; valid: 1-65535")
 
@@ -227,7 +230,7 @@ def load_config(
         identity=identity or env.get("BEYOND_ZENOH_IDENTITY") or None,
         connect=tuple(connect) if connect else (_split(env_connect) if env_connect else None),
         listen=tuple(listen) if listen else (_split(env_listen) if env_listen else None),
-        port=port or (SECURE_PORT if keystore else DEFAULT_PORT),
+        port=port or 0,
         config_file=path,
         routers=tuple(routers) if routers else (_split(env_routers) if env_routers else ()),
     )
