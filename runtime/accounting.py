@@ -84,3 +84,10 @@ class ErrorAccount:
                 exc_info=exc,
                 extra={"fields": {"key": key, "service": self.service}},
             )
+
+    def refused(self, key: str, reason: str) -> None:
+        """A message on `key` refused before its handler (not an error of this service): said
+        once per shape of `reason`, counted by the caller."""
+        key, reason = bounded(key, 200), bounded(reason)
+        if self.once.first(key, reason):
+            event(self.log, logging.WARNING, "message refused", key=key, reason=reason)

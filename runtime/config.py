@@ -15,8 +15,9 @@ the config file connects to, so a machine's processes stay one local peer group 
 stays local) that is also linked to the router (deploy/ uses this).
 
 Secure bus (`--secure DIR`, BEYOND_ZENOH_SECURE=DIR): every process is a client of a router
-(or the router), every link mutual TLS with the certificates of the keystore in DIR, and the
-router enforces access rules generated from the services' declarations (runtime/secure.py).
+(or the router) on the bus's port (7447 unless --port or BEYOND_ZENOH_PORT), every link mutual
+TLS with the certificates of the keystore in DIR, and the router enforces access rules generated
+from the services' declarations (runtime/secure.py).
 
 Precedence: built-in defaults < config file (BEYOND_ZENOH_CONFIG) < environment < arguments.
 """
@@ -38,6 +39,7 @@ if TYPE_CHECKING:
 
 MODES = ("peer", "client", "router")
 DEFAULT_PORT = 7448  # rendezvous port of the default local group (7447 is Zenoh's router port)
+SECURE_PORT = 7447  # a secure bus's router (runtime.secure)
 ROUTER_LISTEN = "tcp/[::]:7447"
 OPEN_WAIT_MS = 100  # open() waits this long to connect, then keeps retrying in the background
 CLIENT_WAIT_MS = 30_000  # a client's open() waits this long for a router, then fails
@@ -82,7 +84,7 @@ class BusConfig:
     mode: str = "peer"
     connect: tuple[str, ...] | None = None
     listen: tuple[str, ...] | None = None
-    port: int = DEFAULT_PORT
+    port: int = 0  # 0: the bus's default, DEFAULT_PORT (SECURE_PORT on a secure bus)
     config_file: Path | None = None
     routers: tuple[str, ...] = ()  # connected to in addition to the mode's or file's endpoints
     secure: Path | None = None  # keystore directory: mutual TLS and access rules
@@ -107,6 +109,9 @@ class BusConfig:
                 "a secure bus has no peers (they would bypass the router's access rules); "
                 "valid modes with --secure: client, router"
             )
+        if self.port == 0:
+            secure = self.secure is not None
+            object.__setattr__(self, "port", SECURE_PORT if secure else DEFAULT_PORT)
         if not 0 < self.port < 65536:
             raise InputError(f"port {self.port} out of range; valid: 1-65535")
 
@@ -147,12 +152,12 @@ class BusConfig:
         """(listen, connect) endpoints actually used."""
         rendezvous = f"tcp/127.0.0.1:{self.port}"
         if self.secure is not None:
-            from beyond_self.runtime.secure import SECURE_ROUTER_CONNECT, SECURE_ROUTER_LISTEN
+            from beyond_self.runtime.secure import router_connect, router_listen
 
             listen, connect = (
-                ([SECURE_ROUTER_LISTEN], [])
+                ([router_listen(self.port)], [])
                 if self.mode == "router"
-                else ([], [SECURE_ROUTER_CONNECT])
+                else ([], [router_connect(self.port)])
             )
         elif self.mode == "peer":
             listen = [rendezvous, "tcp/127.0.0.1:0"]
@@ -225,7 +230,7 @@ def load_config(
         identity=identity or env.get("BEYOND_ZENOH_IDENTITY") or None,
         connect=tuple(connect) if connect else (_split(env_connect) if env_connect else None),
         listen=tuple(listen) if listen else (_split(env_listen) if env_listen else None),
-        port=port or DEFAULT_PORT,
+        port=port or 0,
         config_file=path,
         routers=tuple(routers) if routers else (_split(env_routers) if env_routers else ()),
     )

@@ -189,6 +189,9 @@ class Fleet:
             last_error=last_error or next(iter(self.failed.values()), ""),
             skipped=sum(h.skipped for h in runs),
             restarts=restarts(),
+            stale=sum(h.stale for h in runs),
+            foreign=sum(h.foreign for h in runs),
+            refused=sum(h.refused for h in runs),
         )
 
     @property

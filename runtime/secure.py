@@ -22,8 +22,16 @@ from typing import Any
 from beyond_self.core.errors import InputError
 from beyond_self.runtime import keystore
 
-SECURE_ROUTER_LISTEN = "tls/[::]:7447"
-SECURE_ROUTER_CONNECT = "tls/127.0.0.1:7447"
+
+def router_listen(port: int, *, loopback: bool = False) -> str:
+    """Where a secure router listens: every interface (a side that other machines reach), or
+    loopback only (everything on one machine)."""
+    return f"tls/127.0.0.1:{port}" if loopback else f"tls/[::]:{port}"
+
+
+def router_connect(port: int) -> str:
+    """Where a secure client reaches the router on its own machine."""
+    return f"tls/127.0.0.1:{port}"
 
 
 def default_identity(mode: str) -> str:
@@ -53,10 +61,10 @@ def tls_settings(
         "close_link_on_expiration": True,
         "connect_certificate": str(cert),
         "connect_private_key": str(key),
+        # any TLS listener, whatever the mode or where it was given, presents the identity's
+        "listen_certificate": str(cert),
+        "listen_private_key": str(key),
     }
-    if mode == "router":
-        tls["listen_certificate"] = str(cert)
-        tls["listen_private_key"] = str(key)
     sets: dict[str, Any] = {"transport/link/tls": tls}
     if mode == "router":
         if access_rules is None:

@@ -49,7 +49,9 @@ def health_of(service: Service, seq: int) -> ServiceHealth:
             | ({keys.progress(service.name)} if service.paced_keys else set())
         ),
         restarts=restarts(),
-        stale=service.stale,
+        stale=service.times.stale,
+        foreign=service.times.foreign,
+        refused=service.times.refused,
     )
 
 
@@ -61,7 +63,9 @@ def stop_counts(service: Service, health: ServiceHealth) -> dict[str, Any]:
     counts.update(recovered=recovered, missed=missed)
     counts["not_logged"] = service.account.once.repeats  # problems of a shape logged before
     counts["duplicates"] = service.ledgers.duplicates  # handled already: skipped
-    counts["stale"] = service.stale  # sensor messages not after the last one handled
+    counts["stale"] = health.stale  # sensor messages not after the last one handled
+    counts["foreign"] = health.foreign  # sensor messages of a source not their key's own
+    counts["refused"] = health.refused  # refused by a handler as bad input
     counts["suppressed"] = sum(p.suppressed for p in service.publishers)  # consumers had it
     return counts
 

@@ -26,6 +26,7 @@ import zlib
 from collections.abc import Callable, Coroutine, Sequence
 from typing import Any, NoReturn, TypeVar, overload
 
+from beyond_self.core.errors import InputError
 from beyond_self.runtime import heap, process
 from beyond_self.runtime.accounting import ErrorAccount
 from beyond_self.runtime.acl import check_declared
@@ -33,6 +34,7 @@ from beyond_self.runtime.bus import Bus
 from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.config import BusConfig, load_config
 from beyond_self.runtime.delivery import RELIABLE, STATUS, Delivery
+from beyond_self.runtime.event_time import SourceTimes, Verdict
 from beyond_self.runtime.ledger import Keeper
 from beyond_self.runtime.log import event
 from beyond_self.runtime.progress import ProgressReport
@@ -101,7 +103,7 @@ class Service:
         self._progress = ProgressReport(self.name, self.header)
         self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.ledger)
         self._once: set[str] = set()  # keys whose handling is not repeated after a restart
-        self.stale = 0  # sensor messages not after the last one handled on their key
+        self.times = SourceTimes()  # whose time each sensor key keeps (runtime.event_time)
         self._recovery_reported: tuple[int, int] = (0, 0)
         self._tasks: set[asyncio.Task[Any]] = set()
         self._timers: set[asyncio.TimerHandle] = set()
@@ -148,8 +150,9 @@ class Service:
         """Call `handler(message)` for every well-formed `cls` message on `key`, received as
         `delivery` says (runtime.delivery), each identity once (runtime.ledger). With `paced`
         (sensor inputs), the stamp of every message handled is published as `Progress`, so a
-        player never outruns this service, and a message not after the last one handled on
-        `key` (a restarted source repeats what was handled) is skipped and counted. With
+        player never outruns this service; `key` belongs to one source (runtime.event_time):
+        another's messages, and the owner's not after the last one handled (a restarted
+        source repeats what was handled), are skipped and counted. With
         `once` (a handler whose effect is not to be repeated: a sentence said), a restarted
         instance does not handle again what its predecessor handled."""
         self._check_declared("subscribe", key)
@@ -161,6 +164,7 @@ class Service:
             self._once.add(key)
         if paced:
             self._progress.pace(key)
+            self.times.track(key)
         if self.started.is_set():
             self.spawn(self._consume(sub, handler), key)
         return sub
@@ -285,6 +289,9 @@ class Service:
         """How far each paced input is handled, and what was received and published
         (runtime.progress)."""
         stamps = {p.key: p.last_stamp for p in self._publishers}
+        now = self.clock.now_ns()  # as it stands now: it bounds a stream with no owner yet
+        for key in self._progress.paced:
+            self._progress.handled_up_to(key, self.times.progress(key, ceiling=now))
         return self._progress.report(self.published_counts(), self.received_counts(), stamps)
 
     def publish_progress(self) -> None:
@@ -296,30 +303,40 @@ class Service:
         return recovery_of(self.subscriptions)
 
     async def _consume(self, sub: Subscription[Any], handler: Handler[Any]) -> None:
-        ledgers, progress = self.ledgers, self._progress
-        paced, identified = sub.key in progress.paced, sub.cls in IDENTIFIED
-        handled = progress.handled
-
-        def observe(received: Received[Any]) -> None:
-            self.clock.observe(received.message.header.stamp)
+        ledgers, progress, times = self.ledgers, self._progress, self.times
+        paced, identified = times.tracked(sub.key), sub.cls in IDENTIFIED
+        refusal: list[Exception] = []  # the current message's, if its handler refused it
 
         def fresh(received: Received[Any]) -> bool:
+            refusal.clear()
             if identified and ledgers.duplicate(received.key, received.message) is not None:
                 return False
-            if paced and received.message.header.stamp <= handled.get(sub.key, -1):
-                self.stale += 1
-                return False
+            if paced:
+                header = received.message.header
+                verdict = times.verdict(sub.key, header.source, header.stamp)
+                if verdict is Verdict.FOREIGN:
+                    self.account.refused(sub.key, times.why_foreign(sub.key, header.source))
+                return verdict is Verdict.FRESH
             return True
 
+        def failed(key: str, exc: Exception) -> None:
+            refusal.append(exc)
+            self.report_error(key, exc)
+
         def done(received: Received[Any]) -> None:
-            if identified:
+            header = received.message.header
+            refused = bool(refusal) and isinstance(refusal[0], InputError)
+            # bad input is counted and forgotten: no time, no owner, no ledger entry
+            if refused:
+                times.refuse(sub.key, header.source, header.stamp)
+            elif times.take(sub.key, header.source, header.stamp):  # the key's own stream
+                self.clock.observe(header.stamp)
+            if identified and not refused:
                 ledgers.record(received.key, received.message)
-            if paced:
-                progress.handled_up_to(sub.key, received.message.header.stamp)
             if progress.wanted:
                 self.publish_progress()
 
-        await consume(sub, handler, self.report_error, before=observe, after=done, accept=fresh)
+        await consume(sub, handler, failed, after=done, accept=fresh)
 
     def _follow_clock(self) -> None:
         """On a replay, follow the player's stream clock (runtime.clock), so that health and

@@ -407,10 +407,13 @@ class ServiceHealth(Message, frozen=True):
     Version 2: `skipped` counts inputs whose per-frame work was skipped to keep up with a live
     source (camera frames the object segmenter did not describe; never per-gesture work);
     `restarts`, how many times its supervisor (`beyond up`, a Deployment) restarted
-    the service after it died before this instance (0: the first). `stale`: sensor messages
-    dropped because their stamp was not after the last one handled on their key."""
+    the service after it died before this instance (0: the first).
 
-    VERSION: ClassVar[int] = 2
+    Version 3 counts the sensor messages not taken (runtime.event_time): `stale`, not after
+    the last one handled from their source; `foreign`, from a source other than the one their
+    key belongs to; `refused`, refused by a handler as bad input (also among `errors`)."""
+
+    VERSION: ClassVar[int] = 3
 
     service: Name
     uptime_s: Seconds
@@ -429,6 +432,8 @@ class ServiceHealth(Message, frozen=True):
     skipped: Count = 0
     restarts: Count = 0
     stale: Count = 0
+    foreign: Count = 0
+    refused: Count = 0
 
 
 class StreamEnd(Message, frozen=True):

@@ -360,7 +360,12 @@ class Deployment:
 
     def _router_env(self) -> dict[str, str]:
         """A secure side's router: secure defaults and its own endpoints, not the clients'."""
-        own = BusConfig(robot=self.config.robot, mode="router", secure=self.config.secure)
+        own = BusConfig(
+            robot=self.config.robot,
+            mode="router",
+            secure=self.config.secure,
+            port=self.config.port,
+        )
         return service_env(own)
 
 

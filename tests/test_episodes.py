@@ -31,7 +31,7 @@ from beyond_self.cognition.episodes import (
     Outcome,
     Started,
 )
-from beyond_self.cognition.episodes.objects import EVICTED_KEPT
+from beyond_self.cognition.episodes.objects import EVICTED_KEPT, LOOK_BACK_FRAMES
 from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
 from beyond_self.cognition.gestures import extract_features
 from beyond_self.cognition.gestures.default_models import default_models
@@ -184,7 +184,8 @@ def test_a_start_looks_back_past_frames_dropped_undescribed() -> None:
     )
     step = 66_666_667
     frames = [(with_object.stamp, 1, with_object.image)] + [
-        (with_object.stamp + k * step, k + 1, table) for k in range(1, EVICTED_KEPT + 8)
+        (with_object.stamp + k * step, k + 1, table)
+        for k in range(1, LOOK_BACK_FRAMES + EVICTED_KEPT + 8)
     ]
     start = frames[-1][0] + step
     results = []
@@ -194,8 +195,8 @@ def test_a_start_looks_back_past_frames_dropped_undescribed() -> None:
             watch.camera(stamp, frame, image)
             if eager:
                 watch.frame_objects(stamp, frame, image, frame)
-        watch.gestures_complete(start + 10**10)  # everything before can be dropped
-        assert not watch.buffer
+        watch.gestures_complete(start + 10**10)  # all but the last look-back can be dropped
+        assert len(watch.buffer) == LOOK_BACK_FRAMES
         watch.camera(start + step, len(frames) + 1, table)
         results += [o for o in watch.started(1, start, 0) if isinstance(o, ObjectAtStart)]
     assert [(r.frame, r.reason) for r in results] == [(1, ""), (1, "")]
@@ -208,6 +209,35 @@ def test_a_start_looks_back_past_frames_dropped_undescribed() -> None:
             "Size": "medium",
         }
     )
+
+
+def test_an_hour_without_frames_is_a_pause_not_a_reason_to_refuse_or_drop() -> None:
+    """Issue 39: the skeleton's complete time jumps an hour (the robot idled) before the start
+    of a gesture that began before the pause is heard of (the segmenter places onsets back):
+    the start is taken, its object comes from the frames before the pause, and a gesture open
+    across the pause is not dropped as a stray start."""
+    cameras, _, _ = streams()
+    step, hour = 66_666_667, 3600 * 10**9
+    frames = [(cameras[0].stamp + k * step, k + 1, cameras[0].image) for k in range(10)]
+    watch: ObjectWatch[int] = ObjectWatch(ClusterModel.load())
+    for stamp, frame, image in frames:
+        watch.camera(stamp, frame, image)
+    before = frames[-1][0]
+    watch.gestures_complete(before + hour)  # the skeleton ran on past the pause first
+    watch.camera(before + hour, 11, cameras[0].image)
+    outputs = watch.started(1, before - 2 * step, 0)  # began before the pause: not refused
+    (start,) = [o for o in outputs if isinstance(o, ObjectAtStart)]
+    assert (start.frame, start.reason) == (8, "")
+    assert start.labels == {"Color": "green2", "Shape": "box", "Size": "medium"}
+    # open across a second pause of a day: still under way, then ended and measured
+    watch.gestures_complete(before + hour + 24 * hour)
+    for k in range(1, 6):
+        watch.camera(before + hour + 24 * hour + k * step, 11 + k, cameras[0].image)
+    assert 1 in watch.windows and watch.abandoned == 0
+    end = before + 25 * hour + 5 * step
+    outputs = watch.ended(1, before - 2 * step, end, 20, 0)
+    outputs += watch.camera_ended(end)
+    assert [o.segment_id for o in outputs if isinstance(o, GestureEffects)] == [1]
 
 
 @pytest.fixture(scope="module")

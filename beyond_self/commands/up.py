@@ -50,7 +50,9 @@ over lab-a... when the first one dies (each robot's service served by exactly on
 `--secure DIR` (README, "Securing a deployment"): every certificate the side needs is checked
 first, then the side starts its own router (TLS, the generated access rules; linked with the
 side's certificate to the endpoints given with `--connect`, if any) and its processes join it
-as clients, each with its own certificate.
+as clients, each with its own certificate. It listens on the bus's port (7447 unless `--port` or
+$BEYOND_ZENOH_PORT): on loopback only for everything on one machine (`--profile all`), on every
+interface for a side meant for other machines (robot, workstation, fleet).
 """
 
 from __future__ import annotations
@@ -86,7 +88,6 @@ from beyond_self.services.options import load_options
 from beyond_self.services.registry import PROFILES, SERVICES
 
 HELP = "start the pipeline's services as separate processes and watch them"
-SECURE_LOCAL_PORT = 7447  # a side's own router, when it links to another (if free)
 DEFAULT_TIMEOUT = 120.0
 LOST = 3  # exit status of a run that lost gestures or sensor frames (its summary says which)
 ALIVE_QUERY_S = 2.0  # how long the services already on the bus have to answer
@@ -238,9 +239,10 @@ def secure_router(
     elsewhere (the workstation's router), this side's router links to them with the side's
     certificate, and this side's processes stay on their own router, so a robot's pipeline
     keeps running when the network between the machines fails; that router listens on
-    loopback only, on 7447 if free, else on a free port: a second workstation of a fleet on
-    the first one's host links to the first one's router there."""
+    loopback only, on the bus's port (7447 unless told) if free, else on a free port: a second
+    workstation of a fleet on the first one's host links to the first one's router there."""
     from beyond_self.runtime import keystore
+    from beyond_self.runtime.secure import router_listen
 
     assert config.secure is not None
     remote = list(config.connect or ()) + list(config.routers)
@@ -255,8 +257,11 @@ def secure_router(
         keystore.check(config.secure, name)
     command = ["router", "--secure", str(config.secure), "--identity", identity]
     if not remote:
+        # on the rendezvous port; everything on one machine (`--profile all`) stays on
+        # loopback, a side meant for other machines listens on every interface
+        command += ["--listen", router_listen(config.port, loopback=profile == "all")]
         return command, None
-    local = f"tls/127.0.0.1:{loopback_port(SECURE_LOCAL_PORT)}"
+    local = router_listen(loopback_port(config.port), loopback=True)
     command += ["--listen", local] + [a for e in remote for a in ("--connect", e)]
     return command, local
 

@@ -35,10 +35,11 @@ described them are kept aside (at most `EVICTED_KEPT`, then the newest is descri
 them is known to show an object. `buffer_bytes` is a last-resort cap on top (a frame it drops
 that a gesture has queued is analysed for it first).
 
-Bounded against nonsense: at most `max_open` gestures under way (a start beyond is refused),
-a start older than anything the segmenter can still announce is refused, and a gesture that has
-not ended `max_gesture_s` of skeleton time after it started is dropped (a stray start), so no
-input can make the watch hold frames or analysers without bound.
+Bounded against nonsense by counts and bytes, never by the distance between stamps (a source
+may pause for an hour and resume): at most `max_open` gestures under way (a start beyond is
+refused), a gesture still open after `max_gesture_frames` camera frames is dropped (a stray
+start), the history by `buffer_bytes`; the frames a later start may look back to are kept by
+count across a pause (`LOOK_BACK_FRAMES`).
 """
 
 from __future__ import annotations
@@ -63,6 +64,9 @@ EFFECT_VARIABLES = ("ObjVel", "HandVel", "ObjHandVel", "Contact")
 MIN_WINDOW_FRAMES = 3
 FPS_FRAMES = 4  # frames of a gesture's window its frame rate is measured on
 EVICTED_KEPT = 16  # dropped frames nobody described, kept for a start that looks back to them
+# frames up to the complete skeleton time kept for a start still to be announced: the default
+# onset_s + lead_s at 30 fps, counted so that a pause in the stamps does not shorten it
+LOOK_BACK_FRAMES = 72
 
 
 @dataclass(frozen=True)
@@ -131,6 +135,7 @@ class _Window(Generic[R]):
     analyser: RecordingAnalyser | None = None
     object_decided: bool = False
     end: tuple[int, int, R] | None = None  # (end stamp, end frame, ref) once ended
+    opened_at: int = 0  # camera frames handled when it opened
 
 
 class ObjectWatch(Generic[R]):
@@ -151,7 +156,7 @@ class ObjectWatch(Generic[R]):
         onset_s: float = 2.0,
         buffer_bytes: int = 160 * 2**20,
         max_open: int = 8,
-        max_gesture_s: float = 60.0,
+        max_gesture_frames: int = 1800,
     ) -> None:
         for name, value in (("lead_s", lead_s), ("deadline_s", deadline_s), ("onset_s", onset_s)):
             if not np.isfinite(value) or value < 0:
@@ -163,8 +168,9 @@ class ObjectWatch(Generic[R]):
         self.deadline_ns = round(deadline_s * 1e9)
         self.onset_ns = round(onset_s * 1e9)
         self.max_open = max_open
-        self.max_gesture_ns = round(max_gesture_s * 1e9)
-        self.abandoned = 0  # gestures dropped: never ended within max_gesture_s
+        self.max_gesture_frames = max_gesture_frames
+        self.abandoned = 0  # gestures dropped: not ended within max_gesture_frames
+        self.frames_handled = 0  # camera frames handled: what an open gesture's age counts
         self.complete_until = -1  # gesture events are complete up to this skeleton stamp
         self.evicted_early = 0  # frames the byte cap dropped while a gesture could need them
         # the last dropped frame known to show an object, and the frames dropped after it that
@@ -196,6 +202,7 @@ class ObjectWatch(Generic[R]):
         item = _Buffered(stamp, frame, image)
         self._keep(item)
         self.watermark = stamp
+        self.frames_handled += 1
         for window in self.windows.values():
             if stamp >= window.lo and (window.end is None or window.end[0] >= stamp):
                 window.pending.append(item)
@@ -211,14 +218,8 @@ class ObjectWatch(Generic[R]):
                 f"gesture {segment_id} refused: {len(self.windows)} gestures already under way "
                 f"(valid: at most {self.max_open} at once)"
             )
-        oldest = self.complete_until - self.onset_ns - self.max_gesture_ns
-        if self.complete_until >= 0 and start_stamp < oldest:
-            raise InputError(
-                f"gesture {segment_id} refused: it starts at {start_stamp}, long before the "
-                f"skeleton stream's {self.complete_until} (valid: within "
-                f"{(self.onset_ns + self.max_gesture_ns) / 1e9:g} s of it)"
-            )
         window = _Window(segment_id, start_stamp, start_stamp - self.lead_ns, ref)
+        window.opened_at = self.frames_handled
         window.pending.extend(b for b in self.buffer if b.stamp >= window.lo)
         self.windows[segment_id] = window
         self._skeleton_at(start_stamp)
@@ -346,12 +347,17 @@ class ObjectWatch(Generic[R]):
         self._evict()
 
     def _evict(self) -> None:
-        # a frame can go once no gesture, open or still to be announced, can need it
+        # a frame can go once no gesture, open or still to be announced, can need it: the
+        # segmenter places an onset at most `onset_s` of its frames back, and across a pause
+        # that is a count of frames, not a time, so the last LOOK_BACK_FRAMES frames up to the
+        # complete skeleton time stay too
         keep_from = self.complete_until - self.onset_ns - self.lead_ns
         for window in self.windows.values():
             keep_from = min(keep_from, window.lo)
-        while self.buffer and self.buffer[0].stamp < keep_from:
+        before = sum(1 for b in self.buffer if b.stamp <= self.complete_until)
+        while self.buffer and self.buffer[0].stamp < keep_from and before > LOOK_BACK_FRAMES:
             self._drop_oldest()
+            before -= 1
         while len(self.buffer) > 1 and self._buffered_bytes > self.buffer_bytes:
             self.evicted_early += 1
             oldest = self.buffer[0].stamp
@@ -416,7 +422,7 @@ class ObjectWatch(Generic[R]):
             window = self.windows[segment_id]
             if (
                 window.end is None
-                and self.complete_until > window.start_stamp + self.max_gesture_ns
+                and self.frames_handled - window.opened_at > self.max_gesture_frames
             ):
                 del self.windows[segment_id]  # a start no end followed: not a gesture
                 self.abandoned += 1
