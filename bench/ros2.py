@@ -16,6 +16,7 @@ Last line: one JSON object with every figure.
 
 from __future__ import annotations
 
+import argparse
 import json
 import multiprocessing
 import statistics
@@ -248,6 +249,11 @@ def bags(work: Path) -> dict[str, float]:
 
 
 def main() -> None:
+    # no options: --help says what it measures and exits
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.parse_args()
     from socket import socket
 
     with socket() as s:
