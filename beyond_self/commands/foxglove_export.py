@@ -161,12 +161,18 @@ def export(
             root = f"beyond/{next(iter(robots))}"
             actions = list(default_models().actions)
             try:  # analysed whole before the first message is written
-                for stream, message in _analysis(inputs(Path(source)), actions):
-                    if stream in wanted:
-                        w.write(f"{root}/{STREAMS[stream][0]}", message)
-                        result.derived[stream] = result.derived.get(stream, 0) + 1
+                derived = [
+                    (stream, message)
+                    for stream, message in _analysis(inputs(Path(source)), actions)
+                    if stream in wanted
+                ]
             except InputError as exc:  # a recording the pipeline cannot analyse: copied as is
-                refused = str(exc)
+                derived, refused = [], str(exc)
+            # in stamp order (stable): a gesture's final belief, stamped at its end, is found
+            # after later frames', and a channel's log times (its stamps) must not step back
+            for stream, message in sorted(derived, key=lambda d: d[1].header.stamp):
+                w.write(f"{root}/{STREAMS[stream][0]}", message)
+                result.derived[stream] = result.derived.get(stream, 0) + 1
     result.empty = _empty_views(held | set(result.derived), held, robots, refused)
     return result
 
