@@ -1,19 +1,12 @@
 """Time for services: one clock per run, the wall clock live, the stream's clock on replay.
 
-Why: a service that stamps its outputs with `time.time_ns()` makes every replay different, and a
-recording of a replay that mixes the wall clock (health, progress) with the recording's (the
-data) steps back years on some channels. On replay (`BEYOND_CLOCK=recording`, as `beyond up`
-sets it when it replays a recording or a log) every message is on the stream's clock, like ROS's
-`use_sim_time`: the player (the ingest service, `beyond replay`) publishes the stream's time on
-`beyond/<robot>/clock` (`StreamClock`) as it plays, `ClockTicks` below, and a service's clock
-follows it and the stamps of its own inputs, never backwards. Derived messages copy the stamp of
-their input (`Service.derive`), which needs no clock at all; the clock stamps what is not derived
-from an input: health, progress, the source's end marker, answers to queries.
-
-Before the stream starts the recording clock reads 0, as ROS's does before /clock: health is
-still published (it is how a service shows it is alive), stamped 0, and a recorder logs such a
-message at the stream's first instant (runtime.recording_writer). While a replay is paused the
-clock stands still and health repeats its stamp.
+A service that stamps its outputs with `time.time_ns()` makes every replay different. On replay
+(`BEYOND_CLOCK=recording`, which `beyond up` sets for a recording or a log) the clock is the
+stream's, like ROS's `use_sim_time`: the player publishes the stream's time on
+`beyond/<robot>/clock` (`ClockTicks`), and a service's clock follows it and its own inputs'
+stamps, never backwards. It stamps only what is not derived from an input (health, progress, the
+end marker, answers); derived messages copy their input's stamp. It reads 0 until the stream
+starts. More: docs/concepts/event-time.md, "A service's clock".
 """
 
 from __future__ import annotations

@@ -1,25 +1,12 @@
 """One place that decides how a process joins the bus.
 
-Default (nothing configured): peer mode on loopback, multicast scouting off, and a rendezvous
-port. Every process listens on `tcp/127.0.0.1:<port>` (the first to start gets it; the others'
-listen attempt fails quietly and keeps retrying in the background) and on an ephemeral loopback
-port, and connects to `tcp/127.0.0.1:<port>`. Zenoh's gossip then tells every peer about the
-others' ephemeral listeners, so the processes end up fully meshed with no router. If the process
-holding the rendezvous port exits, the meshed peers keep talking, but nobody takes the port over
-(zenoh 1.10 hangs on close with a pending listen retry, so listen retries are off).
-
-Multi-host: run `beyond router` on one machine and set BEYOND_ZENOH_MODE=client (or peer) with
-BEYOND_ZENOH_CONNECT=tcp/<router-host>:7447 on the others, or pass a full Zenoh JSON5 config file.
-BEYOND_ZENOH_ROUTER=tcp/<router-host>:7447 instead *adds* the router to the endpoints the mode or
-the config file connects to, so a machine's processes stay one local peer group (their traffic
-stays local) that is also linked to the router (deploy/ uses this).
-
-Secure bus (`--secure DIR`, BEYOND_ZENOH_SECURE=DIR): every process is a client of a router
-(or the router) on the bus's port (7447 unless --port or BEYOND_ZENOH_PORT), every link mutual
-TLS with the certificates of the keystore in DIR, and the router enforces access rules generated
-from the services' declarations (runtime/secure.py).
-
-Precedence: built-in defaults < config file (BEYOND_ZENOH_CONFIG) < environment < arguments.
+By default the processes of a machine are Zenoh peers on loopback, multicast scouting off: each
+listens on an ephemeral port and connects to a rendezvous port where the first to start listens,
+and Zenoh's gossip meshes them with no router. Across machines a router links them: clients of it,
+or a machine's peer group linked to it (BEYOND_ZENOH_ROUTER). A secure bus is clients of a router
+over mutual TLS (runtime/secure.py). `BusConfig.to_env` hands a configuration to the processes
+`beyond up` starts. Precedence: defaults < config file < environment < arguments.
+More: docs/concepts/deployment.md.
 """
 
 from __future__ import annotations

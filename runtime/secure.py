@@ -1,16 +1,11 @@
 """Zenoh settings of a secure bus: mutual TLS on every link, the access rules on the router.
 
-`--secure DIR` (BEYOND_ZENOH_SECURE) names the keystore (runtime/keystore.py). Every process is
-then a client of a router, or the router itself: peers would meet each other directly and their
-traffic would never pass the router's access rules, so a secure bus has no peers. Every endpoint
-is `tls/`, the only CA trusted is the deployment's own (`root_ca_certificate`), and the router
-requires a client certificate (`enable_mtls`): a process without a certificate from that CA opens
-no session at all. Who a client is comes from its certificate's common name, which the router's
-rules (runtime/acl.py) name; host names are not checked (`verify_name_on_connect` off) because
-robots and workstations are reached by address, and trust rests on the pinned CA, not on DNS.
-
-Certificates are checked before Zenoh sees them (keystore.check): a missing, expired or foreign
-certificate is one line naming the file, not a handshake Zenoh retries forever.
+A secure bus has no peers: they would meet each other directly, past the router's rules. Every
+process is a client of a router, or the router, over `tls/` only; the one CA trusted is the
+keystore's (runtime/keystore.py), and the router requires a client certificate, whose common name
+is who the client is in its rules (runtime/acl.py). Host names are not verified: robots are
+reached by address, and trust rests on the pinned CA, not on DNS. Certificates are checked first
+(`keystore.check`): a bad one is one line naming the file, not a handshake Zenoh retries forever.
 """
 
 from __future__ import annotations

@@ -1,58 +1,11 @@
-"""`beyond up`: the whole pipeline, every service in its own process, on one machine.
+"""`beyond up`: the whole pipeline, every service in its own process, on one machine or one side.
 
-    beyond up [--recording FILE | --log DIR | --live-source module:function | --video FILE |
-               --camera INDEX] [--config FILE]
-              [--profile all|robot|workstation|fleet-robot|fleet-workstation]
-              [--robots PATTERN [--standby PATTERN]] [--rate R] [--no-live] [--timeout S]
-              [--skip NAME] [--without NAME] [--wait-for NAME,...] [--until-stream-end]
-              [--out-dir DIR] [bus options]
-
-Starts the services of the profile on the configured bus (default: Zenoh peers on loopback), the
-source last (it waits for their liveliness before it publishes), as a `services.deployment.
-Deployment`: this module is the command line and the terminal around it. Service logs go to
-stderr with the service name; pipeline events (recognised action, anticipated effect,
-description) to stdout, and a live view when stdout is a terminal. With a source it exits once
-the source has ended and every gesture has its final description (status 0), or, with a damaged
-recording, with the same one line and status 2 as `beyond analyse`; Ctrl-C stops everything
-cleanly. --timeout bounds start-up (nothing handled or published that long after the services
-are up) and the tail (the source ended, and nothing moved that long): status 1. A source that is
-silent while it runs, a live camera paused for an hour or a gap in a recording played at rate 1,
-is never timed out: the pipeline waits for it, and describes the next gesture. A service that
-dies is started again (services.supervision), said on stderr and counted in the live view; one
-that keeps dying is given up on, and `up` ends.
-
-What the services write (the speech WAVs and `speech.log`) goes under `--out-dir`, else the
-state folder runtime.outputs names (`~/.local/state/beyond`), never the current folder.
-
-`--skip NAME`: NAME runs elsewhere (your own synthesizer, another machine): it is not started
-here, and the others still expect it. `--without NAME`: the deployment has no NAME at all: it is
-neither started nor waited for, and the services that would use it are told.
-
-Two machines (see README, Deployment): `--profile robot` (ingest, gestures, objects) and
-`--profile workstation` (reasoner, describer, speech) start one side each, against a router
-given with `--connect tcp/HOST:7447`. In peer mode the processes `up` starts stay one local peer
-group (their traffic stays on the machine) and that group is linked to the router. The
-workstation side joins as clients of its router unless a mode or config file says otherwise:
-zenoh 1.10 routers assume the peers connected to them reach each other directly, which peers on
-two machines' loopbacks cannot, so peers on both sides of one router would never meet. Either side
-may start first: the source waits only for this machine's services (plus `--wait-for`), and the
-cross-link streams are recovered from publisher caches when the other side joins late or a link
-fails. The workstation side runs until stopped, or with `--until-stream-end` until the robot's
-source has ended and every gesture it showed is described.
-
-A fleet (README, "A fleet"): `--profile fleet-workstation --robots 'lab-*' --robot ws-1` starts
-gestures, objects, reasoner and describer once each, serving every robot named lab-... whose
-source appears (runtime/fleet.py; the workstation's own name is `--robot`); each robot runs
-`--profile fleet-robot` (ingest and speech) with `--wait-for gestures,objects,reasoner,describer`.
-Failover: a second workstation `--robots 'lab-b*' --standby 'lab-a*'` serves lab-b... and takes
-over lab-a... when the first one dies (each robot's service served by exactly one workstation).
-
-`--secure DIR` (README, "Securing a deployment"): every certificate the side needs is checked
-first, then the side starts its own router (TLS, the generated access rules; linked with the
-side's certificate to the endpoints given with `--connect`, if any) and its processes join it
-as clients, each with its own certificate. It listens on the bus's port (7447 unless `--port` or
-$BEYOND_ZENOH_PORT): on loopback only for everything on one machine (`--profile all`), on every
-interface for a side meant for other machines (robot, workstation, fleet).
+This module is the command line and the terminal around a `services.deployment.Deployment`, which
+starts and supervises the processes: the options, the live view, the event lines on stdout
+(service logs on stderr) and the exit status. A run with a source ends once the source has ended
+and every gesture has its final description; `--timeout` bounds start-up and the tail, never a
+running source's silence. Sides, fleets and the secure bus: docs/concepts/deployment.md,
+fleets.md and security.md.
 """
 
 from __future__ import annotations
@@ -118,7 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--profile",
         choices=list(PROFILES),
         default="all",
-        help="which services: all (default), the robot's side or the workstation's",
+        help="which services: all (default: one machine), robot or workstation (a side of two "
+        "machines), fleet-robot or fleet-workstation (a side of a fleet)",
     )
     parser.add_argument(
         "--skip",
@@ -186,7 +140,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_ros2_arguments(parser, flag=True)
     add_bus_arguments(parser)
+    parser.description = (
+        "Start the services of --profile, each in its own process, on the bus (default: Zenoh "
+        "peers on loopback), the source last, once the services it feeds are alive. Pipeline "
+        "events (recognised action, anticipated effect, description) go to stdout, with a live "
+        "view on a terminal; service logs go to stderr. With a source, `up` exits once the "
+        "source has ended and every gesture has its final description; Ctrl-C stops everything. "
+        "A service that dies is started again; one that keeps dying is given up on, and `up` "
+        "ends. The services write under --out-dir, never in the current folder."
+    )
     parser.epilog = (
+        "Two machines: `beyond router` and --profile workstation --connect tcp/127.0.0.1:7447 "
+        "on one, --profile robot --connect tcp/WORKSTATION:7447 on the other; either side may "
+        "start first. A fleet: --profile fleet-workstation --robots 'lab-*' --robot ws-1, and on "
+        "each robot --profile fleet-robot --wait-for gestures,objects,reasoner,describer. "
+        "--secure DIR checks every certificate the side needs, then starts the side's own "
+        "router, which its processes join as clients. "
         "Every service dies with `up`, however `up` ends (SIGKILL too). A second `up` for a "
         "robot whose services are on the bus already says so in one line and exits 2: stop the "
         "first, or give the second another --robot. Exit status: 0 done; 1 a failure or a "
@@ -225,8 +194,8 @@ def run(args: argparse.Namespace) -> int:
     except InputError as exc:  # bad input (a damaged recording...): one line, as every command
         print(f"beyond up: error: {exc}", file=sys.stderr)
         status = 2
-    # every service is stopped and the session closed: leave before the interpreter's teardown,
-    # which aborted `up` now and then (SIGABRT) after a run that had succeeded
+    # every service is stopped and the session closed: leave without the interpreter's teardown,
+    # which can abort (SIGABRT) a process whose Zenoh native threads are up (exit_process)
     exit_process(status)
 
 

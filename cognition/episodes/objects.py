@@ -1,45 +1,12 @@
 """What the camera says about each gesture: the object it is about and the effects on it.
 
-Per gesture: the object acted on as seen when the gesture began (`ObjectAtStart`) and the effects
-measured over the gesture's own frames (`GestureEffects`), each exactly once, measured or with the
-reason it could not be. Per camera frame, apart from them: the segmented, labelled objects
-(`frame_objects`), which a live source may skip under overload without changing any per-gesture
-result.
-
-Why the per-frame description is apart: it estimates the table from each frame, the costliest step
-of the object segmenter (bench/pipeline.py prints the budget), and no gesture needs it but for the
-one frame its object comes from. So `camera` does only what gestures need: it keeps the frame and
-queues it for the windows of the gestures under way, whose analysers segment against their own
-table model, one frame per `catch_up` (a service calls it between messages, so a gesture's lead
-frames and its frames are analysed while they come, and its end costs one frame, not a batch;
-what is still queued when its effects are decided is analysed then). A frame is described when
-its objects are asked for (`frame_objects`, or elsewhere, such as a worker process, the result
-handed back with `described`) or when a gesture's object needs it, once either way.
-
-Why the decisions wait for what they wait for: the camera stream arrives in stamp order, so a
-frame stamped at or after an instant proves every frame before it has been seen. The object at a
-gesture's start is decided once a frame at or after the start has been handled, its effects once
-a frame after its end has; or when the camera is known to be complete (`camera_ended`: its last
-stamp is known from the stream's end marker and that frame has been handled, or it never had a
-frame); or when the camera has fallen silent while the skeleton moved `deadline_s` of stream time
-past the instant (`skeleton_time`, told by the gesture events). Nothing is decided on a wall
-clock, so the same frames and events give the same outputs in any arrival order, whichever frames
-were described for their own sake.
-
-Camera history is kept until no gesture can still need it: `gestures_complete(t)` says every
-gesture event derived from the skeleton up to `t` has been received, so a gesture announced from
-now on starts after `t - onset_s` (the segmenter places an onset at most that far back), and
-older frames outside open windows can go. A start looks back past them to the last frame that
-showed an object: the last such frame dropped is remembered, and frames dropped before anyone
-described them are kept aside (at most `EVICTED_KEPT`, then the newest is described) until one of
-them is known to show an object. `buffer_bytes` is a last-resort cap on top (a frame it drops
-that a gesture has queued is analysed for it first).
-
-Bounded against nonsense by counts and bytes, never by the distance between stamps (a source
-may pause for an hour and resume): at most `max_open` gestures under way (a start beyond is
-refused), a gesture still open after `max_gesture_frames` camera frames is dropped (a stray
-start), the history by `buffer_bytes`; the frames a later start may look back to are kept by
-count across a pause (`LOOK_BACK_FRAMES`).
+Per gesture, exactly once: the object acted on as seen when it began (`ObjectAtStart`) and the
+effects over its own frames (`GestureEffects`), measured or with the reason why not. Apart, per
+frame: its labelled objects (`frame_objects`), the costliest step, which a live source may skip
+without changing any per-gesture result. Each decision waits for proof in stamp order (a frame at
+or after the instant, the camera's end, or a camera silent while the skeleton moved `deadline_s`
+on), never for the wall clock; memory is bounded by counts and bytes, never by the distance
+between stamps. More: docs/concepts/pipeline.md, "Event time".
 """
 
 from __future__ import annotations
