@@ -137,6 +137,7 @@ class LedgerBook:
         self.handled: dict[str, Handled] = {}
         self.current: dict[str, tuple[int, Handled]] = {}  # service -> (instance, its handled)
         self.resume: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, numbers)
+        self.positions: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, key ->)
         self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
 
     def heard(self, ledger: Ledger) -> None:
@@ -153,6 +154,9 @@ class LedgerBook:
         numbers = {**ledger.resume, **ledger.resume_stamps}
         if numbers and ledger.header.stamp >= stamp:
             self.resume[name] = (ledger.header.stamp, numbers)
+        stamp, _ = self.positions.get(name, (-1, {}))
+        if ledger.positions and ledger.header.stamp >= stamp:
+            self.positions[name] = (ledger.header.stamp, dict(ledger.positions))
 
     def instance_of(self, service: str) -> int:
         """The newest instance of `service` heard of (-1: none)."""
@@ -160,6 +164,17 @@ class LedgerBook:
 
     def resume_of(self, service: str) -> dict[str, int]:
         return dict(self.resume.get(service, (-1, {}))[1])
+
+    def needed(self, keys: Iterable[str]) -> dict[str, int]:
+        """Per key of `keys`, the first stamp some service's next instance needs again (the
+        oldest of their snapshots' input positions): where a restarted source plays from."""
+        wanted = set(keys)
+        out: dict[str, int] = {}
+        for _, positions in self.positions.values():
+            for key, stamp in positions.items():
+                if key in wanted:
+                    out[key] = min(stamp, out.get(key, stamp))
+        return out
 
     def consumers_have(self, key: str, ident: Identity, producer: str) -> bool:
         """Every service (but `producer`) that takes `key` has handled `ident` in its instance
@@ -230,6 +245,7 @@ class Keeper:
         # what this service's next instance resumes from (its checkpoint)
         self.resume: dict[str, int] = {}
         self.resume_stamps: dict[str, int] = {}
+        self.positions: dict[str, int] = {}  # input key -> first stamp a successor needs
         self._header = header
         self._pub: Publisher[Ledger] | None = None
         self._dirty = False
@@ -305,6 +321,7 @@ class Keeper:
             handled=self.handled.wire(),
             resume=dict(self.resume),
             resume_stamps=dict(self.resume_stamps),
+            positions=dict(self.positions),
         )
 
     def publish(self) -> None:
@@ -318,13 +335,17 @@ class Keeper:
             self.publish()
 
     def checkpoint(
-        self, stamps: Mapping[str, int], counts: Mapping[str, int] | None = None
+        self,
+        stamps: Mapping[str, int],
+        counts: Mapping[str, int] | None = None,
+        positions: Mapping[str, int] | None = None,
     ) -> None:
         """Where a next instance would resume, its stamps and counts (published with the next
-        ledger; `predecessor` gives both back as one mapping)."""
-        counts = dict(counts or {})
-        if dict(stamps) != self.resume_stamps or counts != self.resume:
-            self.resume_stamps, self.resume = dict(stamps), counts
+        ledger; `predecessor` gives both back as one mapping), and per sensor key the first
+        stamp it needs again (`LedgerBook.needed`)."""
+        counts, at = dict(counts or {}), dict(positions or {})
+        if dict(stamps) != self.resume_stamps or counts != self.resume or at != self.positions:
+            self.resume_stamps, self.resume, self.positions = dict(stamps), counts, at
             self._dirty = True
 
     # -- the checks -------------------------------------------------------------------------

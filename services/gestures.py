@@ -179,7 +179,7 @@ class GestureStreamer(Service):
         stamps = {"stamp": at} | at_gestures("stamp", {n: a for n, (a, _) in points})
         counts = {"segments": segments, "events": events}
         counts |= at_gestures("events", {n: e for n, (_, e) in points})
-        self.ledgers.checkpoint(stamps, counts)
+        self.ledgers.checkpoint(stamps, counts, {self.bus.keys.skeleton: at})
         if first_after_gesture:
             # told at once, not with the next health report: at rate max a second of wall
             # time is many gestures, and a successor whose newest checkpoint is older than the

@@ -192,8 +192,12 @@ class SensorIngest(Service):
             window_s=self.window_s,
         )
         await self.pacer.start()
-        # where the consumers are: a restarted source goes on from there, not from the start
+        # where the consumers are: a restarted source goes on from there, not from the start,
+        # but plays again what a consumer's successor needs to rebuild its state (its snapshot's
+        # input position), which a consumer restarted with this source finds nowhere else
         self.resume = self.pacer.handled_by_all()
+        for key, stamp in self.ledgers.book.needed(self.resume).items():
+            self.resume[key] = min(self.resume[key], stamp - 1)
         ticks = None if self.live else ClockTicks(self._tick)  # live: the wall's
         self.player = Player(rate=self.rate, pacer=self.pacer, ticks=ticks)
         if self.start_delay_s:

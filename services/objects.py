@@ -113,7 +113,11 @@ class ObjectSegmenter(Service):
         # restarted: the gestures whose effects every consumer has are not measured again, and
         # the camera history before the predecessor's restart point is not gone over again
         self.watch.done(self.ledgers.done_downstream(keys.effects, "effects"))
-        self.history, self.resume_from = self._restart_point(self.ledgers.predecessor())
+        resume = self.ledgers.predecessor()
+        self.history, self.resume_from = self._restart_point(resume)
+        # the events its predecessor received count as received for pacing: a gesture streamer
+        # restarted before it did not send again what that predecessor had, nor cached it
+        self.received_before = resume.get("events", 0)
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
         self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)
@@ -148,7 +152,11 @@ class ObjectSegmenter(Service):
         """Where a successor would resume: the restart point now, and the one at each of the
         last gestures' starts (`_restart_point`)."""
         points = at_gestures("camera", self.history)
-        self.ledgers.checkpoint({"camera": max(0, self.watch.restart_point)} | points)
+        point = max(0, self.watch.restart_point)
+        keys = self.bus.keys
+        positions = {keys.camera: point, keys.camera_compressed: point}
+        events = {"events": max(self.segments_received, self.received_before)}
+        self.ledgers.checkpoint({"camera": point} | points, events, positions)
 
     def on_gestures_progress(self, msg: Progress) -> None:
         stamp = msg.handled.get(self.bus.keys.skeleton, -1)
@@ -230,7 +238,7 @@ class ObjectSegmenter(Service):
         # gesture events carry their own index: the last one here says what has arrived, also
         # for an instance restarted mid-stream that got the earlier ones from the cache
         counts = super().received_counts()
-        counts[self.bus.keys.gesture_segment] = self.segments_received
+        counts[self.bus.keys.gesture_segment] = max(self.segments_received, self.received_before)
         return counts
 
     def on_segment(self, event: GestureSegment) -> None:
