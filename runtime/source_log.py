@@ -34,13 +34,11 @@ SEGMENTS = 8  # files the log is cut into: the oldest is deleted whole
 FLUSH_S = 0.1
 
 
-def state_dir(robot: str, service: str) -> Path:
-    """The state folder of `service` of `robot` on this machine: $BEYOND_STATE_DIR, else
-    $XDG_STATE_HOME/beyond-self (~/.local/state/beyond-self), then robot/service."""
-    base = os.environ.get("BEYOND_STATE_DIR") or str(
-        Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state") / "beyond-self"
-    )
-    return Path(base) / robot / service
+def state_dir(robot: str, service: str) -> Path | None:
+    """The state folder of `service` of `robot` on this machine, under $BEYOND_STATE_DIR (None
+    when it is not set: the service keeps no state on disk)."""
+    base = os.environ.get("BEYOND_STATE_DIR")
+    return Path(base) / robot / service if base else None
 
 
 class SourceLog:

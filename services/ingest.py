@@ -174,8 +174,8 @@ class SensorIngest(Service):
         }
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
         self.stream_clock = self.publisher(keys.clock, StreamClock, STATUS)
-        if self.live and self.log_bytes:  # a recording is its own log: it is read again
-            folder = Path(self.state) if self.state else state_dir(keys.robot, self.name)
+        folder = Path(self.state) if self.state else state_dir(keys.robot, self.name)
+        if self.live and self.log_bytes and folder:  # a recording is read again instead
             self.source_log = SourceLog(folder, self.log_bytes)
             self.source_log.record(self.person_streams.values(), self.camera)
         self.spawn(self._play(), "source")
