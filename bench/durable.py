@@ -3,8 +3,9 @@ service resumes.
 
 - Source log: `Publisher.put` of a skeleton frame (15 joints, ~1.1 kB) and a 320x240 rgb8 camera
   frame (~230 kB) on the ingest's cached publishers, alone (the reference) and with the source
-  log written first (runtime.source_log, in a temporary folder), interleaved runs, median per
-  message. Goal: with the log <= 1.2x the publish alone.
+  log written first (runtime.source_log, in a temporary folder), interleaved runs, the fastest
+  run's time per message (the machine is shared: the minimum is the cost, the rest is other
+  load). Goal: with the log <= 1.2x the publish alone.
 - Snapshots: the gesture streamer's snapshot logic (the tracker's snapshot each frame, told with
   the ledger when it moves, stored on disk with fsync on a new gesture count and every 2 s) over
   three-actions.mcap's skeleton frames; time and bytes per snapshot, and its CPU share at 30 Hz
@@ -30,7 +31,7 @@ from types import ModuleType
 
 REPO = Path(__file__).resolve().parent.parent
 RECORDING = REPO / "recordings" / "three-actions.mcap"
-REPEATS = 5
+REPEATS = 9
 
 
 def bus_bench() -> ModuleType:
@@ -58,7 +59,7 @@ def source_log_cost() -> dict[str, float]:
             messages = [make(kind, i, 1_000_000 + i) for i in range(count)]
             plain_us, logged_us = [], []
             for r in range(REPEATS):
-                for logged in (False, True):
+                for logged in (False, True) if r % 2 else (True, False):
                     pub = bus.publisher(key, cls, delivery)
                     log = SourceLog(Path(folder) / f"{kind}{r}", round(DEFAULT_MAX_MB * 2**20))
                     if logged:
@@ -72,7 +73,7 @@ def source_log_cost() -> dict[str, float]:
                     (logged_us if logged else plain_us).append(took)
                     log.close()
                     pub.close()
-            plain, logged_ = statistics.median(plain_us), statistics.median(logged_us)
+            plain, logged_ = min(plain_us), min(logged_us)  # the cost itself, not the load
             figures[f"{kind}_publish_us"] = round(plain, 2)
             figures[f"{kind}_publish_logged_us"] = round(logged_, 2)
             figures[f"{kind}_log_ratio"] = round(logged_ / plain, 3)
@@ -121,6 +122,8 @@ def snapshot_cost() -> dict[str, float]:
                 snapshots.taken(state, {"r/skeleton": snap.stamp}, gestures=snap.segments)
                 taken += 1
             spent += time.perf_counter() - began
+        if snapshots.stored is not None:
+            snapshots.stored.result(10)
         saves = store.number
         save_us = []
         for i in range(50):  # one stored snapshot: encode, write, fsync, rename, fsync folder
@@ -135,12 +138,15 @@ def snapshot_cost() -> dict[str, float]:
         objects_us = (time.perf_counter() - began) / len(frames) * 1e6
     stream_s = len(frames) / 30.0
     share = spent / stream_s
+    # counting the writes' wall time as CPU too (an upper bound: fsync mostly waits)
+    total = (spent + saves * statistics.median(save_us) / 1e6) / stream_s
     per_us = spent / max(taken, 1) * 1e6
     print(
         f"snapshots, gesture streamer: {taken} taken over {len(frames)} frames ({saves} stored),"
-        f" {per_us:.1f} us each told, {statistics.median(save_us):.0f} us each stored "
-        f"(fsync), {size:.0f} bytes; CPU share at 30 Hz {share * 100:.3f}% of a core "
-        f"(goal < 2%)",
+        f" {per_us:.1f} us each on the event loop, {statistics.median(save_us):.0f} us each "
+        f"stored (on a thread of its own, fsync included), {size:.0f} bytes; CPU share of the "
+        f"event loop at 30 Hz {share * 100:.3f}% of a core "
+        f"(goal < 2%); with the stored ones' wall time counted as CPU {total * 100:.3f}%",
         flush=True,
     )
     print(f"snapshots, object segmenter: {objects_us:.2f} us per camera frame (ledger)", flush=True)
@@ -150,6 +156,7 @@ def snapshot_cost() -> dict[str, float]:
         "gestures_snapshot_stored_us": round(statistics.median(save_us), 1),
         "gestures_snapshot_bytes": round(size, 1),
         "gestures_snapshot_cpu_share": round(share, 6),
+        "gestures_snapshot_share_with_writes": round(total, 6),
         "objects_checkpoint_us": round(objects_us, 2),
     }
 

@@ -16,6 +16,7 @@ import contextlib
 import os
 import time
 from collections.abc import Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Generic, TypeVar
 
@@ -120,6 +121,9 @@ class Snapshots(Generic[S]):
         self.newest = self._state(resume, "")
         self._stored_at = -float("inf")
         self.taken_count = 0
+        self.stored: Future[int] | None = None  # the last save handed to the writer
+        # one thread writes them, in order: an fsync takes milliseconds, not the event loop's
+        self._writer = ThreadPoolExecutor(1, "snapshots") if store is not None else None
 
     def _state(self, resume: Mapping[str, int], suffix: str) -> S | None:
         values = {f.name: resume.get(f.name + suffix) for f in self.fields}
@@ -161,9 +165,10 @@ class Snapshots(Generic[S]):
         self.keeper.checkpoint(stamps, counts, positions)
         self.taken_count += 1
         now = time.monotonic()
-        if self.store is not None and (first_at_count or now - self._stored_at >= self.every_s):
+        if self._writer is not None and (first_at_count or now - self._stored_at >= self.every_s):
+            assert self.store is not None
             self._stored_at = now
-            self.store.save(state, dict(positions))
+            self.stored = self._writer.submit(self.store.save, state, dict(positions))
         if first_at_count:
             # told at once, not with the next health report: at rate max a second of wall time
             # is many gestures, and a successor needs a snapshot its source still has input for

@@ -57,6 +57,7 @@ def test_snapshots_told_with_a_ledger_are_what_a_successor_restores(tmp_path: Pa
     assert snapshots.chosen(restarted=True) is None  # nothing anywhere: afresh
     for n, stamp in enumerate((100, 200, 300)):
         snapshots.taken(Streamer(stamp, n, 2 * n), {"r/skeleton": stamp}, gestures=n)
+    assert snapshots.stored is not None and snapshots.stored.result(10) > 0  # on the machine
     successor = Keeper("gestures", header)
     successor.book.heard(mine.ledger())
     assert successor.book.needed(["r/skeleton"]) == {"r/skeleton": 300}
