@@ -166,8 +166,7 @@ class LedgerBook:
         return dict(self.resume.get(service, (-1, {}))[1])
 
     def needed(self, keys: Iterable[str]) -> dict[str, int]:
-        """Per key of `keys`, the first stamp some service's next instance needs again (the
-        oldest of their snapshots' input positions): where a restarted source plays from."""
+        """Per key of `keys`, the oldest input position of any service's snapshot."""
         wanted = set(keys)
         out: dict[str, int] = {}
         for _, positions in self.positions.values():
@@ -245,7 +244,7 @@ class Keeper:
         # what this service's next instance resumes from (its checkpoint)
         self.resume: dict[str, int] = {}
         self.resume_stamps: dict[str, int] = {}
-        self.positions: dict[str, int] = {}  # input key -> first stamp a successor needs
+        self.positions: dict[str, int] = {}  # sensor key -> first stamp a successor needs
         self._header = header
         self._pub: Publisher[Ledger] | None = None
         self._dirty = False
@@ -340,9 +339,8 @@ class Keeper:
         counts: Mapping[str, int] | None = None,
         positions: Mapping[str, int] | None = None,
     ) -> None:
-        """Where a next instance would resume, its stamps and counts (published with the next
-        ledger; `predecessor` gives both back as one mapping), and per sensor key the first
-        stamp it needs again (`LedgerBook.needed`)."""
+        """Where a next instance would resume, its stamps and counts (`predecessor` gives both
+        back as one mapping), and per sensor key the first stamp it needs (`positions`)."""
         counts, at = dict(counts or {}), dict(positions or {})
         if dict(stamps) != self.resume_stamps or counts != self.resume or at != self.positions:
             self.resume_stamps, self.resume, self.positions = dict(stamps), counts, at
