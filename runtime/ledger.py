@@ -51,6 +51,7 @@ from beyond_self.schemas.messages import LEDGER_RANGES, Ledger, Range
 
 SEGMENTS_KEPT = 256  # per key and kind: older segments are forgotten (no cache holds them)
 RANGES_KEPT = 64  # per key, kind and segment: older ranges are forgotten
+SEGMENT_EVENTS = ("start", "end", "cancel")
 
 
 class Handled:
@@ -206,29 +207,6 @@ ASK_TIMEOUT_S = 10.0
 # waited for a gesture its predecessor had finished, the pipeline stalled; a restarted speech
 # service said a sentence again)
 ASK_AGAIN_S = 0.1
-# checkpoints a producer keeps, one per gesture count, for a successor to go back to
-CHECKPOINTS_KEPT = 8
-
-
-def per_gesture(resume: Mapping[str, int], name: str) -> dict[int, int]:
-    """What a predecessor left per gesture count as "<name>@N" (`at_gestures`): N -> value."""
-    prefix = f"{name}@"
-    return {
-        int(key.removeprefix(prefix)): value
-        for key, value in resume.items()
-        if key.startswith(prefix) and key.removeprefix(prefix).isdigit()
-    }
-
-
-def at_gestures(name: str, values: Mapping[int, int]) -> dict[str, int]:
-    """`values` per gesture count as a ledger's resume entries, "<name>@N"."""
-    return {f"{name}@{n}": value for n, value in values.items()}
-
-
-def keep_newest(history: dict[int, Any]) -> None:
-    """Drop all but the CHECKPOINTS_KEPT highest gesture counts of `history`."""
-    for old in sorted(history)[:-CHECKPOINTS_KEPT]:
-        del history[old]
 
 
 class Keeper:
@@ -393,8 +371,12 @@ class Keeper:
         return self.book.done(key, kind, self.name)
 
     def suppressed(self, key: str, message: Message) -> bool:
-        """Every consumer of `key` has handled `message` already: do not send it again."""
+        """Every consumer of `key` has handled `message` already: do not send it again. A
+        gesture's start, end or cancel is always sent (two a gesture): a consumer restarted
+        at the same moment may not be heard of yet, and it cannot rebuild without them."""
         if not self.book.taken(key, self.name):
             return False
         ident = identify(key, message)
-        return ident is not None and self.book.consumers_have(key, ident, self.name)
+        if ident is None or ident.kind in SEGMENT_EVENTS:
+            return False
+        return self.book.consumers_have(key, ident, self.name)

@@ -18,13 +18,38 @@ import time
 from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import msgspec
 
-from beyond_self.runtime.ledger import Keeper, at_gestures, keep_newest, per_gesture
+from beyond_self.runtime.ledger import Keeper
 
 S = TypeVar("S", bound=msgspec.Struct)
+
+# checkpoints a producer keeps, one per gesture count, for a successor to go back to
+CHECKPOINTS_KEPT = 8
+
+
+def per_gesture(resume: Mapping[str, int], name: str) -> dict[int, int]:
+    """What a predecessor left per gesture count as "<name>@N" (`at_gestures`): N -> value."""
+    prefix = f"{name}@"
+    return {
+        int(key.removeprefix(prefix)): value
+        for key, value in resume.items()
+        if key.startswith(prefix) and key.removeprefix(prefix).isdigit()
+    }
+
+
+def at_gestures(name: str, values: Mapping[int, int]) -> dict[str, int]:
+    """`values` per gesture count as a ledger's resume entries, "<name>@N"."""
+    return {f"{name}@{n}": value for n, value in values.items()}
+
+
+def keep_newest(history: dict[int, Any]) -> None:
+    """Drop all but the CHECKPOINTS_KEPT highest gesture counts of `history`."""
+    for old in sorted(history)[:-CHECKPOINTS_KEPT]:
+        del history[old]
+
 
 KEEP = 4
 EVERY_S = 2.0  # a snapshot stored on the machine at least this often (wall time: the machine's)
