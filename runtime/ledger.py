@@ -51,6 +51,7 @@ from beyond_self.schemas.messages import LEDGER_RANGES, Ledger, Range
 
 SEGMENTS_KEPT = 256  # per key and kind: older segments are forgotten (no cache holds them)
 RANGES_KEPT = 64  # per key, kind and segment: older ranges are forgotten
+SEGMENT_EVENTS = ("start", "end", "cancel")
 
 
 class Handled:
@@ -137,6 +138,7 @@ class LedgerBook:
         self.handled: dict[str, Handled] = {}
         self.current: dict[str, tuple[int, Handled]] = {}  # service -> (instance, its handled)
         self.resume: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, numbers)
+        self.positions: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, key ->)
         self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
 
     def heard(self, ledger: Ledger) -> None:
@@ -153,6 +155,9 @@ class LedgerBook:
         numbers = {**ledger.resume, **ledger.resume_stamps}
         if numbers and ledger.header.stamp >= stamp:
             self.resume[name] = (ledger.header.stamp, numbers)
+        stamp, _ = self.positions.get(name, (-1, {}))
+        if ledger.positions and ledger.header.stamp >= stamp:
+            self.positions[name] = (ledger.header.stamp, dict(ledger.positions))
 
     def instance_of(self, service: str) -> int:
         """The newest instance of `service` heard of (-1: none)."""
@@ -160,6 +165,16 @@ class LedgerBook:
 
     def resume_of(self, service: str) -> dict[str, int]:
         return dict(self.resume.get(service, (-1, {}))[1])
+
+    def needed(self, keys: Iterable[str]) -> dict[str, int]:
+        """Per key of `keys`, the oldest input position of any service's snapshot."""
+        wanted = set(keys)
+        out: dict[str, int] = {}
+        for _, positions in self.positions.values():
+            for key, stamp in positions.items():
+                if key in wanted:
+                    out[key] = min(stamp, out.get(key, stamp))
+        return out
 
     def consumers_have(self, key: str, ident: Identity, producer: str) -> bool:
         """Every service (but `producer`) that takes `key` has handled `ident` in its instance
@@ -192,29 +207,6 @@ ASK_TIMEOUT_S = 10.0
 # waited for a gesture its predecessor had finished, the pipeline stalled; a restarted speech
 # service said a sentence again)
 ASK_AGAIN_S = 0.1
-# checkpoints a producer keeps, one per gesture count, for a successor to go back to
-CHECKPOINTS_KEPT = 8
-
-
-def per_gesture(resume: Mapping[str, int], name: str) -> dict[int, int]:
-    """What a predecessor left per gesture count as "<name>@N" (`at_gestures`): N -> value."""
-    prefix = f"{name}@"
-    return {
-        int(key.removeprefix(prefix)): value
-        for key, value in resume.items()
-        if key.startswith(prefix) and key.removeprefix(prefix).isdigit()
-    }
-
-
-def at_gestures(name: str, values: Mapping[int, int]) -> dict[str, int]:
-    """`values` per gesture count as a ledger's resume entries, "<name>@N"."""
-    return {f"{name}@{n}": value for n, value in values.items()}
-
-
-def keep_newest(history: dict[int, Any]) -> None:
-    """Drop all but the CHECKPOINTS_KEPT highest gesture counts of `history`."""
-    for old in sorted(history)[:-CHECKPOINTS_KEPT]:
-        del history[old]
 
 
 class Keeper:
@@ -230,6 +222,7 @@ class Keeper:
         # what this service's next instance resumes from (its checkpoint)
         self.resume: dict[str, int] = {}
         self.resume_stamps: dict[str, int] = {}
+        self.positions: dict[str, int] = {}  # sensor key -> first stamp a successor needs
         self._header = header
         self._pub: Publisher[Ledger] | None = None
         self._dirty = False
@@ -305,6 +298,7 @@ class Keeper:
             handled=self.handled.wire(),
             resume=dict(self.resume),
             resume_stamps=dict(self.resume_stamps),
+            positions=dict(self.positions),
         )
 
     def publish(self) -> None:
@@ -318,13 +312,16 @@ class Keeper:
             self.publish()
 
     def checkpoint(
-        self, stamps: Mapping[str, int], counts: Mapping[str, int] | None = None
+        self,
+        stamps: Mapping[str, int],
+        counts: Mapping[str, int] | None = None,
+        positions: Mapping[str, int] | None = None,
     ) -> None:
-        """Where a next instance would resume, its stamps and counts (published with the next
-        ledger; `predecessor` gives both back as one mapping)."""
-        counts = dict(counts or {})
-        if dict(stamps) != self.resume_stamps or counts != self.resume:
-            self.resume_stamps, self.resume = dict(stamps), counts
+        """Where a next instance would resume, its stamps and counts (`predecessor` gives both
+        back as one mapping), and per sensor key the first stamp it needs (`positions`)."""
+        counts, at = dict(counts or {}), dict(positions or {})
+        if dict(stamps) != self.resume_stamps or counts != self.resume or at != self.positions:
+            self.resume_stamps, self.resume, self.positions = dict(stamps), counts, at
             self._dirty = True
 
     # -- the checks -------------------------------------------------------------------------
@@ -374,8 +371,12 @@ class Keeper:
         return self.book.done(key, kind, self.name)
 
     def suppressed(self, key: str, message: Message) -> bool:
-        """Every consumer of `key` has handled `message` already: do not send it again."""
+        """Every consumer of `key` has handled `message` already: do not send it again. A
+        gesture's start, end or cancel is always sent (two a gesture): a consumer restarted
+        at the same moment may not be heard of yet, and it cannot rebuild without them."""
         if not self.book.taken(key, self.name):
             return False
         ident = identify(key, message)
-        return ident is not None and self.book.consumers_have(key, ident, self.name)
+        if ident is None or ident.kind in SEGMENT_EVENTS:
+            return False
+        return self.book.consumers_have(key, ident, self.name)

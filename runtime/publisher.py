@@ -83,6 +83,8 @@ class Publisher(Generic[M]):
         self.last_stamp = -1  # of the last message sent
         self.suppress: Callable[[str, Message], bool] | None = None  # consumers have it already
         self.suppressed = 0
+        # written to before each put (the source's log, runtime.source_log): key, stamp, payload
+        self.tap: Callable[[str, int, bytes], None] | None = None
         self._owner = threading.get_ident()
         # One buffer reused for every put (Zenoh copies it before `put` returns): no fresh block
         # per message, which for camera frames costs more than encoding them. A cache keeps
@@ -98,7 +100,11 @@ class Publisher(Generic[M]):
             self.suppressed += 1  # handled by every consumer, sent by a previous instance
             return
         self.last_stamp = message.header.stamp
-        if self._reuse and threading.get_ident() == self._owner:
+        if self.tap is not None:
+            payload = encode(message)
+            self.tap(self.key, self.last_stamp, payload)
+            self._pub.put(payload)
+        elif self._reuse and threading.get_ident() == self._owner:
             buffer = self._buffer
             encode_into(message, buffer)
             self._pub.put(buffer)

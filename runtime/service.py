@@ -26,6 +26,8 @@ import zlib
 from collections.abc import Callable, Coroutine, Sequence
 from typing import Any, NoReturn, TypeVar, overload
 
+import msgspec
+
 from beyond_self.core.errors import InputError
 from beyond_self.runtime import heap, process
 from beyond_self.runtime.accounting import ErrorAccount
@@ -48,6 +50,8 @@ from beyond_self.runtime.self_report import (
     stop_counts,
 )
 from beyond_self.runtime.service_cli import options_from_command_line
+from beyond_self.runtime.snapshots import Snapshots, SnapshotStore
+from beyond_self.runtime.source_log import state_dir
 from beyond_self.runtime.subscription import Handler, Received, Subscription, consume
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
@@ -57,6 +61,7 @@ from beyond_self.schemas.messages import Progress, ServiceHealth, StreamClock
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
+S = TypeVar("S", bound=msgspec.Struct)
 
 
 def report_phase(robot: str) -> float:
@@ -203,6 +208,15 @@ class Service:
                 self.report_error(key, exc)
 
         self.bus.watch_tokens(key_expr, guarded)
+
+    def keep_state(self, cls: type[S]) -> tuple[Snapshots[S], S | None]:
+        """Snapshots of this service's `cls` state, taken by `Snapshots.taken`, and the one to
+        restore (None: start afresh): told with its ledger, stored in its state folder when
+        there is one (runtime.snapshots)."""
+        folder = state_dir(self.bus.keys.robot, self.name)
+        store = SnapshotStore(folder) if folder is not None else None
+        snapshots = Snapshots(cls, self.ledgers, store, self.bus.keys.description)
+        return snapshots, snapshots.chosen(restarted=restarts() > 0)
 
     def spawn(self, work: Coroutine[Any, Any, Any], name: str = "task") -> asyncio.Task[Any]:
         """Run `work` beside the handlers until the service stops (then it is cancelled); what

@@ -499,6 +499,8 @@ class Ledger(Message, frozen=True):
     (the gesture streamer's checkpoint: a skeleton stamp from which its state can be rebuilt,
     and its counts there; the object segmenter's camera restart point). Stamps apart: they
     exceed 2^53, and the JSON form writes them as times.
+    `positions`: sensor key -> the first stamp on it the next instance needs again (its
+    snapshot's input position): a restarted source plays again from there (services/ingest.py).
     Every service publishes its own on `ledger/<service>` when it changes, keeps the last one
     of every other service of its robot, and answers for all of them on query, so a service's
     record outlives the service.
@@ -525,6 +527,9 @@ class Ledger(Message, frozen=True):
     )
     resume_stamps: Annotated[dict[Name, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = (
         msgspec.field(default_factory=dict)
+    )
+    positions: Annotated[dict[Text, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
+        default_factory=dict
     )
 
 

@@ -10,12 +10,11 @@ stamp and sequence). The end of the source (`StreamEnd`) ends or cancels a gestu
 way once the last skeleton frame it announces has been handled, so the last gesture of a
 recording is answered whatever order the end marker and the frames arrive in.
 
-Crash-only: the tracker's checkpoint (a skeleton stamp from which its state can be rebuilt
-exactly, with the segments and events counted there) goes into this service's ledger
-(runtime.ledger), which the other services keep. A restarted streamer takes it, gets the
-skeleton frames since back from the ingest's cache (`SKELETON` delivery), rebuilds the state
-its predecessor had, and continues its numbering; what its consumers already have is not sent
-again.
+Crash-only: the tracker's snapshot (a skeleton stamp from which its state can be rebuilt
+exactly, with the segments and events counted there) is taken by the base (`keep_state`,
+runtime.snapshots); a restarted streamer is restored from it, gets the skeleton frames since
+back from the source (which plays them again from that input position), and continues its
+numbering; what its consumers already have is not sent again.
 """
 
 from __future__ import annotations
@@ -23,14 +22,14 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
-from beyond_self.cognition.episodes.tracker import hand_position
+from beyond_self.cognition.episodes.tracker import TrackerSnapshot, hand_position
 from beyond_self.cognition.gestures import GestureModels
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.delivery import EVENTS, FRAMES, SKELETON
-from beyond_self.runtime.ledger import at_gestures, keep_newest, per_gesture
 from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
@@ -39,16 +38,13 @@ from beyond_self.services import shared
 SEGMENT_KINDS = ("start", "end", "cancel")
 
 
-def checkpoints_in(resume: dict[str, int]) -> dict[int, tuple[int, int]]:
-    """The checkpoint per gesture count a predecessor left (`_tell_checkpoint` writes them as
-    "stamp@N" and "events@N"): N -> (stamp, events)."""
-    events = per_gesture(resume, "events")
-    return {n: (stamp, events.get(n, 0)) for n, stamp in per_gesture(resume, "stamp").items()}
+class StreamerState(msgspec.Struct, frozen=True):
+    """The streamer's snapshot: its tracker's (`TrackerSnapshot`) and the events it had told
+    there (`event_seq` runs on across restarts)."""
 
-
-def newest_checkpoint(resume: dict[str, int]) -> tuple[int, int, int]:
-    """(stamp, segments, events) of the newest checkpoint a predecessor left; -1: none."""
-    return resume.get("stamp", -1), resume.get("segments", 0), resume.get("events", 0)
+    stamp: int
+    segments: int
+    events: int
 
 
 class GestureStreamer(Service):
@@ -73,17 +69,14 @@ class GestureStreamer(Service):
         self.torso_joint = torso_joint
         self.buffer_frames = buffer_frames
         self.end_at: int | None = None  # last skeleton stamp of the source, once it has ended
-        self.checkpoint: tuple[int, int] | None = None  # the tracker's, last told
+        self.told: TrackerSnapshot | None = None  # the tracker's snapshot, last taken
         self.events = 0
         self.finished = False
 
     async def setup(self) -> None:
         self.gesture_models: GestureModels = shared.gesture_models(self.models_path)
-        # a restarted streamer rebuilds its predecessor's state from a checkpoint it left
-        resume = self.ledgers.predecessor()
-        self.history = checkpoints_in(resume)  # segments told -> (stamp, events)
-        self.newest = newest_checkpoint(resume)
-        self._resume_at(*self._resume_point(resume))
+        self.snapshots, restored = self.keep_state(StreamerState)
+        self._restore(restored)
         self.actions = list(self.gesture_models.actions)
         keys = self.bus.keys
         self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, FRAMES)
@@ -91,15 +84,17 @@ class GestureStreamer(Service):
         self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame, SKELETON, paced=True)
         self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
 
-    def _resume_at(self, stamp: int, segments: int, events: int) -> None:
-        """Rebuild from the checkpoint at `stamp` (-1: from the start) with its counts."""
-        self.resume_from, self.events = stamp, events
-        self.tracker: GestureTracker[Header] = GestureTracker(
-            self.gesture_models, buffer_frames=self.buffer_frames, first_segment_id=segments
+    def _restore(self, state: StreamerState | None) -> None:
+        """Rebuild from `state` (None: from the first frame)."""
+        self.resume_from, self.events = (state.stamp, state.events) if state else (-1, 0)
+        snapshot = TrackerSnapshot(state.stamp, state.segments) if state else None
+        self.tracker: GestureTracker[Header] = GestureTracker.restored(
+            self.gesture_models, snapshot, self.buffer_frames
         )
-        if stamp >= 0:
-            event(self.log, logging.INFO, "resuming from a checkpoint",
-                  stamp=stamp, segments=segments, events=events)  # fmt: skip
+        if state is not None:
+            event(
+                self.log, logging.INFO, "resuming from a snapshot", **msgspec.structs.asdict(state)
+            )
 
     def features(self, frame: SkeletonFrame) -> np.ndarray:
         hand = frame.joints.get(self.hand_joint)
@@ -119,14 +114,15 @@ class GestureStreamer(Service):
         stamp = frame.header.stamp
         if self.finished or stamp < self.resume_from:
             return  # before the checkpoint: the predecessor's, already told
-        if self.tracker.last_stamp is None and self.resume_from < stamp <= self.newest[0]:
+        newest = self.snapshots.newest
+        if self.tracker.last_stamp is None and newest and self.resume_from < stamp <= newest.stamp:
             # going back to a checkpoint before a gesture not yet said, whose frames are gone
             # from the source's cache (the source was restarted too), while the newest one's
             # are here: rebuild exactly from the newest, as a plain restart does (the gestures
             # in between are with the consumers, or lost either way). From here instead, the
             # cut path below left the gesture under way started and never ended: every
             # consumer waited on it (the kill test stalled)
-            self._resume_at(*self.newest)
+            self._restore(newest)
             if stamp < self.resume_from:
                 return
         if self.tracker.last_stamp is None and stamp > self.resume_from >= 0:
@@ -134,12 +130,14 @@ class GestureStreamer(Service):
         x = self.features(frame)
         events = self.events
         self.emit(self.tracker.push(stamp, frame.frame, x, frame.header))
-        checkpoint = self.tracker.checkpoint
-        if checkpoint is not None and checkpoint != self.checkpoint:
-            # a checkpoint moves only on a frame with no event (or is the first frame): the
-            # events counted before this frame are those before the checkpoint's
-            self.checkpoint = checkpoint
-            self._tell_checkpoint(*checkpoint, events)
+        snapshot = self.tracker.snapshot()
+        if snapshot is not None and snapshot != self.told:
+            # a snapshot moves only on a frame with no event (or is the first frame): the
+            # events counted before this frame are those before the snapshot's
+            self.told = snapshot
+            state = StreamerState(snapshot.stamp, snapshot.segments, events)
+            positions = {self.bus.keys.skeleton: snapshot.stamp}
+            self.snapshots.taken(state, positions, gestures=snapshot.segments)
         if self.end_at is not None and stamp >= self.end_at:
             self.finish()
 
@@ -167,37 +165,6 @@ class GestureStreamer(Service):
                 f"{self.resume_from}: gestures under way were cut ({cut})"
             ),
         )
-
-    def _tell_checkpoint(self, at: int, segments: int, events: int) -> None:
-        """The newest checkpoint, and the newest one at each of the last gesture counts: a
-        successor goes back to the one before the oldest gesture not yet said (its outputs
-        may have died with the workstation that was working on them, caches and all)."""
-        first_after_gesture = segments not in self.history
-        self.history[segments] = (at, events)
-        keep_newest(self.history)
-        points = self.history.items()
-        stamps = {"stamp": at} | at_gestures("stamp", {n: a for n, (a, _) in points})
-        counts = {"segments": segments, "events": events}
-        counts |= at_gestures("events", {n: e for n, (_, e) in points})
-        self.ledgers.checkpoint(stamps, counts)
-        if first_after_gesture:
-            # told at once, not with the next health report: at rate max a second of wall
-            # time is many gestures, and a successor whose newest checkpoint is older than the
-            # source's cache cannot rebuild exactly (on_frame)
-            self.ledgers.publish()
-
-    def _resume_point(self, resume: dict[str, int]) -> tuple[int, int, int]:
-        """(stamp, segments, events) to start from: the newest checkpoint left, or, when the
-        gestures it has told are not all said yet (a workstation taken over: the outputs in
-        between are gone), the newest one before the oldest gesture not said. -1: none."""
-        latest = self.newest
-        points = self.history
-        unsaid = self.ledgers.unsaid(self.bus.keys.description, range(1, latest[1] + 1))
-        if not points or not unsaid:
-            return latest
-        before = [n for n in points if n < min(unsaid)] or [min(points)]
-        stamp, events = points[max(before)]
-        return stamp, max(before), events
 
     def published_counts(self) -> dict[str, int]:
         # events carry their running count (event_seq), which a restarted streamer continues:

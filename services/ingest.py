@@ -30,8 +30,9 @@ pass restamped after the one before (runtime.replay.looped): consumers refuse st
 so replaying the same stamps again would have them refuse every later pass.
 
 Crash-only: a restarted ingest asks its consumers how far they have handled each stream
-(runtime.pacing) and goes on from there, in the same pass of a loop; it does not start the
-recording over.
+(runtime.pacing) and goes on from there, in the same pass of a loop, after playing again what a
+consumer's successor needs to rebuild its state (the ledgers' input positions): a recording is
+read again, a live source's messages come from its log (runtime.source_log).
 
 Replays never outrun their consumers: the services this ingest waits for report how far they
 have handled each sensor stream, and publishing waits while the slowest is more than
@@ -44,11 +45,10 @@ from __future__ import annotations
 
 import asyncio
 import functools
-import importlib
 import logging
-from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import msgspec
 
@@ -67,6 +67,7 @@ from beyond_self.runtime.recording_damage import Losses
 from beyond_self.runtime.replay import Cue, Player, looped, recorded_cues
 from beyond_self.runtime.replay_control import rate_option
 from beyond_self.runtime.service import Service
+from beyond_self.runtime.source_log import DEFAULT_MAX_MB, SourceLog, state_dir
 from beyond_self.schemas import (
     CameraFrame,
     CompressedCameraFrame,
@@ -79,6 +80,7 @@ from beyond_self.schemas import (
     StreamEnd,
 )
 from beyond_self.schemas.keys import split_key, with_robot
+from beyond_self.services.plugins import joints_of, load_plugin
 from beyond_self.services.pose_source import PersonFrame, PoseCounts, person_messages
 
 
@@ -113,6 +115,8 @@ class SensorIngest(Service):
         wait_for: list[str] | None = None,
         wait_timeout_s: float = 60.0,
         window_s: float = DEFAULT_WINDOW_S,
+        log_mb: float = DEFAULT_MAX_MB,
+        state: str | None = None,
         **base: Any,
     ) -> None:
         super().__init__(**base)
@@ -141,6 +145,11 @@ class SensorIngest(Service):
         if not window_s > 0 or window_s == float("inf"):
             raise InputError(f"window_s {window_s} must be a positive number of seconds")
         self.window_s = window_s
+        if not 0 <= log_mb < float("inf"):
+            raise InputError(f"log_mb {log_mb}; valid: 0 (no source log) or more megabytes")
+        self.log_bytes = round(log_mb * 2**20)
+        self.state = state
+        self.source_log: SourceLog | None = None
         self.last_stamps: dict[str, int] = {}
         self.losses = Losses(self.source_name)
         self.resume: dict[str, int] = {}
@@ -166,7 +175,15 @@ class SensorIngest(Service):
         }
         self.end = self.publisher(keys.stream_end, StreamEnd, EVENTS)
         self.stream_clock = self.publisher(keys.clock, StreamClock, STATUS)
+        folder = Path(self.state) if self.state else state_dir(keys.robot, self.name)
+        if self.live and self.log_bytes and folder:  # a recording is read again instead
+            self.source_log = SourceLog(folder, self.log_bytes)
+            self.source_log.record(self.person_streams.values(), self.camera)
         self.spawn(self._play(), "source")
+
+    async def teardown(self) -> None:
+        if self.source_log is not None:
+            self.source_log.close()
 
     def health_report(self) -> ServiceHealth:
         """With a camera source, `skipped` counts the frames whose pose was shed to keep up."""
@@ -193,8 +210,15 @@ class SensorIngest(Service):
             window_s=self.window_s,
         )
         await self.pacer.start()
-        # where the consumers are: a restarted source goes on from there, not from the start
+        # where the consumers are: a restarted source goes on from there, not from the start,
+        # but plays again what a consumer's successor needs to rebuild its state (its snapshot's
+        # input position), which a consumer restarted with this source finds nowhere else
         self.resume = self.pacer.handled_by_all()
+        for key, stamp in self.ledgers.book.needed(self.resume).items():
+            self.resume[key] = min(self.resume[key], stamp - 1)
+        if self.source_log is not None and self.ledgers.instance > 0:
+            again = self.source_log.play_again({k: s + 1 for k, s in self.resume.items()})
+            event(self.log, logging.INFO, "played again from the source log", messages=again)
         ticks = None if self.live else ClockTicks(self._tick)  # live: the wall's
         self.player = Player(rate=self.rate, pacer=self.pacer, ticks=ticks)
         if self.start_delay_s:
@@ -373,26 +397,3 @@ class SensorIngest(Service):
                     raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera, person")
         finally:
             task.cancel()
-
-
-def joints_of(items: Mapping[str, Sequence[float]]) -> dict[str, Joint]:
-    """Skeleton joints from a plug-in's `joint -> (x, y, z)` or `(x, y, z, confidence)`."""
-    joints = {}
-    for name, p in items.items():
-        x, y, z = (float(v) for v in p[:3])
-        joints[name] = Joint(position=(x, y, z), confidence=float(p[3]) if len(p) > 3 else 1.0)
-    return joints
-
-
-def load_plugin(spec: str) -> Callable[[], AsyncIterator[tuple[str, Any]]]:
-    module_name, sep, attr = spec.partition(":")
-    if not sep:
-        raise InputError(f"plug-in {spec!r}; valid: module:function")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise InputError(f"plug-in module {module_name!r} cannot be imported: {exc}") from None
-    fn = getattr(module, attr, None)
-    if not callable(fn):
-        raise InputError(f"plug-in {spec!r}: {module_name} has no function {attr!r}")
-    return cast("Callable[[], AsyncIterator[tuple[str, Any]]]", fn)

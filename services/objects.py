@@ -41,8 +41,8 @@ from beyond_self.cognition.episodes import GestureEffects, ObjectAtStart, Object
 from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.images import CameraMessage, image_from_message
-from beyond_self.runtime.ledger import at_gestures, keep_newest, per_gesture
 from beyond_self.runtime.service import Service
+from beyond_self.runtime.snapshots import at_gestures, keep_newest, per_gesture
 from beyond_self.runtime.subscription import Subscription
 from beyond_self.schemas import (
     CameraFrame,
@@ -112,8 +112,15 @@ class ObjectSegmenter(Service):
         keys = self.bus.keys
         # restarted: the gestures whose effects every consumer has are not measured again, and
         # the camera history before the predecessor's restart point is not gone over again
-        self.watch.done(self.ledgers.done_downstream(keys.effects, "effects"))
-        self.history, self.resume_from = self._restart_point(self.ledgers.predecessor())
+        done = self.ledgers.done_downstream(keys.effects, "effects")
+        self.watch.done(done)
+        resume = self.ledgers.predecessor()
+        self.history, self.resume_from = self._restart_point(resume)
+        # for pacing, the start and the end of every gesture closed before (its effects told,
+        # or cancelled) count as received: a gesture streamer restarted before this one may not
+        # send them again (its predecessor's consumer had them), and this one does not need them
+        closed = done | self.ledgers.seen_downstream(keys.gesture_segment, ("cancel",))
+        self.received_before = 2 * next(n for n in range(1, len(closed) + 2) if n not in closed) - 2
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
         self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)
@@ -148,7 +155,10 @@ class ObjectSegmenter(Service):
         """Where a successor would resume: the restart point now, and the one at each of the
         last gestures' starts (`_restart_point`)."""
         points = at_gestures("camera", self.history)
-        self.ledgers.checkpoint({"camera": max(0, self.watch.restart_point)} | points)
+        point = max(0, self.watch.restart_point)
+        keys = self.bus.keys
+        positions = {keys.camera: point, keys.camera_compressed: point}
+        self.ledgers.checkpoint({"camera": point} | points, positions=positions)
 
     def on_gestures_progress(self, msg: Progress) -> None:
         stamp = msg.handled.get(self.bus.keys.skeleton, -1)
@@ -230,7 +240,7 @@ class ObjectSegmenter(Service):
         # gesture events carry their own index: the last one here says what has arrived, also
         # for an instance restarted mid-stream that got the earlier ones from the cache
         counts = super().received_counts()
-        counts[self.bus.keys.gesture_segment] = self.segments_received
+        counts[self.bus.keys.gesture_segment] = max(self.segments_received, self.received_before)
         return counts
 
     def on_segment(self, event: GestureSegment) -> None:

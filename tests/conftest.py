@@ -142,6 +142,8 @@ LONG_FILES = (
     "test_deploy_netns.py",
     "test_gesture_people.py",
     "test_pipeline_up.py",
+    "test_chaos_a.py",
+    "test_chaos_b.py",
     "test_damaged_recordings.py",
     "test_bus_fuzz.py",
     "test_live_load.py",

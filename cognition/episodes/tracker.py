@@ -130,6 +130,16 @@ class _Frame(msgspec.Struct, Generic[R], frozen=True, gc=False):
     ref: R
 
 
+class TrackerSnapshot(msgspec.Struct, frozen=True):
+    """What a tracker is rebuilt from (`GestureTracker.snapshot`, `restored`): a skeleton stamp
+    from which a fresh tracker, fed the frames from there on, makes exactly the events this one
+    makes (its checkpoint, `GestureTracker._advance`), and the segments started before it. Its
+    input position is that stamp: the state is empty there, so a snapshot is a few bytes."""
+
+    stamp: int
+    segments: int
+
+
 class GestureTracker(Generic[R]):
     """Segments and recognises gestures one frame at a time. Frames must come in stamp order;
     segment ids count from 1 in the order gestures start."""
@@ -155,6 +165,20 @@ class GestureTracker(Generic[R]):
         self._results_from = -1  # stream index of the frame the first of them is about
         self.checkpoint: tuple[int, int] | None = None  # (stamp, segment_id): see `_advance`
         self._candidate: _Candidate | None = None
+
+    def snapshot(self) -> TrackerSnapshot | None:
+        """The newest snapshot (None before the first frame)."""
+        if self.checkpoint is None:
+            return None
+        return TrackerSnapshot(*self.checkpoint)
+
+    @classmethod
+    def restored(
+        cls, models: GestureModels, snapshot: TrackerSnapshot | None, buffer_frames: int = 1800
+    ) -> GestureTracker[R]:
+        """A tracker to be fed the frames from `snapshot.stamp` on (None: from the first)."""
+        first = snapshot.segments if snapshot is not None else 0
+        return cls(models, buffer_frames=buffer_frames, first_segment_id=first)
 
     @property
     def memory_frames(self) -> int:

@@ -1,0 +1,70 @@
+"""Snapshots on the machine (runtime.snapshots, issue 39): the newest few kept, each whole, and
+the newest one that decodes restored."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import msgspec
+
+import beyond_self.schemas as s
+from beyond_self.runtime.ledger import Keeper
+from beyond_self.runtime.snapshots import Snapshots, SnapshotStore
+
+
+class State(msgspec.Struct, frozen=True):
+    segments: int
+    stamp: int
+
+
+class Other(msgspec.Struct, frozen=True):
+    name: str
+
+
+def test_the_newest_of_the_last_few_is_restored(tmp_path: Path) -> None:
+    store = SnapshotStore(tmp_path, keep=3)
+    for i in range(10):
+        assert store.save(State(i, 100 * i), {"r/skeleton": 100 * i}) > 0
+    assert len(store.numbers()) == 3 and store.numbers()[-1] == 10
+    assert list((tmp_path / "snapshots").glob("*.tmp")) == []
+    again = SnapshotStore(tmp_path, keep=3)  # a successor
+    assert again.newest(State) == (State(9, 900), {"r/skeleton": 900})
+    again.save(State(10, 1000), {})
+    assert again.numbers()[-1] == 11
+
+
+def test_a_snapshot_that_does_not_decode_is_passed_over(tmp_path: Path) -> None:
+    store = SnapshotStore(tmp_path)
+    store.save(State(1, 10), {"k": 10})
+    store.save(Other("x"), {})
+    (tmp_path / "snapshots" / "0000000003.snap").write_bytes(b"\x00 cut short")
+    assert store.newest(State) == (State(1, 10), {"k": 10})
+    assert SnapshotStore(tmp_path / "empty").newest(State) is None
+
+
+class Streamer(msgspec.Struct, frozen=True):
+    stamp: int
+    segments: int
+    events: int
+
+
+def test_snapshots_told_with_a_ledger_are_what_a_successor_restores(tmp_path: Path) -> None:
+    """The base tells each snapshot in the service's ledger (any successor on the bus finds it)
+    and stores it on the machine (a successor with no record on the bus restores that one)."""
+    header = lambda cls, stamp: s.Header(version=1, source="gestures", seq=0, stamp=1)  # noqa: E731
+    mine = Keeper("gestures", header)
+    snapshots = Snapshots(Streamer, mine, SnapshotStore(tmp_path), "r/description")
+    assert snapshots.chosen(restarted=True) is None  # nothing anywhere: afresh
+    for n, stamp in enumerate((100, 200, 300)):
+        snapshots.taken(Streamer(stamp, n, 2 * n), {"r/skeleton": stamp}, gestures=n)
+    assert snapshots.stored is not None and snapshots.stored.result(10) > 0  # on the machine
+    successor = Keeper("gestures", header)
+    successor.book.heard(mine.ledger())
+    assert successor.book.needed(["r/skeleton"]) == {"r/skeleton": 300}
+    again = Snapshots(Streamer, successor, None, "r/description")
+    assert again.newest == Streamer(300, 2, 4)
+    assert sorted(again.history) == [0, 1, 2]
+    assert again.chosen(restarted=True) == Streamer(300, 2, 4)  # nobody takes descriptions
+    alone = Snapshots(Streamer, Keeper("gestures", header), SnapshotStore(tmp_path), "d")
+    assert alone.chosen(restarted=True) == Streamer(300, 2, 4)  # from the machine
+    assert alone.chosen(restarted=False) is None  # a first start takes nothing
