@@ -1,23 +1,12 @@
 """The history a late subscriber must not lose: a workaround for zenoh-ext 1.10.
 
-zenoh-ext's advanced subscriber holds a publisher's live samples back only while its *global*
-history query (`<key>/@adv/**`) is pending, not while its per-publisher queries are (the one
-sent when the publisher's liveliness token is detected, and the gap query sent when a live
-sample was parked; the timestamped path does wait for them, the sequenced one does not:
-`handle_sample` in zenoh-ext's advanced_subscriber.rs). A live sample that arrives after the
-global query ended but before those did is delivered as that publisher's first, and every
-history reply, older, is then dropped as a duplicate with no miss reported. The window is a few
-milliseconds idle and tens of milliseconds on a loaded machine: enough for a per-frame stream.
-A workstation started after the robot then never got the posteriors of the gestures that had
-ended before it (CI: all six gestures undescribed, `recovered=8 missed=0`).
-
-Publishers number their samples from 0, so a first sample numbered n > 0 means 0..n-1 either
-left the publisher's cache long ago or were dropped that way. Then that publisher's samples are
-held, its cache is asked for them (the query zenoh-ext itself makes, bounded by n and by the
-delivery's history), and what comes back is delivered first, in order, gaps counted as missed.
-A publisher whose first sample is 0 costs nothing; one that joined late (its first sample is
-the oldest its cache still had) costs one quick, empty query. Reconnections are untouched:
-they concern publishers already known.
+zenoh-ext's advanced subscriber can deliver a live sample before the history its per-publisher
+queries bring, and then drops that history as duplicates with no miss reported
+(docs/decisions.md, history-repair). Publishers number their samples from 0, so a first sample
+numbered n > 0 means 0..n-1 were either dropped that way or left the cache long ago: that
+publisher's samples are held, its cache is asked for them (bounded by n and by the delivery's
+history), and what comes back is delivered first, in order, gaps counted as missed. A publisher
+whose first sample is 0 costs nothing; one that joined late costs one quick, empty query.
 """
 
 from __future__ import annotations

@@ -1,32 +1,12 @@
 """Exactly once at the consumer: what each service has handled, by identity, and who knows it.
 
-Every per-gesture output (and every per-frame one) has an identity: robot, segment id, kind,
-and for a per-frame kind its frame (schemas.identity). Three rules, in the Service base, make a
-killed and restarted service neither stall nor repeat anything:
-
-1. A consumer acts on each identity once. What it has handled is recorded per input key
-   (`Handled`); a message whose identity is already there is skipped and counted as a
-   duplicate, whoever republished it: a restarted producer re-deriving its outputs, a
-   publisher's cache after a cut link, a history query.
-2. A restarted producer does not send again what every consumer of its key has handled. Each
-   service publishes its `Handled` as a `Ledger` (`ledger/<service>`) when a per-gesture entry
-   is added and with its health otherwise; every service keeps the last one of all the others
-   (`LedgerBook`) and answers for all of them on query. So a restarted reasoner does not
-   republish a whole run of predictions: it sends what its consumers lack, and only that. It
-   suppresses only what consumers *handled* (never what its predecessor merely put: a put can
-   die in the process's send queue), so nothing is lost, and what goes out twice (a message
-   still in a consumer's queue when it asked) is skipped there by rule 1. Handled by the
-   consumer's instance alive now: one replaced with the producer (a workstation taken over,
-   runtime.fleet) has handled nothing yet and gets what it needs to rebuild its state.
-3. A service whose handling is a side effect (speech: a sentence said; the describer: a
-   description made) takes its predecessor's `Handled` for those inputs (`once`), from the
-   copies the others kept, and does not act again on what its predecessor acted on.
-
-The book answers per service; several copies of one service's ledger (its own answer, the
-copies others kept) are merged, since what a service has handled only grows; each ledger says
-which instance of its service wrote it (the predecessor's plus one), and the newest instance's
-is also kept apart (rule 2). A service's `resume` numbers (its checkpoint) are taken from
-whichever copy is newest by stamp.
+Every per-gesture and per-frame output has an identity (schemas.identity). Three rules, applied
+by the Service base, make a killed and restarted service neither stall nor repeat anything
+(docs/concepts/exactly-once.md): a consumer acts on each identity once (`Handled`); a restarted
+producer does not send again what every consumer of its key has handled (`Ledger`s published
+and kept by everyone, `LedgerBook`); and a service whose handling is a side effect takes its
+predecessor's `Handled` for those inputs (`once`). What a service has handled only grows, so
+several copies of one ledger are merged; its `resume` numbers come from the newest copy.
 """
 
 from __future__ import annotations
@@ -203,9 +183,8 @@ class LedgerBook:
 ASK_TIMEOUT_S = 10.0
 # a restarted service asks again until its predecessor's record is among the answers: a session
 # just opened may not know the others' queryables yet, and its first query then ends at once
-# with no answer at all (seen under load: a restarted reasoner took itself for a first one and
-# waited for a gesture its predecessor had finished, the pipeline stalled; a restarted speech
-# service said a sentence again)
+# with no answer at all; taking itself for a first instance, a restarted reasoner would wait
+# for a gesture its predecessor had finished, and a restarted speech service say a sentence again
 ASK_AGAIN_S = 0.1
 
 

@@ -1,31 +1,12 @@
 """Streams that survive a broken link: the subscriber half (zenoh-ext advanced subscriber).
 
-Between a robot and a workstation the network does fail: Wi-Fi drops, a cable is pulled, a
-router restarts. Zenoh then closes the session when its lease runs out and re-opens it when the
-link is back; whatever was published in between went nowhere. For derived streams (gesture
-posteriors and events, detected objects, effects, words, descriptions) every message matters: a
-gesture whose "end" event is lost is never described. So their publishers keep a cache
-(`Delivery.cache`, runtime.publisher) and their subscribers recover (`Delivery.recover`): an
-advanced subscriber asks every publisher it detects for its history (also when a publisher comes
-back after a partition) and recovers gaps it sees in the numbering or in the heartbeats from that
-publisher's cache. Samples are delivered in order per publisher, each once; what a cache no
-longer holds is counted in `missed` and logged.
-
-It also counts what came back from a cache rather than off the wire (`recovered`): a plain
-subscriber on the same key in the same session witnesses every live sample, so a delivered
-(source, sequence number) the witness never saw can only be a recovered one. Deployments say how
-much the caches saved, and the distributed test checks it. The witness has no callback: its
-samples wait in a ring channel (no Python, no GIL on Zenoh's thread) and are read when a sample is
-delivered or the count is asked for. As a second callback per sample it took the GIL once more on
-another thread for every live message, which in a 64-robot fleet's reasoner was the difference
-between a 20 ms and a 54 ms stage p99 (bench/fleet.py rounds).
-
-Sequence numbers need no clock; `max_age_s` (history by age) uses sample timestamps, which a
-session adds only with `timestamping` enabled (as in `deploy/zenoh/*.json5`); without them the
-history is bounded by count alone.
-
-zenoh-ext 1.10 can drop a late subscriber's history when a live sample overtakes it;
-runtime.history_repair asks the cache again for what came before each publisher's first sample.
+Wi-Fi drops and cables are pulled; what is published meanwhile goes nowhere, and a lost "end"
+event means a gesture never described. So derived streams' publishers keep a cache
+(runtime.publisher) and their subscribers here ask every publisher for its history and recover
+gaps from it: delivered in order per publisher, each once, what no cache holds counted as
+`missed`. A plain subscriber beside it witnesses the live samples, so a delivered one it never
+saw is counted as `recovered`; it reads a ring channel, not a callback, to spare Zenoh's thread
+the GIL (docs/decisions.md). runtime.history_repair covers a zenoh-ext 1.10 history bug.
 """
 
 from __future__ import annotations

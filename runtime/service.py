@@ -1,18 +1,11 @@
 """The base every service stands on: its surface (subscribe, publish, serve, spawn, report),
 its lifecycle (liveliness, health, clean shutdown on signals) and its accounting.
 
-A service subclasses `Service`, names the streams it touches in class attributes (`subscribes`,
-`publishes`, `serves`: stream and queryable names of schemas/keys.py, from which runtime/acl.py
-generates a secure router's access rules), opens them in `setup()` with `self.subscribe`,
-`self.publisher` and `self.queryable` (a key the class did not declare is refused there, so the
-rules cannot drift from the code; a class that declares nothing is not checked, and has no
-place on a secure bus), and is run with `asyncio.run(service.run())` (or `Service.main()`).
-It stops cleanly on SIGINT/SIGTERM: its tasks and timers are cancelled, subscribers,
-publishers, queryables and the liveliness token are undeclared, then the session closes.
-
-Bad input never stops a service (runtime.accounting): a payload that does not decode is counted
-as malformed; whatever a handler, a timer, a spawned task, a queryable or the teardown raises is
-counted as an error and logged once per kind of problem; the service goes on.
+A service declares the streams it touches (`subscribes`, `publishes`, `serves`, names from
+schemas/keys.py) and opens only those in `setup()`: runtime/acl.py generates a secure router's
+rules from the declarations, and a key not declared is refused, so the rules cannot drift from
+the code. Bad input never stops a service (runtime.accounting): what does not decode, or what a
+handler, timer, task or queryable raises, is counted and logged once per kind of problem.
 runtime/README.md shows a whole service.
 """
 
@@ -371,8 +364,8 @@ class Service:
         loop = asyncio.get_running_loop()
         # the first report at once (it shows the service is up), the next ones at a phase of
         # the period of this robot's own: a fleet's runs start together when their robots
-        # appear, and reports in step built and sent a health report and a ledger for every
-        # robot in one go each second, a burst that every gesture under way then queued behind
+        # appear, and reports in step would build and send a health report and a ledger for
+        # every robot in one go each second, a burst that every gesture under way queues behind
         due = loop.time() + self.health_period * report_phase(self.bus.keys.robot)
         while True:
             pub.put(self.health_report())

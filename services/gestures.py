@@ -1,20 +1,12 @@
 """Gesture HMM streamer: skeleton frames in; gesture start/end/cancel events and, every frame of a
-gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out. A started gesture that turns
-out to be none (drift, a tracker failure, a movement no model fits) is cancelled, and the log
-says why; a skeleton frame that is not a person's hand (NaN, or metres away) is counted and
-skipped.
+gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out.
 
 The per-gesture logic is `cognition.episodes.GestureTracker`; this service turns messages into
-its calls and its events into messages (each derived from the skeleton frame it is about: same
-stamp and sequence). The end of the source (`StreamEnd`) ends or cancels a gesture still under
-way once the last skeleton frame it announces has been handled, so the last gesture of a
-recording is answered whatever order the end marker and the frames arrive in.
-
-Crash-only: the tracker's snapshot (a skeleton stamp from which its state can be rebuilt
-exactly, with the segments and events counted there) is taken by the base (`keep_state`,
-runtime.snapshots); a restarted streamer is restored from it, gets the skeleton frames since
-back from the source (which plays them again from that input position), and continues its
-numbering; what its consumers already have is not sent again.
+its calls and its events into messages, each derived from the skeleton frame it is about. The
+source's `StreamEnd` closes a gesture still under way once the last frame it announces is
+handled, whatever order they arrive in. Crash-only: the tracker's snapshot (runtime.snapshots)
+restores a restarted streamer, which gets the frames since back from the source and continues
+its numbering (docs/concepts/recovery.md).
 """
 
 from __future__ import annotations
@@ -119,9 +111,9 @@ class GestureStreamer(Service):
             # going back to a checkpoint before a gesture not yet said, whose frames are gone
             # from the source's cache (the source was restarted too), while the newest one's
             # are here: rebuild exactly from the newest, as a plain restart does (the gestures
-            # in between are with the consumers, or lost either way). From here instead, the
-            # cut path below left the gesture under way started and never ended: every
-            # consumer waited on it (the kill test stalled)
+            # in between are with the consumers, or lost either way). From here the cut path
+            # below would leave the gesture under way started and never ended, and every
+            # consumer would wait on it
             self._restore(newest)
             if stamp < self.resume_from:
                 return

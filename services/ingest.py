@@ -1,44 +1,12 @@
 """Sensor ingest: puts sensor streams on the bus, from a recording, a YARP hand log or a live
-source plug-in.
+source (a plug-in, a video or a camera); docs/how-to/recordings.md describes each.
 
-- recording (MCAP): every skeleton and camera message is published as recorded (same headers and
-  stamps, so a replay is byte-identical), with the original timing scaled by `rate`
-  (0 = as fast as possible, runtime.replay_control.rate_option), by the same engine as
-  `beyond replay` (runtime.replay.Player).
-- YARP hand log (the article's `data.log`): converted on the fly into skeleton frames holding one
-  joint, the hand, in metres (`scale`), stamped with the log's own times and played by the same
-  engine, at the same rate.
-- plug-in (`module:function`): the function returns an async iterator of `("skeleton", {joint:
-  (x, y, z)})` (or `(x, y, z, confidence)`), `("camera", rgb_uint8_array)` (the tabletop camera)
-  or `("person", services.pose_source.PersonFrame)` (a frame through the pose model: its image,
-  skeleton and pose in the image, one stamp for the three) items, a skeleton or camera item
-  with its own stamp (ns) third if it has one (a ROS 2 source, services.ros2_source); ingest
-  stamps the others with the clock, and numbers them.
-- video file or camera (`video=FILE`, `camera=INDEX`): the pose source (services.pose_source),
-  a plug-in of that shape run here, so the pose model runs where the camera is.
-A bounded queue sits between a live source and the bus: when the bus cannot keep up the oldest
-item is dropped and counted, never silently.
-When the source is exhausted a `StreamEnd` message says how many messages were published and the
-last stamp of each stream, so consumers know when they have seen everything, and what a damaged
-recording lost, in the one line every command says (runtime.recording_damage: every intact chunk is
-played, a frame that does not decode or goes back in time is dropped and counted, not the end of
-the source). A recording or a log is played on its own clock: ingest publishes the stream's time
-(`StreamClock`, ROS's /clock, runtime.clock) as it plays, which the services of a replay stamp
-their health and progress with, and stamps its own health and the end marker with it too; a live
-source is on the wall clock. With `loop`, a recording or log plays pass after pass for ever, each
-pass restamped after the one before (runtime.replay.looped): consumers refuse stamps that go back,
-so replaying the same stamps again would have them refuse every later pass.
-
-Crash-only: a restarted ingest asks its consumers how far they have handled each stream
-(runtime.pacing) and goes on from there, in the same pass of a loop, after playing again what a
-consumer's successor needs to rebuild its state (the ledgers' input positions): a recording is
-read again, a live source's messages come from its log (runtime.source_log).
-
-Replays never outrun their consumers: the services this ingest waits for report how far they
-have handled each sensor stream, and publishing waits while the slowest is more than
-`window_s` of stream time behind (runtime.pacing), so no rate, however fast, and no load drops a
-frame. Live sources are not held back (a sensor does not wait): their bounded queue drops the
-oldest item and counts it.
+A recording or log is played on its own clock (`StreamClock`, runtime.clock) and paced on its
+slowest consumer (runtime.pacing), so no rate drops a frame; a live source is on the wall clock
+and never held back: a bounded queue drops its oldest item, counted. `StreamEnd` says what was
+published, so consumers know when they have seen everything. Crash-only: a restarted ingest goes
+on from where its consumers are, after playing again what their successors need to rebuild
+(read from the recording again, or from runtime.source_log); see docs/concepts/recovery.md.
 """
 
 from __future__ import annotations

@@ -2,30 +2,11 @@
 object each gesture is about (`GestureObject`) and the effects of the action on it
 (`ObjectEffects`) out.
 
-The per-gesture logic is `cognition.episodes.ObjectWatch`: every result waits for the camera
-frames it needs (a frame at or after the instant proves the earlier ones have been seen), or for
-the end of the source, or for a deadline in skeleton stream time when the camera falls silent;
-never for a wall-clock timer. One `GestureObject` and one `ObjectEffects` per gesture, measured
-or saying why not. Frame numbers are the camera messages' own sequence numbers.
-
-Gestures first, so a description comes within a beat on a loaded machine too: a camera frame is
-handled for the gestures as it arrives, after any gesture event already waiting (kept, queued for
-the windows of the gestures under way), and their results are published at once; the queued
-frames are analysed one at a time between messages (`ObjectWatch.catch_up`). A frame's own
-objects (`vision/objects`, the costly part: the table estimated from the frame) are described in
-a process of its own (services/frame_describer.py), so the event loop and the interpreter stay
-free for the gestures meanwhile. A replay (`skip_frames` off, the default on the recording clock)
-describes every frame before it reports the frame handled, so the player paces itself on it and
-the outputs are those of `beyond analyse`. A live source (`skip_frames` on, the default on the
-wall clock) is not held back: its describer runs at a lower priority, when frames come faster
-than they are described the newest wins, and each `DetectedObjects` says how many frames it
-overtook (`skipped`, also summed in health). Skipping never touches a gesture's results: every
-frame still goes through the gestures' windows, and the frame a gesture's object comes from is
-described for it.
-
-Camera history is dropped only once no gesture can still need it: the gesture streamer's
-`Progress` says how many gesture events it had published by the time it handled a skeleton
-stamp, so once that many have arrived here the gesture stream is complete up to that stamp.
+The per-gesture logic is `cognition.episodes.ObjectWatch`, which waits on stamps, never on a
+wall-clock timer. Gestures come first, so a description is not late on a loaded machine: a
+frame's own objects, the costly part, are described in a process of its own
+(services/frame_describer.py): a replay's every frame, a live source's newest when frames come
+faster (`skip_frames`), never at a gesture's expense (docs/concepts/pipeline.md, event time).
 """
 
 from __future__ import annotations

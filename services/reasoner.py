@@ -1,14 +1,11 @@
 """Affordance reasoner: holds the Affordance–Words network and fuses what the other services
-see with what the gesture recogniser believes (SPEC.md, P_comb).
+see with what the gesture recogniser believes (P_comb).
 
-The per-gesture join is `cognition.episodes.FusionJoin`, by segment id: every belief of a
-gesture, fused with the object the gesture is about (`GestureObject`), gives an anticipation;
-its final belief, its end and its measured effects (`ObjectEffects`, always sent, measured or
-not) give the final belief and the word probabilities the description generator turns into
-sentences. Gestures come out strictly in segment order. With `objects: false` (no object
-segmenter in the deployment) nothing waits for vision; a segmenter that should be there and is
-not is waited out by `deadline_s` of skeleton stream time. It also answers ad-hoc queries
-(`beyond ask`).
+The per-gesture join is `cognition.episodes.FusionJoin`, by segment id: every belief fused with
+the gesture's object gives an anticipation; its final belief, end and effects give the final
+belief and the word probabilities the describer turns into sentences, strictly in segment order.
+With `objects: false` nothing waits for vision; an absent segmenter is waited out by
+`deadline_s` of skeleton stream time. It also answers ad-hoc queries (`beyond ask`).
 """
 
 from __future__ import annotations
