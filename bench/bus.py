@@ -26,7 +26,8 @@ reliable (congestion control BLOCK), so nothing is dropped.
   burst to the last message received.
 
 Replay: a 10 s recording (skeleton and camera at 30 Hz) replayed as fast as possible by
-`runtime.replay.replay` into a subscriber in another process (as `beyond replay` feeds services),
+`runtime.recording.replay.replay` into a subscriber in another process (as `beyond replay` feeds
+services),
 speed = recording time / wall time until the subscriber had every message (goal >= 50x). The
 reference publishes the same wire payloads, read into memory beforehand, with raw zenoh-python.
 
@@ -74,9 +75,9 @@ import numpy as np  # noqa: E402
 import zenoh  # noqa: E402
 
 import beyond_self.schemas as s  # noqa: E402
-from beyond_self.runtime.bus import Bus  # noqa: E402
-from beyond_self.runtime.config import BusConfig, load_config, zenoh_config  # noqa: E402
-from beyond_self.runtime.delivery import Delivery  # noqa: E402
+from beyond_self.runtime.bus.config import BusConfig, load_config, zenoh_config  # noqa: E402
+from beyond_self.runtime.bus.delivery import Delivery  # noqa: E402
+from beyond_self.runtime.bus.session import Bus  # noqa: E402
 from beyond_self.services.launcher import BEYOND  # noqa: E402
 
 KINDS = {
@@ -351,7 +352,7 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
         return statistics.median(lat) / 1e3
 
     async def to_loop(wakeup_fd: bool) -> float:
-        from beyond_self.runtime.inbox import Inbox
+        from beyond_self.runtime.bus.inbox import Inbox
 
         inbox: Inbox[int] = Inbox(asyncio.get_running_loop(), 16, wakeup_fd=wakeup_fd)
         lat: list[int] = []
@@ -378,7 +379,7 @@ def handoff_floor(n: int = 1500) -> dict[str, float]:
 
 
 def write_recording(path: Path, keys: s.Keys) -> None:
-    from beyond_self.runtime.recording_writer import RecordingWriter
+    from beyond_self.runtime.recording.writer import RecordingWriter
 
     start = 1_700_000_000_000_000_000
     with RecordingWriter(path) as writer:
@@ -390,8 +391,8 @@ def write_recording(path: Path, keys: s.Keys) -> None:
 
 
 def replay_once(path: Path, topics: list[str] | None, reference: bool) -> dict[str, float]:
-    from beyond_self.runtime.recording import read_recording
-    from beyond_self.runtime.replay import replay
+    from beyond_self.runtime.recording.reader import read_recording
+    from beyond_self.runtime.recording.replay import replay
 
     items = list(read_recording(path, topics=topics))
     span = (items[-1].publish_time - items[0].publish_time) / 1e9
@@ -541,7 +542,7 @@ def run_path(path: str, kind: str, keys_dir: Path) -> dict[str, float]:
 
 def secure_path() -> dict[str, float]:
     """Plain, router and secure paths, interleaved REPEATS times, medians and ratios."""
-    from beyond_self.runtime import keystore
+    from beyond_self.runtime.security import keystore
     from beyond_self.services import registry
 
     figures: dict[str, float] = {}

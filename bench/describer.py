@@ -32,8 +32,8 @@ from busutil_net import busy_loops  # noqa: E402
 from pipeline import QUIET, _p, raw_hop_us  # noqa: E402
 
 import beyond_self.schemas as s  # noqa: E402
-from beyond_self.runtime.config import BusConfig  # noqa: E402
-from beyond_self.runtime.delivery import EVENTS  # noqa: E402
+from beyond_self.runtime.bus.config import BusConfig  # noqa: E402
+from beyond_self.runtime.bus.delivery import EVENTS  # noqa: E402
 from beyond_self.runtime.fleet import LEAVE_ENV  # noqa: E402
 from beyond_self.services import shared  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402

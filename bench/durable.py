@@ -3,7 +3,8 @@ service resumes.
 
 - Source log: `Publisher.put` of a skeleton frame (15 joints, ~1.1 kB) and a 320x240 rgb8 camera
   frame (~230 kB) on the ingest's cached publishers, alone (the reference) and with the source
-  log written first (runtime.source_log, in a temporary folder), interleaved runs, the fastest
+  log written first (runtime.resilience.source_log, in a temporary folder), interleaved runs, the
+  fastest
   run's time per message (the machine is shared: the minimum is the cost, the rest is other
   load). Goal: with the log <= 1.2x the publish alone.
 - Snapshots: the gesture streamer's snapshot logic (the tracker's snapshot each frame, told with
@@ -44,10 +45,10 @@ def bus_bench() -> ModuleType:
 
 def source_log_cost() -> dict[str, float]:
     import beyond_self.schemas as s
-    from beyond_self.runtime.bus import Bus
-    from beyond_self.runtime.config import BusConfig
-    from beyond_self.runtime.delivery import CAMERA, SKELETON
-    from beyond_self.runtime.source_log import DEFAULT_MAX_MB, SourceLog
+    from beyond_self.runtime.bus.config import BusConfig
+    from beyond_self.runtime.bus.delivery import CAMERA, SKELETON
+    from beyond_self.runtime.bus.session import Bus
+    from beyond_self.runtime.resilience.source_log import DEFAULT_MAX_MB, SourceLog
 
     make = bus_bench().make_message
     figures: dict[str, float] = {}
@@ -92,8 +93,8 @@ def snapshot_cost() -> dict[str, float]:
     from beyond_self.cognition.gestures import extract_features
     from beyond_self.cognition.gestures.default_models import default_models
     from beyond_self.commands.analyse import _inputs
-    from beyond_self.runtime.ledger import Keeper
-    from beyond_self.runtime.snapshots import Snapshots, SnapshotStore
+    from beyond_self.runtime.resilience.ledger import Keeper
+    from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
     from beyond_self.services.gestures import StreamerState
 
     frames = [
@@ -166,8 +167,8 @@ async def resume_time() -> dict[str, float]:
     import signal
 
     import beyond_self.schemas as s
-    from beyond_self.runtime.config import BusConfig
-    from beyond_self.runtime.delivery import STATUS
+    from beyond_self.runtime.bus.config import BusConfig
+    from beyond_self.runtime.bus.delivery import STATUS
     from beyond_self.services.deployment import Deployment
 
     loop = asyncio.get_running_loop()

@@ -59,11 +59,11 @@ sys.path.insert(0, str(REPO / "bench"))  # the pipeline bench's skeleton stream 
 from pipeline import CAMERA, QUIET, _p, scene_gestures, stream_frames, vision_scene  # noqa: E402
 
 import beyond_self.schemas as s  # noqa: E402
-from beyond_self.runtime.bus import Bus  # noqa: E402
-from beyond_self.runtime.config import BusConfig  # noqa: E402
-from beyond_self.runtime.delivery import EVENTS  # noqa: E402
+from beyond_self.runtime.bus.config import BusConfig  # noqa: E402
+from beyond_self.runtime.bus.delivery import EVENTS  # noqa: E402
+from beyond_self.runtime.bus.session import Bus  # noqa: E402
 from beyond_self.runtime.fleet import LEAVE_ENV  # noqa: E402
-from beyond_self.runtime.replay import restamped  # noqa: E402
+from beyond_self.runtime.recording.replay import restamped  # noqa: E402
 from beyond_self.schemas.keys import for_robots, split_key  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402
 

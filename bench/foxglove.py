@@ -12,7 +12,7 @@ before `Publisher.put`. Two setups, REPEATS runs each, interleaved, medians repo
   camera key and the 3D scene view; latency = the client's receive time - the stamp (the
   frame's log time is the stamp), so it includes the bridge's decoding, JSON encoding and the
   WebSocket hop;
-- sdk (the reference for the handshake front, runtime/foxglove_front.py): the same, the client
+- sdk (the reference for the handshake front, runtime/foxglove/front.py): the same, the client
   connected straight to foxglove-sdk's own port behind the front (read from its log), so the
   difference is what the front's extra loopback hop costs in latency and in the bridge's CPU.
 
@@ -57,10 +57,10 @@ from websockets.exceptions import ConnectionClosed  # noqa: E402
 
 import beyond_self.schemas as s  # noqa: E402
 from bench.bus import free_port, quantile  # noqa: E402
-from beyond_self.runtime.bus import Bus  # noqa: E402
-from beyond_self.runtime.config import BusConfig  # noqa: E402
-from beyond_self.runtime.delivery import Delivery  # noqa: E402
-from beyond_self.runtime.recording import inspect_recording, read_recording  # noqa: E402
+from beyond_self.runtime.bus.config import BusConfig  # noqa: E402
+from beyond_self.runtime.bus.delivery import Delivery  # noqa: E402
+from beyond_self.runtime.bus.session import Bus  # noqa: E402
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording  # noqa: E402
 from beyond_self.services.launcher import BEYOND  # noqa: E402
 
 DEMO = REPO / "recordings" / "tap-ball-grasp-box.mcap"

@@ -74,10 +74,10 @@ from beyond_self.cognition.gestures import (  # noqa: E402
     Segment,
     synthesize_continuous,
 )
-from beyond_self.runtime.bus import Bus  # noqa: E402
-from beyond_self.runtime.config import BusConfig  # noqa: E402
-from beyond_self.runtime.publisher import Publisher  # noqa: E402
-from beyond_self.runtime.subscription import Subscription  # noqa: E402
+from beyond_self.runtime.bus.config import BusConfig  # noqa: E402
+from beyond_self.runtime.bus.publisher import Publisher  # noqa: E402
+from beyond_self.runtime.bus.session import Bus  # noqa: E402
+from beyond_self.runtime.bus.subscription import Subscription  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402
 
 GESTURES = int(os.environ.get("BENCH_GESTURES", "100"))
@@ -107,13 +107,13 @@ def raw_hop_us(config: BusConfig, n: int = 2000) -> float:
     """Median one-way latency of raw zenoh-python (ping-pong with a child process)."""
     import zenoh
 
-    from beyond_self.runtime.config import zenoh_config
+    from beyond_self.runtime.bus.config import zenoh_config
 
     child = subprocess.Popen(
         [sys.executable, "-P", "-c", textwrap.dedent(f"""
             import sys, time, zenoh
             sys.path.append({str(REPO)!r})  # after the installed package, never before it
-            from beyond_self.runtime.config import BusConfig, zenoh_config
+            from beyond_self.runtime.bus.config import BusConfig, zenoh_config
             s = zenoh.open(zenoh_config(BusConfig(robot={config.robot!r}, port={config.port})))
             pub = s.declare_publisher("bench/pong")
             sub = s.declare_subscriber("bench/ping", lambda x: pub.put(x.payload))
@@ -239,7 +239,7 @@ def vision_scene(repeats: int, seed: int = 3, turn: int = 0) -> list[s.Message]:
     import tempfile
 
     from beyond_self.cli import main as beyond
-    from beyond_self.runtime.recording import read_recording
+    from beyond_self.runtime.recording.reader import read_recording
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "scene.mcap"
@@ -380,7 +380,7 @@ def stage_costs(width: int, height: int) -> dict[str, float]:
     from beyond_self.cognition.vision.clusters import ClusterModel
     from beyond_self.cognition.vision.pipeline import analyse_frames
     from beyond_self.cognition.vision.tabletop import Camera, simulate_experiment
-    from beyond_self.runtime.images import image_from_message, message_from_image
+    from beyond_self.runtime.recording.images import image_from_message, message_from_image
 
     clusters = ClusterModel.load()
     rng = np.random.default_rng(0)

@@ -37,9 +37,9 @@ import numpy as np  # noqa: E402
 
 from beyond_self.cognition.pose.estimator import PoseEstimator  # noqa: E402
 from beyond_self.cognition.pose.video import Video  # noqa: E402
-from beyond_self.runtime.bus import Bus  # noqa: E402
-from beyond_self.runtime.config import BusConfig  # noqa: E402
-from beyond_self.runtime.delivery import Delivery  # noqa: E402
+from beyond_self.runtime.bus.config import BusConfig  # noqa: E402
+from beyond_self.runtime.bus.delivery import Delivery  # noqa: E402
+from beyond_self.runtime.bus.session import Bus  # noqa: E402
 from beyond_self.schemas import Header, Message, SkeletonFrame  # noqa: E402
 from beyond_self.schemas.codec import encode  # noqa: E402
 from beyond_self.services.pose_source import PersonFrame, person_messages  # noqa: E402

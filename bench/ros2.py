@@ -9,7 +9,7 @@ import next to rosbags reading the same bag alone, in one run.
    15 fps camera (goal <= 10 %).
 2. Latency a description gains: p50/p99 of one description at a time through the bridge next to
    the raw hop, idle and with three busy loops (goal: <= 1 ms p99 added).
-3. rosbag2: export (runtime.ros2_bag.export) and import (read_recording of the bag: CDR to our
+3. rosbag2: export (runtime.ros2.bag.export) and import (read_recording of the bag: CDR to our
    messages) in messages/s and MB/s, next to rosbags' Reader + deserialize_cdr on the same bag.
 Last line: one JSON object with every figure.
 """
@@ -31,10 +31,10 @@ from typing import Any
 import zenoh
 
 from beyond_self.cognition.paths import DEMO_RECORDING
-from beyond_self.runtime.recording import read_recording
-from beyond_self.runtime.ros2_bag import export
-from beyond_self.runtime.ros2_convert import store, to_ros
-from beyond_self.runtime.ros2_node import Ros2Node
+from beyond_self.runtime.recording.reader import read_recording
+from beyond_self.runtime.ros2.bag import export
+from beyond_self.runtime.ros2.convert import store, to_ros
+from beyond_self.runtime.ros2.node import Ros2Node
 from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import decode, encode

@@ -46,8 +46,8 @@ sys.path.insert(0, str(REPO))
 import beyond_self.schemas as s  # noqa: E402
 from beyond_self.commands.analyse import default_run, looped_inputs  # noqa: E402
 from beyond_self.monitor import PipelineMonitor  # noqa: E402
-from beyond_self.runtime.config import BusConfig  # noqa: E402
-from beyond_self.runtime.delivery import FRAMES  # noqa: E402
+from beyond_self.runtime.bus.config import BusConfig  # noqa: E402
+from beyond_self.runtime.bus.delivery import FRAMES  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402
 
 RECORDINGS = REPO / "recordings"

@@ -15,8 +15,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import FRAMES, RELIABLE
+from beyond_self.runtime.bus.delivery import FRAMES, RELIABLE
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.schemas import Description, GestureSegment, ServiceHealth
 from beyond_self.schemas.keys import for_robots, split_key
 

@@ -20,11 +20,11 @@ from typing import TYPE_CHECKING, Any
 
 from beyond_self.cognition.episodes import GestureReport
 from beyond_self.fleet_tally import FleetTally
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.delivery import FRAMES, RELIABLE
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import Received, consume
 from beyond_self.runtime.clock import Clock
-from beyond_self.runtime.delivery import FRAMES, RELIABLE
-from beyond_self.runtime.ledger import Keeper
-from beyond_self.runtime.subscription import Received, consume
+from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.schemas import (
     ActionPosterior,
     AffordancePrediction,
@@ -84,7 +84,8 @@ class PipelineMonitor:
         self.last_message = time.monotonic()
         self.moving = False  # a service has handled a sensor message, or published
         # named (its deployment's watcher), the monitor is a consumer in exactly-once: it
-        # publishes what it has handled (runtime.ledger), so a restarted producer sends it
+        # publishes what it has handled (runtime.resilience.ledger), so a restarted producer sends
+        # it
         # what it lacks too. Unnamed, a belief that had reached the reasoner but not the
         # monitor when the streamer was SIGKILLed was withheld by the restarted streamer and
         # missing from the printed lines (CI, tests/test_event_time.py)
@@ -146,7 +147,8 @@ class PipelineMonitor:
         return cls.original_header(self.ledgers.name, seq, stamp)
 
     def _fresh(self, received: Received[Any]) -> bool:
-        """Each result once (runtime.ledger): a restarted service's repeats, or a cache's after
+        """Each result once (runtime.resilience.ledger): a restarted service's repeats, or a cache's
+        after
         a cut link, would otherwise change the lines (a belief from an earlier frame again)."""
         ident = identify(received.key, received.message)
         if ident is None:

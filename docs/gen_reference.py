@@ -24,7 +24,7 @@ if str(ROOT) not in sys.path:  # a fresh clone without an install: the package f
 
 from beyond_self import cli  # noqa: E402
 from beyond_self.commands import schemas_cmd  # noqa: E402
-from beyond_self.runtime import config  # noqa: E402
+from beyond_self.runtime.bus import config  # noqa: E402
 from beyond_self.schemas import codec, keys  # noqa: E402
 from beyond_self.schemas.base import Message  # noqa: E402
 
@@ -125,8 +125,8 @@ def cli_reference() -> str:
     lines += [
         "## Environment variables {#environment}",
         "",
-        "The bus options' defaults, read by every command and service (`runtime.config.ENV_VARS`);",
-        "an option given on the command line wins.",
+        "The bus options' defaults, read by every command and service",
+        "(`runtime.bus.config.ENV_VARS`); an option given on the command line wins.",
         "",
         "| variable | meaning |",
         "|---|---|",

@@ -92,7 +92,8 @@ class SourceTimes:
     def refuse(self, key: str, source: str, stamp: int) -> None:
         """The handler refused the message as bad input: counted and forgotten (no time, no
         owner). Only how far the stream has been read moves (`progress`), so that a player
-        waiting on this service (runtime.pacing) passes a run of bad frames of its own, also
+        waiting on this service (runtime.recording.pacing) passes a run of bad frames of its own,
+        also
         at the start, before the key has an owner."""
         self.refused += 1
         stream = self._streams.get(key)

@@ -1,4 +1,4 @@
-"""How far a service has got: the `Progress` it publishes for players (runtime.pacing).
+"""How far a service has got: the `Progress` it publishes for players (runtime.recording.pacing).
 
 After the handler of each message on a `paced` input (so everything it caused is published
 first), the service reports the last stamp handled per paced key, what each subscription received
@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import STATUS
-from beyond_self.runtime.publisher import Publisher
+from beyond_self.runtime.bus.delivery import STATUS
+from beyond_self.runtime.bus.publisher import Publisher
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.schemas.base import Header
 from beyond_self.schemas.messages import Progress
 

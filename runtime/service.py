@@ -1,12 +1,12 @@
-"""The base every service stands on: its surface (subscribe, publish, serve, spawn, report),
-its lifecycle (liveliness, health, clean shutdown on signals) and its accounting.
+"""The base every service stands on: its surface (subscribe, publish, serve, spawn, report), its
+lifecycle (liveliness, health, clean shutdown on signals) and its accounting.
 
 A service declares the streams it touches (`subscribes`, `publishes`, `serves`, names from
-schemas/keys.py) and opens only those in `setup()`: runtime/acl.py generates a secure router's
-rules from the declarations, and a key not declared is refused, so the rules cannot drift from
-the code. Bad input never stops a service (runtime.accounting): what does not decode, or what a
-handler, timer, task or queryable raises, is counted and logged once per kind of problem.
-runtime/README.md shows a whole service.
+schemas/keys.py) and opens only those in `setup()`: runtime/security/acl.py generates a secure
+router's rules from the declarations, and a key not declared is refused, so the rules cannot drift
+from the code. Bad input never stops a service (runtime.resilience.accounting): what does not
+decode, or what a handler, timer, task or queryable raises, is counted and logged once per kind of
+problem. runtime/README.md shows a whole service.
 """
 
 from __future__ import annotations
@@ -22,19 +22,22 @@ from typing import Any, NoReturn, TypeVar, overload
 import msgspec
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime import heap, process
-from beyond_self.runtime.accounting import ErrorAccount
-from beyond_self.runtime.acl import check_declared
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.config import BusConfig, load_config
+from beyond_self.runtime.bus.delivery import RELIABLE, STATUS, Delivery
+from beyond_self.runtime.bus.publisher import Publisher
+from beyond_self.runtime.bus.queries import PlainQueryHandler, QueryHandler
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import Handler, Received, Subscription, consume
 from beyond_self.runtime.clock import Clock
-from beyond_self.runtime.config import BusConfig, load_config
-from beyond_self.runtime.delivery import RELIABLE, STATUS, Delivery
 from beyond_self.runtime.event_time import SourceTimes, Verdict
-from beyond_self.runtime.ledger import Keeper
 from beyond_self.runtime.log import event
 from beyond_self.runtime.progress import ProgressReport
-from beyond_self.runtime.publisher import Publisher
-from beyond_self.runtime.queries import PlainQueryHandler, QueryHandler
+from beyond_self.runtime.resilience import heap, process
+from beyond_self.runtime.resilience.accounting import ErrorAccount
+from beyond_self.runtime.resilience.ledger import Keeper
+from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
+from beyond_self.runtime.resilience.source_log import state_dir
+from beyond_self.runtime.security.acl import check_declared
 from beyond_self.runtime.self_report import (
     health_of,
     log_recovery,
@@ -43,9 +46,6 @@ from beyond_self.runtime.self_report import (
     stop_counts,
 )
 from beyond_self.runtime.service_cli import options_from_command_line
-from beyond_self.runtime.snapshots import Snapshots, SnapshotStore
-from beyond_self.runtime.source_log import state_dir
-from beyond_self.runtime.subscription import Handler, Received, Subscription, consume
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
 from beyond_self.schemas.identity import TYPES as IDENTIFIED
@@ -70,7 +70,7 @@ class Service:
     health_period: float = 1.0
     subscribes: tuple[str, ...] | None = None  # stream names (schemas.keys.STREAMS)
     publishes: tuple[str, ...] | None = None
-    serves: tuple[str, ...] | None = None  # queryable names (runtime.acl.QUERYABLES)
+    serves: tuple[str, ...] | None = None  # queryable names (runtime.security.acl.QUERYABLES)
     # one process may serve many robots, a run per robot (runtime.fleet): not a robot's source
     fleet: bool = False
 
@@ -99,7 +99,7 @@ class Service:
         self._subscriptions: list[tuple[Subscription[Any], Handler[Any]]] = []
         self._publishers: list[Publisher[Any]] = []
         self._progress = ProgressReport(self.name, self.header)
-        self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.ledger)
+        self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.resilience.ledger)
         self._once: set[str] = set()  # keys whose handling is not repeated after a restart
         self.times = SourceTimes()  # whose time each sensor key keeps (runtime.event_time)
         self._recovery_reported: tuple[int, int] = (0, 0)
@@ -146,7 +146,8 @@ class Service:
         once: bool = False,
     ) -> Subscription[M]:
         """Call `handler(message)` for every well-formed `cls` message on `key`, received as
-        `delivery` says (runtime.delivery), each identity once (runtime.ledger). With `paced`
+        `delivery` says (runtime.bus.delivery), each identity once (runtime.resilience.ledger). With
+        `paced`
         (sensor inputs), the stamp of every message handled is published as `Progress`, so a
         player never outruns this service; `key` belongs to one source (runtime.event_time):
         another's messages, and the owner's not after the last one handled (a restarted
@@ -192,7 +193,7 @@ class Service:
 
     def watch_tokens(self, key_expr: str, on_change: Callable[[str, bool], None]) -> None:
         """`on_change(key, present)` for every liveliness token matching `key_expr` that
-        appears or goes (runtime.liveliness); what it raises is counted as an error."""
+        appears or goes (runtime.bus.liveliness); what it raises is counted as an error."""
 
         def guarded(key: str, present: bool) -> None:
             try:
@@ -205,7 +206,7 @@ class Service:
     def keep_state(self, cls: type[S]) -> tuple[Snapshots[S], S | None]:
         """Snapshots of this service's `cls` state, taken by `Snapshots.taken`, and the one to
         restore (None: start afresh): told with its ledger, stored in its state folder when
-        there is one (runtime.snapshots)."""
+        there is one (runtime.resilience.snapshots)."""
         folder = state_dir(self.bus.keys.robot, self.name)
         store = SnapshotStore(folder) if folder is not None else None
         snapshots = Snapshots(cls, self.ledgers, store, self.bus.keys.description)

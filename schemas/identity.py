@@ -3,7 +3,8 @@
 A per-gesture output is identified by robot, segment id and kind ("start", "end", "cancel",
 "final belief", "object", "effects", "outcome", "words", "description"); a per-frame one adds its
 frame ("belief", "anticipation", "objects", a describer's drafts). Exactly-once is built on it
-(runtime.ledger): a consumer acts on each identity once, whether it came from its maker, a
+(runtime.resilience.ledger): a consumer acts on each identity once, whether it came from its maker,
+a
 restarted maker re-deriving it, or a cache after a cut link. It depends only on the key and the
 message's contents, never on who sent it or when, so every service agrees on it. Sensor streams,
 health and progress have none.

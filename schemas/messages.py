@@ -489,7 +489,7 @@ Range = tuple[Id, Count, Count]
 
 class Ledger(Message, frozen=True):
     """What one service has handled, by identity (schemas.identity), and where its next
-    instance starts: how a restarted service neither stalls nor repeats (runtime.ledger).
+    instance starts: how a restarted service neither stalls nor repeats (runtime.resilience.ledger).
 
     `handled`: input key -> kind -> (segment id, first, last) ranges of the frames handled (a
     per-gesture kind: (segment id, 0, 0)); the most recent ones, a bounded number. A producer

@@ -1,7 +1,7 @@
 """The ROS 2 face of a deployment: topic names, standard message types and rmw_zenoh's key
 expressions (ros2/rmw_zenoh docs/design.md), defined once. A stream of ours maps to one ROS 2
 topic under the robot's namespace (`/<robot>/...`) with the nearest standard type; the CDR
-conversion is runtime.ros2_convert's, the type hashes (RIHS01) come from rosbags' type store.
+conversion is runtime.ros2.convert's, the type hashes (RIHS01) come from rosbags' type store.
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 from beyond_self.core.errors import InputError, unknown
-from beyond_self.runtime import process
-from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.resilience import process
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.launcher import (
     HealthWatch,
@@ -38,7 +38,7 @@ from beyond_self.services.registry import PIPELINE, service_class
 from beyond_self.services.supervision import RestartPolicy, Restarts, how_it_ended
 
 if TYPE_CHECKING:
-    from beyond_self.runtime.bus import Bus
+    from beyond_self.runtime.bus.session import Bus
 
 SOURCE = "ingest"  # the service that publishes sensor streams, started last
 ROUTER = "router"  # a secure side's own router, supervised like a service
@@ -145,7 +145,7 @@ class Deployment:
             self._signals = process.install_signals(self._stopping.set)
         if self.router_command is not None:
             await self._launch_router()
-        from beyond_self.runtime.bus import (
+        from beyond_self.runtime.bus.session import (
             Bus,  # here: zenoh is slow to import, building a plan needs none
         )
 

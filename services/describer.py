@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from beyond_self.cognition.descriptions import nbest_exact
-from beyond_self.runtime.delivery import EVENTS
+from beyond_self.runtime.bus.delivery import EVENTS
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import Description, Evidence, ScoredSentence, WordProbabilities
 

@@ -5,7 +5,8 @@ object segmenter's costliest work, and no gesture result waits for it. On a thre
 GIL with the gestures' work, so the frame that completes a gesture waited behind it; in a process
 of its own, at a lower priority when the source is live, the system runs the gestures' work first
 and a live segmenter skips the frames nothing was left for. A replay's describer keeps its
-priority: every frame is described. The worker dies with the segmenter (runtime.lifeline).
+priority: every frame is described. The worker dies with the segmenter
+(runtime.resilience.lifeline).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.cognition.vision.pipeline import DetectedObject, describe_frame
-from beyond_self.runtime import lifeline
+from beyond_self.runtime.resilience import lifeline
 
 _clusters: ClusterModel | None = None  # the worker's own copy, loaded once
 

@@ -4,7 +4,8 @@ gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out.
 The per-gesture logic is `cognition.episodes.GestureTracker`; this service turns messages into
 its calls and its events into messages, each derived from the skeleton frame it is about. The
 source's `StreamEnd` closes a gesture still under way once the last frame it announces is
-handled, whatever order they arrive in. Crash-only: the tracker's snapshot (runtime.snapshots)
+handled, whatever order they arrive in. Crash-only: the tracker's snapshot
+(runtime.resilience.snapshots)
 restores a restarted streamer, which gets the frames since back from the source and continues
 its numbering (docs/concepts/recovery.md).
 """
@@ -21,7 +22,7 @@ from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTrac
 from beyond_self.cognition.episodes.tracker import TrackerSnapshot, hand_position
 from beyond_self.cognition.gestures import GestureModels
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.delivery import EVENTS, FRAMES, SKELETON
+from beyond_self.runtime.bus.delivery import EVENTS, FRAMES, SKELETON
 from beyond_self.runtime.log import event
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd

@@ -1,12 +1,12 @@
-"""Sensor ingest: puts sensor streams on the bus, from a recording, a YARP hand log or a live
-source (a plug-in, a video or a camera); docs/how-to/recordings.md describes each.
+"""Sensor ingest: puts sensor streams on the bus, from a recording, a YARP hand log or a live source
+(a plug-in, a video or a camera); docs/how-to/recordings.md describes each.
 
 A recording or log is played on its own clock (`StreamClock`, runtime.clock) and paced on its
-slowest consumer (runtime.pacing), so no rate drops a frame; a live source is on the wall clock
-and never held back: a bounded queue drops its oldest item, counted. `StreamEnd` says what was
-published, so consumers know when they have seen everything. Crash-only: a restarted ingest goes
-on from where its consumers are, after playing again what their successors need to rebuild
-(read from the recording again, or from runtime.source_log); see docs/concepts/recovery.md.
+slowest consumer (runtime.recording.pacing), so no rate drops a frame; a live source is on the wall
+clock and never held back: a bounded queue drops its oldest item, counted. `StreamEnd` says what was
+published, so consumers know when they have seen everything. Crash-only: a restarted ingest goes on
+from where its consumers are, after playing again what their successors need to rebuild (read from
+the recording again, or from runtime.resilience.source_log); see docs/concepts/recovery.md.
 """
 
 from __future__ import annotations
@@ -22,20 +22,20 @@ import msgspec
 
 from beyond_self.cognition.gestures.logs import hand_log_stream
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.accounting import bounded
+from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, SKELETON, STATUS
+from beyond_self.runtime.bus.publisher import Publisher
 from beyond_self.runtime.clock import Clock, ClockTicks
-from beyond_self.runtime.delivery import CAMERA, EVENTS, SKELETON, STATUS
-from beyond_self.runtime.fleet_recording import recorded_robot
-from beyond_self.runtime.images import message_from_image
 from beyond_self.runtime.log import event
-from beyond_self.runtime.pacing import DEFAULT_WINDOW_S, Pacer
-from beyond_self.runtime.publisher import Publisher
-from beyond_self.runtime.recording import inspect_recording, read_recording, require_mcap
-from beyond_self.runtime.recording_damage import Losses
-from beyond_self.runtime.replay import Cue, Player, looped, recorded_cues
-from beyond_self.runtime.replay_control import rate_option
+from beyond_self.runtime.recording.damage import Losses
+from beyond_self.runtime.recording.fleet import recorded_robot
+from beyond_self.runtime.recording.images import message_from_image
+from beyond_self.runtime.recording.pacing import DEFAULT_WINDOW_S, Pacer
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording, require_mcap
+from beyond_self.runtime.recording.replay import Cue, Player, looped, recorded_cues
+from beyond_self.runtime.recording.replay_control import rate_option
+from beyond_self.runtime.resilience.accounting import bounded
+from beyond_self.runtime.resilience.source_log import DEFAULT_MAX_MB, SourceLog, state_dir
 from beyond_self.runtime.service import Service
-from beyond_self.runtime.source_log import DEFAULT_MAX_MB, SourceLog, state_dir
 from beyond_self.schemas import (
     CameraFrame,
     CompressedCameraFrame,

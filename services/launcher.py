@@ -20,11 +20,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from beyond_self.runtime import lifeline
-from beyond_self.runtime.config import ENV_VARS, BusConfig
+from beyond_self.runtime.bus.config import ENV_VARS, BusConfig
+from beyond_self.runtime.resilience import lifeline
 
 if TYPE_CHECKING:
-    from beyond_self.runtime.bus import Bus
+    from beyond_self.runtime.bus.session import Bus
 
 LogSink = Callable[[str, str], None]
 LINE_MAX = 4096  # characters of one log line passed on (the rest is counted, not kept)
@@ -82,7 +82,7 @@ async def start_service(
         cmd += ["--set", f"{key}={json.dumps(value)}"]
     proc = await asyncio.create_subprocess_exec(  # started from this thread: the event loop's
         *cmd,
-        env={**env, **lifeline.child_env()},  # it dies with us (runtime.lifeline)
+        env={**env, **lifeline.child_env()},  # it dies with us (runtime.resilience.lifeline)
         stdin=asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT,

@@ -16,9 +16,9 @@ import asyncio
 import contextlib
 from collections.abc import Callable, Iterable
 
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import STATUS
-from beyond_self.runtime.subscription import Subscription
+from beyond_self.runtime.bus.delivery import STATUS
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import Subscription
 from beyond_self.schemas.messages import ServiceHealth
 
 SILENT_S = 12.0  # twelve health periods of every service of the other side, none arrived

@@ -20,11 +20,11 @@ import numpy as np
 
 from beyond_self.cognition.episodes import GestureEffects, ObjectAtStart, ObjectWatch
 from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
-from beyond_self.runtime.delivery import CAMERA, EVENTS, FRAMES
-from beyond_self.runtime.images import CameraMessage, image_from_message
+from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, FRAMES
+from beyond_self.runtime.bus.subscription import Subscription
+from beyond_self.runtime.recording.images import CameraMessage, image_from_message
+from beyond_self.runtime.resilience.snapshots import at_gestures, keep_newest, per_gesture
 from beyond_self.runtime.service import Service
-from beyond_self.runtime.snapshots import at_gestures, keep_newest, per_gesture
-from beyond_self.runtime.subscription import Subscription
 from beyond_self.schemas import (
     CameraFrame,
     CompressedCameraFrame,

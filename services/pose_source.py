@@ -21,7 +21,7 @@ import numpy as np
 
 from beyond_self.cognition.pose.skeleton import PoseEstimate, kinect_joints, pixel_joints
 from beyond_self.cognition.pose.video import Video
-from beyond_self.runtime.images import message_from_image
+from beyond_self.runtime.recording.images import message_from_image
 from beyond_self.schemas import (
     CompressedCameraFrame,
     Header,

@@ -17,7 +17,7 @@ from beyond_self.cognition.bn.evidence import Evidence, build_evidence
 from beyond_self.cognition.episodes import Anticipation, FusionJoin, Outcome
 from beyond_self.cognition.episodes.fusion import Prediction
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.delivery import EVENTS, FRAMES
+from beyond_self.runtime.bus.delivery import EVENTS, FRAMES
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     ActionPosterior,

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from beyond_self.core.errors import unknown
-from beyond_self.runtime import acl
+from beyond_self.runtime.security import acl
 from beyond_self.runtime.service import Service
 
 SERVICES: dict[str, str] = {
@@ -86,7 +86,7 @@ def access_rules(keystore: Path | None = None) -> dict[str, Any]:
     """The secure router's `access_control` block for these services, one subject per
     certificate of `keystore`, each on the robots it is bound to (default: every identity for
     the one robot `robot`)."""
-    from beyond_self.runtime.keystore import bindings
+    from beyond_self.runtime.security.keystore import bindings
 
     subjects = bindings(keystore) if keystore is not None else None
     return acl.access_control(declarations(), SIDES, subjects)

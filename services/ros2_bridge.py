@@ -1,7 +1,7 @@
 """The deployment's face on a ROS 2 graph (rmw_zenoh): each final description's best sentence as
 std_msgs/String on /<robot>/description, the skeleton as the Azure Kinect driver's body markers
 and the cameras as image_transport's CompressedImage, each stamped with its own message's
-stamp (schemas.ros2 names topics and types, runtime.ros2_convert converts, runtime.ros2_node
+stamp (schemas.ros2 names topics and types, runtime.ros2.convert converts, runtime.ros2.node
 speaks rmw_zenoh).
 
 A sentence is said once, across a SIGKILL, as the speech service says it (services.speech): a
@@ -15,10 +15,10 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from beyond_self.runtime.delivery import CAMERA, EVENTS, SKELETON
+from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, SKELETON
 from beyond_self.runtime.log import event
-from beyond_self.runtime.ros2_convert import to_ros
-from beyond_self.runtime.ros2_node import (
+from beyond_self.runtime.ros2.convert import to_ros
+from beyond_self.runtime.ros2.node import (
     DEFAULT_CONNECT,
     Ros2Node,
     Ros2Publisher,

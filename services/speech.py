@@ -19,7 +19,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from beyond_self.runtime.delivery import EVENTS
+from beyond_self.runtime.bus.delivery import EVENTS
 from beyond_self.runtime.log import event
 from beyond_self.runtime.outputs import DESCRIPTION, service_out_dir
 from beyond_self.runtime.service import Service

@@ -6,7 +6,8 @@ as stuck by the health watch) is started again after a delay that doubles with e
 the last `interval_s`, at most `burst` times in it; then the supervisor gives up and says so. A
 status 0 or SIGTERM/SIGINT meant to stop; status 2 is bad input, which a restart would read
 again (`RestartPreventExitStatus=2`): neither is restarted. A restarted service resumes
-(runtime.ledger) and learns its restart count from `BEYOND_RESTARTS` (runtime.self_report).
+(runtime.resilience.ledger) and learns its restart count from `BEYOND_RESTARTS`
+(runtime.self_report).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from dataclasses import dataclass, field
 
 from beyond_self.core.errors import InputError
 
-BAD_INPUT = 2  # the exit status of a service refusing its input (runtime.process)
+BAD_INPUT = 2  # the exit status of a service refusing its input (runtime.resilience.process)
 CLEAN_SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
 

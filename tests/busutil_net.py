@@ -18,7 +18,7 @@ import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
-from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.schemas import Header, Joint, Keys, ServiceHealth, SkeletonFrame
 
 REPO = Path(__file__).resolve().parent.parent
@@ -151,7 +151,7 @@ def skeleton_recording(path: Path, actions: list[str], seed: int, robot: str = "
     describe the gestures without measured effects."""
     from beyond_self.cognition.gestures import synthesize_continuous
     from beyond_self.cognition.scene import SCENE_GESTURES
-    from beyond_self.runtime.recording_writer import RecordingWriter
+    from beyond_self.runtime.recording.writer import RecordingWriter
 
     # gestures on a table, as in the shipped recordings (no slow taps in the air)
     stream = synthesize_continuous(actions, seed=seed, config=SCENE_GESTURES)

@@ -17,8 +17,8 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 import beyond_self.schemas as s
-from beyond_self.runtime.images import image_from_message
-from beyond_self.runtime.recording import read_recording
+from beyond_self.runtime.recording.images import image_from_message
+from beyond_self.runtime.recording.reader import read_recording
 
 
 async def scene() -> AsyncIterator[tuple[str, Any]]:

@@ -268,8 +268,8 @@ def probe() -> int:
 
     import zenoh
 
-    from beyond_self.runtime.bus import Bus
-    from beyond_self.runtime.delivery import EVENTS
+    from beyond_self.runtime.bus.delivery import EVENTS
+    from beyond_self.runtime.bus.session import Bus
     from beyond_self.schemas import Description, GestureSegment
 
     zenoh.init_log_from_env_or("error")  # RUST_LOG=zenoh=debug to see the transport's view

@@ -33,7 +33,7 @@ from typing import Any
 
 import zenoh
 
-from beyond_self.runtime.config import BusConfig, zenoh_config
+from beyond_self.runtime.bus.config import BusConfig, zenoh_config
 
 ROOT = "beyond/robot"
 ROUTER = "tls/127.0.0.1:7447"
@@ -183,7 +183,7 @@ def main(keystore: Path, foreign: Path) -> int:
 
 
 def watch(key: str) -> int:
-    from beyond_self.runtime.config import load_config
+    from beyond_self.runtime.bus.config import load_config
 
     zenoh.init_log_from_env_or("error")
     bus = zenoh.open(zenoh_config(load_config()))

@@ -20,7 +20,7 @@ from beyond_self.cli import main
 from beyond_self.cognition.bn import BayesNet, learn_network, synthetic_dataset
 from beyond_self.cognition.bn.inference import MAX_JOINT_ROWS, MAX_QUERY_WORK
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.services.launcher import BEYOND
 
 ASKS = 50

@@ -29,8 +29,8 @@ from busutil_net import REPO, env_for, private_config
 
 import beyond_self.schemas as s
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.services.launcher import BEYOND
 from beyond_self.services.registry import PIPELINE as SERVICES  # what `up` starts
 

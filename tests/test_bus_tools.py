@@ -13,12 +13,12 @@ import pytest
 from busutil_net import REPO, env_for, private_config, skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import Delivery
-from beyond_self.runtime.rates import RateWindow
-from beyond_self.runtime.recording import read_recording
-from beyond_self.runtime.replay import replay
-from beyond_self.runtime.replay_control import ReplayControl, remapper
+from beyond_self.runtime.bus.delivery import Delivery
+from beyond_self.runtime.bus.rates import RateWindow
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.recording.reader import read_recording
+from beyond_self.runtime.recording.replay import replay
+from beyond_self.runtime.recording.replay_control import ReplayControl, remapper
 from beyond_self.runtime.service import Service
 from beyond_self.schemas.codec import recording_json_schema, to_recording_json
 from beyond_self.services.launcher import BEYOND

@@ -33,8 +33,8 @@ from hypothesis import strategies as st
 
 from beyond_self.cli import build_parser
 from beyond_self.commands import argtypes
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.recording import inspect_recording
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.recording.reader import inspect_recording
 from beyond_self.services.launcher import BEYOND
 
 CASE_TIMEOUT = 60.0  # a hang, on a loaded 2-core machine (cases take well under a second)

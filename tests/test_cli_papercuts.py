@@ -18,10 +18,10 @@ from pathlib import Path
 import pytest
 from busutil_net import REPO, env_for, free_port, private_config
 
-from beyond_self.runtime import keystore
-from beyond_self.runtime.config import describe, load_config
+from beyond_self.runtime.bus.config import describe, load_config
 from beyond_self.runtime.outputs import OUT_DIR_VAR, out_dir
-from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.security import keystore
 from beyond_self.services import registry
 from beyond_self.services.launcher import BEYOND
 from beyond_self.services.speech import SpeechSynthesizer

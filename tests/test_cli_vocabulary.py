@@ -16,9 +16,9 @@ from busutil_net import REPO, free_port
 
 from beyond_self.cli import build_parser, main
 from beyond_self.commands import argtypes
-from beyond_self.runtime.bus import open_failure
-from beyond_self.runtime.cliargs import _port, config_from_args
-from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.bus.cliargs import _port, config_from_args
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.session import open_failure
 from beyond_self.schemas.keys import ALIVE, HEALTH, PROGRESS, STREAMS
 from beyond_self.services.launcher import BEYOND
 

@@ -21,9 +21,9 @@ from busutil_net import env_for, private_config, skeleton_frames
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from beyond_self.runtime.recording import inspect_recording
-from beyond_self.runtime.recording_damage import Losses
-from beyond_self.runtime.recording_scan import Walk, mapped
+from beyond_self.runtime.recording.damage import Losses
+from beyond_self.runtime.recording.reader import inspect_recording
+from beyond_self.runtime.recording.scan import Walk, mapped
 from beyond_self.services.launcher import BEYOND
 
 SOURCE = Path(__file__).resolve().parent.parent / "recordings" / "touch-box.mcap"
@@ -183,7 +183,7 @@ async def test_inspect_analyse_and_up_agree_on_every_damaged_recording(
 def test_a_damaged_chunk_costs_only_itself(tmp_path: Path) -> None:
     """A flipped bit in one chunk of many: the chunks after it are read (they used to be
     hidden), and the line says what was lost, also with the summary gone."""
-    from beyond_self.runtime.recording_writer import RecordingWriter
+    from beyond_self.runtime.recording.writer import RecordingWriter
 
     path = tmp_path / "many.mcap"
     frames = skeleton_frames(90)

@@ -25,7 +25,7 @@ import pytest
 import yaml
 
 from beyond_self.cli import COMMANDS, build_parser
-from beyond_self.runtime.config import BLOCK_CLOSE_MS, ENV_VARS
+from beyond_self.runtime.bus.config import BLOCK_CLOSE_MS, ENV_VARS
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import PROFILES, service_class
 
@@ -399,7 +399,7 @@ def test_deploy_configs_load_and_agree() -> None:
     assert modes == {"router": "router", "robot": "peer", "workstation": "client"}
     leases = {k: int(c.get_json("transport/link/tx/lease")) for k, c in configs.items()}
     assert len(set(leases.values())) == 1 and leases["router"] < 10_000  # faster than default
-    # a blocking message gives up on a full queue before the lease runs out (runtime/config.py)
+    # a blocking message gives up on a full queue before the lease runs out (runtime/bus/config.py)
     for path in sorted(REPO.glob("deploy/zenoh*/*.json5")):
         config = zenoh.Config.from_file(str(path))
         block_close_us = int(config.get_json(WAIT_BEFORE_CLOSE))

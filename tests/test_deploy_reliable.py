@@ -1,6 +1,7 @@
 """The pieces a two-machine deployment stands on, checked fast on one machine: publisher caches
-and recovering subscriptions (runtime.delivery, runtime.recovery), routers joined in addition to
-the local group (runtime.config), and how `beyond up` hands that to the processes it starts."""
+and recovering subscriptions (runtime.bus.delivery, runtime.resilience.recovery), routers joined in
+addition to
+the local group (runtime.bus.config), and how `beyond up` hands that to the processes it starts."""
 
 from __future__ import annotations
 
@@ -15,9 +16,9 @@ from busutil_net import private_config, skeleton_frames
 import beyond_self.schemas as s
 from beyond_self.commands.up import local_group, monitor_name, wait_list
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig, load_config, zenoh_config
-from beyond_self.runtime.delivery import FRAMES, Delivery
+from beyond_self.runtime.bus.config import BusConfig, load_config, zenoh_config
+from beyond_self.runtime.bus.delivery import FRAMES, Delivery
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.services.launcher import service_env
 
 REPO = Path(__file__).resolve().parent.parent

@@ -67,7 +67,7 @@ def test_every_command_subcommand_and_option_is_in_the_cli_reference(gen: dict[s
 
 
 def test_every_environment_variable_is_in_the_cli_reference(gen: dict[str, Any]) -> None:
-    from beyond_self.runtime.config import ENV_VARS
+    from beyond_self.runtime.bus.config import ENV_VARS
 
     text = _section(gen["cli_reference"](), "## Environment variables")
     for name in ENV_VARS:

@@ -33,7 +33,7 @@ import beyond_self.schemas as s
 from beyond_self.cognition.episodes.report import GestureLines
 from beyond_self.commands.analyse import _inputs, default_run, looped_inputs
 from beyond_self.monitor import PipelineMonitor
-from beyond_self.runtime.delivery import FRAMES
+from beyond_self.runtime.bus.delivery import FRAMES
 from beyond_self.services.deployment import Deployment
 
 RECORDINGS = Path(__file__).resolve().parent.parent / "recordings"

@@ -16,11 +16,11 @@ from busutil_net import private_config
 from beyond_self.commands.analyse import _inputs, default_run
 from beyond_self.core.errors import InputError
 from beyond_self.monitor import PipelineMonitor
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig
-from beyond_self.runtime.delivery import EVENTS
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.delivery import EVENTS
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.fleet import LEAVE_ENV, Fleet
-from beyond_self.runtime.recorder import record
+from beyond_self.runtime.recording.recorder import record
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     Description,

@@ -1,5 +1,5 @@
 """A robot's identity is its own: on a secure bus a certificate speaks only for the robots it is
-bound to (runtime/keystore.py bindings, runtime/acl.py rules).
+bound to (runtime/security/keystore.py bindings, runtime/security/acl.py rules).
 
 A real secure router runs in this process (mutual TLS on a free loopback port, the rules made
 from the keystore's certificates) and clients join it with their certificates, as
@@ -22,10 +22,10 @@ import pytest
 import zenoh
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime import keystore
-from beyond_self.runtime.acl import Binding
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig, zenoh_config
+from beyond_self.runtime.bus.config import BusConfig, zenoh_config
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.security import keystore
+from beyond_self.runtime.security.acl import Binding
 from beyond_self.schemas.keys import robot_matches, robot_pattern
 from beyond_self.services import registry
 

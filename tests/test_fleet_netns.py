@@ -162,7 +162,7 @@ def test_a_secure_fleet_describes_its_robot_through_the_rules(
     tests/test_fleet_identity.py's). A second workstation, ws-lab2 (lab-b*), on ws-lab's
     host links its own router to ws-lab's (loopback 7447 is taken: its router takes another
     port) and comes up beside it."""
-    from beyond_self.runtime import keystore
+    from beyond_self.runtime.security import keystore
     from beyond_self.services import registry
 
     keys = tmp_path / "keys"

@@ -5,7 +5,7 @@ the npm client `@foxglove/ws-protocol` with its defaults.
 
 The protocol has two names: foxglove.sdk.v1, the only one foxglove-sdk 0.30's server accepts,
 and foxglove.websocket.v1, the only one the npm client offers; the first client offers both, as
-the Foxglove app does, the npm client only its own (runtime/foxglove_front.py)."""
+the Foxglove app does, the npm client only its own (runtime/foxglove/front.py)."""
 
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ from third_party_readers import official_schemas
 from websockets.asyncio.client import connect
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.foxglove_bridge import FoxgloveBridge
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.foxglove.bridge import FoxgloveBridge
 from beyond_self.services.launcher import BEYOND
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]

@@ -1,4 +1,4 @@
-"""The shipped Foxglove layout is the one `runtime.foxglove_layout` builds, and shows only
+"""The shipped Foxglove layout is the one `runtime.foxglove.layout` builds, and shows only
 topics the bridge serves (so importing it gives panels with data, not empty ones)."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import re
 
 from busutil_net import REPO
 
-from beyond_self.runtime.foxglove_layout import layout_json
-from beyond_self.runtime.foxglove_views import VIEWS
+from beyond_self.runtime.foxglove.layout import layout_json
+from beyond_self.runtime.foxglove.views import VIEWS
 from beyond_self.schemas.keys import STREAMS, Keys
 
 SHIPPED = REPO / "deploy" / "foxglove" / "beyond-demo.layout.json"

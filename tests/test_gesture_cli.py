@@ -70,7 +70,7 @@ def test_train_then_evaluate_synthetic(tmp_path: Path, capsys: pytest.CaptureFix
 
 def _write_mcap(path: Path, actions: list[str], seed: int, metadata: dict[str, str]) -> None:
     from beyond_self.cognition.gestures.synthetic import synthesize_continuous
-    from beyond_self.runtime.recording_writer import RecordingWriter
+    from beyond_self.runtime.recording.writer import RecordingWriter
     from beyond_self.schemas.base import Header
     from beyond_self.schemas.keys import Keys
     from beyond_self.schemas.messages import Joint, SkeletonFrame

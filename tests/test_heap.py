@@ -1,4 +1,5 @@
-"""runtime.heap: a service process settles its heap after set-up, once per burst, and hands it
+"""runtime.resilience.heap: a service process settles its heap after set-up, once per burst, and
+hands it
 back when a run ends; a process that is not a service's own keeps the collector as it was."""
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from beyond_self.runtime import heap
+from beyond_self.runtime.resilience import heap
 
 
 class _Node:

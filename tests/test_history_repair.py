@@ -10,7 +10,7 @@ reply, older, is then discarded as a duplicate, with no miss reported. On a load
 window is a few tens of ms wide, enough for a per-frame stream (the CI failure of
 test_deploy_netns.py::test_the_robot_may_start_first). Here a second queryable on the
 publisher's side delays the end of per-publisher queries, which widens the window at will;
-runtime.history_repair must still get the history back."""
+runtime.resilience.history_repair must still get the history back."""
 
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ import zenoh
 from busutil_net import private_config, skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import FRAMES
+from beyond_self.runtime.bus.delivery import FRAMES
+from beyond_self.runtime.bus.session import Bus
 
 BEFORE = 100  # published before the subscriber exists: only the cache holds them
 LIVE = 60  # published while it starts, every 10 ms

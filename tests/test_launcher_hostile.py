@@ -15,7 +15,7 @@ from pathlib import Path
 
 from busutil_net import env_for, private_config
 
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.services.launcher import (
     LINE_MAX,
     HealthWatch,

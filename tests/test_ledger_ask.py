@@ -12,11 +12,11 @@ import pytest
 from busutil_net import private_config
 
 from beyond_self.monitor import PipelineMonitor
-from beyond_self.runtime import ledger
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import FRAMES, STATUS
-from beyond_self.runtime.ledger import Keeper, LedgerBook
-from beyond_self.runtime.subscription import Received
+from beyond_self.runtime.bus.delivery import FRAMES, STATUS
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import Received
+from beyond_self.runtime.resilience import ledger
+from beyond_self.runtime.resilience.ledger import Keeper, LedgerBook
 from beyond_self.schemas import ActionPosterior, Header, Keys, Ledger
 from beyond_self.schemas.identity import Identity, identify
 

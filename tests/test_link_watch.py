@@ -8,8 +8,8 @@ from collections.abc import Callable
 
 from busutil_net import health_report, private_config
 
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import STATUS
+from beyond_self.runtime.bus.delivery import STATUS
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.schemas import ServiceHealth
 from beyond_self.services.link_watch import LinkSilence, LinkWatch
 

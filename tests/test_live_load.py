@@ -31,10 +31,10 @@ from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, a
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.monitor import PipelineMonitor
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import EVENTS, FRAMES
-from beyond_self.runtime.images import image_from_message
-from beyond_self.runtime.subscription import Subscription
+from beyond_self.runtime.bus.delivery import EVENTS, FRAMES
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import Subscription
+from beyond_self.runtime.recording.images import image_from_message
 
 SCENE = REPO / "recordings" / "touch-box.mcap"  # 4.8 s, a touch ending at 3.6 s
 TIMEOUT_S = 3

@@ -15,7 +15,7 @@ from beyond_self.cognition.gestures import synthesize_continuous
 from beyond_self.commands import up
 from beyond_self.core.errors import InputError
 from beyond_self.monitor import PipelineMonitor
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.deployment import Ending

@@ -169,11 +169,11 @@ def test_our_package_imports_beside_decoy_layers(installed: Path, tmp_path: Path
         (decoys / name).mkdir(parents=True)
         (decoys / name / "__init__.py").write_text(f"DECOY = {name!r}\n")
     probe = (
-        "import beyond_self, beyond_self.services.registry, beyond_self.runtime.bus, "
+        "import beyond_self, beyond_self.services.registry, beyond_self.runtime.bus.session, "
         "beyond_self.schemas, beyond_self.cognition.bn\n"
         "import runtime, schemas, services, cognition, core\n"
         "print(beyond_self.__file__)\n"
-        "print(beyond_self.runtime.bus.__file__)\n"
+        "print(beyond_self.runtime.bus.session.__file__)\n"
         "print(runtime.DECOY, schemas.DECOY, services.DECOY, cognition.DECOY, core.DECOY)\n"
     )
     done = subprocess.run(
@@ -188,5 +188,6 @@ def test_our_package_imports_beside_decoy_layers(installed: Path, tmp_path: Path
     package, bus, decoy_names = done.stdout.splitlines()
     site = re.escape(str(installed))
     assert re.match(site + r"/lib/python3\.\d+/site-packages/beyond_self/__init__\.py$", package)
-    assert re.match(site + r"/lib/python3\.\d+/site-packages/beyond_self/runtime/bus\.py$", bus)
+    installed_bus = r"/lib/python3\.\d+/site-packages/beyond_self/runtime/bus/session\.py$"
+    assert re.match(site + installed_bus, bus)
     assert decoy_names == "runtime schemas services cognition core"

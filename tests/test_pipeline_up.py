@@ -18,11 +18,11 @@ from third_party_readers import assert_trusted, doctor, js_reports, unsafe_integ
 import beyond_self.schemas as s
 from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
 from beyond_self.cognition.paths import DEMO_RECORDING
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig
-from beyond_self.runtime.delivery import EVENTS
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.replay import Player, recorded_cues
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.delivery import EVENTS
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.replay import Player, recorded_cues
 from beyond_self.services.deployment import Deployment
 from beyond_self.services.launcher import BEYOND
 

@@ -13,10 +13,10 @@ from busutil_net import REPO, env_for, private_config
 from third_party_readers import assert_trusted, js_reports
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.clock import ClockTicks
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.replay import replay
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.replay import replay
 from beyond_self.services.launcher import BEYOND
 
 SHIPPED = sorted((REPO / "recordings").glob("*.mcap"))

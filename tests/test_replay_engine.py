@@ -1,4 +1,5 @@
-"""The one replay engine (runtime.replay.Player) and the one rule for replay speed, without a bus:
+"""The one replay engine (runtime.recording.replay.Player) and the one rule for replay speed,
+without a bus:
 what both `beyond replay` and the ingest service rely on, checked where it is cheap to check."""
 
 from __future__ import annotations
@@ -12,10 +13,10 @@ from busutil_net import skeleton_frames
 
 import beyond_self.schemas as s
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.recording import read_recording
-from beyond_self.runtime.recording_writer import RecordingWriter
-from beyond_self.runtime.replay import Cue, Player, recorded_cues
-from beyond_self.runtime.replay_control import ReplayControl, check_rate, rate_option
+from beyond_self.runtime.recording.reader import read_recording
+from beyond_self.runtime.recording.replay import Cue, Player, recorded_cues
+from beyond_self.runtime.recording.replay_control import ReplayControl, check_rate, rate_option
+from beyond_self.runtime.recording.writer import RecordingWriter
 
 KEYS = s.Keys("r1")
 
@@ -94,7 +95,7 @@ def test_a_looped_source_is_restamped_pass_after_pass(tmp_path: Path) -> None:
     """Each pass later than the one before by the recording's span and a second: a consumer
     that refuses stamps going back takes every pass (issue 21); a camera frame's timestamp
     moves with its header. A restarted source starts with the pass its consumers are in."""
-    from beyond_self.runtime.replay import LOOP_GAP_S, looped
+    from beyond_self.runtime.recording.replay import LOOP_GAP_S, looped
     from beyond_self.schemas import CameraFrame
 
     path = tmp_path / "r.mcap"

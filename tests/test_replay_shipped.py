@@ -11,9 +11,9 @@ from pathlib import Path
 from busutil_net import private_config
 
 import beyond_self.schemas as s
-from beyond_self.runtime.config import BusConfig
-from beyond_self.runtime.delivery import FRAMES
-from beyond_self.runtime.replay import replay
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.delivery import FRAMES
+from beyond_self.runtime.recording.replay import replay
 from beyond_self.services.deployment import Deployment
 
 RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "touch-box.mcap"

@@ -21,8 +21,8 @@ from busutil_net import env_for, free_port, private_config
 from ros2util import STORE, zero
 from zenoh_ros2_sdk.attachment import Attachment
 
-from beyond_self.runtime.recording import read_recording
-from beyond_self.runtime.ros2_node import attachment, read_attachment
+from beyond_self.runtime.recording.reader import read_recording
+from beyond_self.runtime.ros2.node import attachment, read_attachment
 from beyond_self.schemas import ros2 as r
 from beyond_self.services.launcher import BEYOND
 

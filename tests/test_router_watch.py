@@ -9,9 +9,9 @@ from pathlib import Path
 
 from busutil_net import free_port
 
-from beyond_self.runtime import keystore
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.security import keystore
 from beyond_self.services import registry
 from beyond_self.services.deployment import Deployment
 

@@ -13,8 +13,8 @@ import pytest
 from busutil_net import EXAMPLES, env_for, health_report, private_config, skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.inbox import Inbox
+from beyond_self.runtime.bus.inbox import Inbox
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.service import Service
 
 

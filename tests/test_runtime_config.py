@@ -10,7 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.config import DEFAULT_PORT, ENV_VARS, BusConfig, load_config, zenoh_config
+from beyond_self.runtime.bus.config import (
+    DEFAULT_PORT,
+    ENV_VARS,
+    BusConfig,
+    load_config,
+    zenoh_config,
+)
 
 
 def get(zc: object, key: str) -> object:
@@ -138,7 +144,7 @@ def test_a_connect_timeout_bounds_the_first_link_whatever_the_mode_or_file() -> 
 def test_a_blocking_message_gives_up_on_a_full_queue_before_the_lease_does(mode: str) -> None:
     """Zenoh's default wait (5 s) outlasts our lease (4 s): a router forwarding a blocking
     message onto a dead link would hold the thread that routes every other stream past the
-    lease of its local sessions (runtime/config.py, BLOCK_CLOSE_MS)."""
+    lease of its local sessions (runtime/bus/config.py, BLOCK_CLOSE_MS)."""
     zc = zenoh_config(BusConfig(mode=mode))
     wait_us = get(zc, "transport/link/tx/queue/congestion_control/block/wait_before_close")
     lease_ms = get(zc, "transport/link/tx/lease")

@@ -20,8 +20,8 @@ from types import ModuleType
 import msgspec
 from busutil_net import env_for, private_config
 
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import EVENTS
+from beyond_self.runtime.bus.delivery import EVENTS
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.schemas import Description, GestureSegment, Header
 
 README = Path(__file__).resolve().parents[1] / "runtime" / "README.md"

@@ -13,11 +13,11 @@ import pytest
 from busutil_net import private_config, skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import Delivery
-from beyond_self.runtime.inbox import Inbox
-from beyond_self.runtime.recording_writer import RecordingWriter
-from beyond_self.runtime.replay import replay
+from beyond_self.runtime.bus.delivery import Delivery
+from beyond_self.runtime.bus.inbox import Inbox
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.recording.replay import replay
+from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.schemas.codec import encode, encode_into, wire_encoding
 
 
@@ -212,7 +212,7 @@ async def test_replay_sends_each_recorded_message_as_its_wire_bytes(tmp_path: Pa
 def test_chunk_parser_reads_what_mcap_reads(tmp_path: Path, compression: str) -> None:
     from mcap.reader import make_reader
 
-    from beyond_self.runtime.recording import read_recording
+    from beyond_self.runtime.recording.reader import read_recording
 
     keys = s.Keys("robot")
     path = tmp_path / f"{compression}.mcap"
@@ -235,7 +235,7 @@ def test_chunk_parser_reads_what_mcap_reads(tmp_path: Path, compression: str) ->
 
 def test_a_corrupt_chunk_is_reported_as_damage(tmp_path: Path) -> None:
     from beyond_self.core.errors import InputError
-    from beyond_self.runtime.recording import read_recording
+    from beyond_self.runtime.recording.reader import read_recording
 
     keys = s.Keys("robot")
     path = tmp_path / "corrupt.mcap"

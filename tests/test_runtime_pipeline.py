@@ -12,10 +12,10 @@ from pathlib import Path
 from busutil_net import EXAMPLES, env_for, private_config, skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.recording_writer import RecordingWriter
-from beyond_self.runtime.replay import replay
-from beyond_self.runtime.subscription import RawSubscription
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import RawSubscription
+from beyond_self.runtime.recording.replay import replay
+from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.services.launcher import BEYOND
 
 N = 150

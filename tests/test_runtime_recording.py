@@ -18,10 +18,10 @@ from mcap.reader import make_reader
 
 import beyond_self.schemas as s
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.recording_writer import RecordingWriter
-from beyond_self.runtime.replay import replay
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.replay import replay
+from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.services.launcher import BEYOND
 
 ROBOT_KEYS = s.Keys("r1")

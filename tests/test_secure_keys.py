@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime import acl, keystore
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig, load_config, zenoh_config
+from beyond_self.runtime.bus.config import BusConfig, load_config, zenoh_config
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.security import acl, keystore
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import Description, WordProbabilities
 from beyond_self.services import registry
@@ -90,7 +90,8 @@ def test_rules_follow_the_declarations() -> None:
             "beyond/robot/language/words/@adv/**",
             "beyond/robot/progress/*",
             "beyond/robot/clock",  # a replay's stream clock, which every service may follow
-            "beyond/robot/ledger/*",  # everyone's ledger, kept by every service (runtime.ledger)
+            # everyone's ledger, kept by every service (runtime.resilience.ledger)
+            "beyond/robot/ledger/*",
         ]
     )
     assert "beyond/robot/clock" in by_id["ingest-out-ingress"]["key_exprs"]  # the player's

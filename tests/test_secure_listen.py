@@ -14,10 +14,10 @@ import pytest
 from busutil_net import env_for, free_port, private_config
 
 import beyond_self.schemas as s
-from beyond_self.runtime import keystore
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import load_config
-from beyond_self.runtime.delivery import RELIABLE
+from beyond_self.runtime.bus.config import load_config
+from beyond_self.runtime.bus.delivery import RELIABLE
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.security import keystore
 from beyond_self.services import registry
 from beyond_self.services.launcher import BEYOND
 

@@ -22,7 +22,7 @@ import pytest
 from busutil_net import skeleton_recording
 from netns_util import REPO, TwoHosts
 
-from beyond_self.runtime import keystore
+from beyond_self.runtime.security import keystore
 from beyond_self.services import registry
 from beyond_self.services.launcher import BEYOND
 

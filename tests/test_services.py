@@ -12,7 +12,7 @@ from busutil_net import private_config
 
 import beyond_self.schemas as s
 from beyond_self.cognition.gestures import synthesize_continuous
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.registry import SERVICES, service_class
 

@@ -26,9 +26,9 @@ from beyond_self.cognition.scene import (
 from beyond_self.cognition.vision.tabletop import kinect_to_table
 from beyond_self.commands.simulate import check_recording, checks_pass
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.images import image_from_message, message_from_image
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.runtime.recording.images import image_from_message, message_from_image
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, Header, SkeletonFrame
 from beyond_self.schemas.keys import Keys
 

@@ -1,4 +1,5 @@
-"""Snapshots on the machine (runtime.snapshots, issue 39): the newest few kept, each whole, and
+"""Snapshots on the machine (runtime.resilience.snapshots, issue 39): the newest few kept, each
+whole, and
 the newest one that decodes restored."""
 
 from __future__ import annotations
@@ -8,8 +9,8 @@ from pathlib import Path
 import msgspec
 
 import beyond_self.schemas as s
-from beyond_self.runtime.ledger import Keeper
-from beyond_self.runtime.snapshots import Snapshots, SnapshotStore
+from beyond_self.runtime.resilience.ledger import Keeper
+from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
 
 
 class State(msgspec.Struct, frozen=True):

@@ -1,4 +1,5 @@
-"""The source's flight recorder (runtime.source_log, issue 39): what went in comes back from a
+"""The source's flight recorder (runtime.resilience.source_log, issue 39): what went in comes back
+from a
 position on, across a restart and a file cut short by a kill, within a bound on bytes."""
 
 from __future__ import annotations
@@ -12,9 +13,9 @@ from busutil_net import private_config
 
 import beyond_self.schemas as s
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import SKELETON
-from beyond_self.runtime.source_log import SEGMENTS, SourceLog
+from beyond_self.runtime.bus.delivery import SKELETON
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.resilience.source_log import SEGMENTS, SourceLog
 from beyond_self.services.ingest import SensorIngest
 
 

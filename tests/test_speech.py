@@ -11,8 +11,8 @@ import pytest
 from busutil_net import private_config
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.config import BusConfig
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.schemas import Keys, Message
 from beyond_self.services.speech import LOG_START, SpeechLog, SpeechSynthesizer

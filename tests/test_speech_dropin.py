@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from busutil_net import REPO, env_for, private_config, run_beyond
 
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.session import Bus
 
 EXAMPLE = REPO / "docs" / "examples" / "my_speech.py"
 RECORDING = REPO / "recordings" / "touch-box.mcap"

@@ -12,9 +12,9 @@ import pytest
 from busutil_net import env_for, private_config, run_beyond
 
 import beyond_self.schemas as s
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.recording_writer import RecordingWriter
-from beyond_self.runtime.replay import restamped
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.replay import restamped
+from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.services.launcher import BEYOND
 
 RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"

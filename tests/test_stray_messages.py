@@ -17,9 +17,9 @@ from busutil_net import env_for, private_config, run_beyond
 import beyond_self.schemas as s
 from beyond_self.commands.analyse import _inputs, default_run
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
+from beyond_self.runtime.bus.delivery import RELIABLE, STATUS
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.clock import Clock
-from beyond_self.runtime.delivery import RELIABLE, STATUS
 from beyond_self.runtime.service import Service
 from beyond_self.services.launcher import BEYOND
 
@@ -162,8 +162,8 @@ async def test_a_recording_that_begins_with_frames_without_a_hand_plays_to_its_e
     """Refused frames move no time, but the player waiting on the gesture streamer still sees
     them read: thirty hand-less frames at the start (no owner yet) do not stall `up --rate 0`,
     and the rest of the recording is described."""
-    from beyond_self.runtime.recording import inspect_recording, read_recording
-    from beyond_self.runtime.recording_writer import RecordingWriter
+    from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+    from beyond_self.runtime.recording.writer import RecordingWriter
 
     bad = tmp_path / "no-hand-at-first.mcap"
     with RecordingWriter(bad, metadata=inspect_recording(RECORDING).metadata["beyond"]) as out:

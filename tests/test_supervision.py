@@ -95,7 +95,7 @@ async def test_up_says_which_skipped_service_it_waits_for_until_it_comes() -> No
     """Issue 42: `up --skip speech` with no speech service anywhere waited with no hint."""
     import asyncio
 
-    from beyond_self.runtime.bus import Bus
+    from beyond_self.runtime.bus.session import Bus
 
     args = parsed("--skip", "speech,objects", "--wait-for", "reasoner")
     awaited = up.awaited_elsewhere(args)

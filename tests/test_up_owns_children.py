@@ -15,8 +15,8 @@ from busutil_net import REPO, env_for, private_config, run_beyond
 from test_lifeline import gone, wait_gone
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.delivery import EVENTS
+from beyond_self.runtime.bus.delivery import EVENTS
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.services.launcher import BEYOND
 from beyond_self.services.registry import PROFILES
 

@@ -27,7 +27,7 @@ from beyond_self.cognition.gestures.synthetic import JOINTS
 from beyond_self.cognition.scene import EPOCH_NS
 from beyond_self.live_view import render
 from beyond_self.monitor import PipelineMonitor
-from beyond_self.runtime.recording import inspect_recording, read_recording
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
 from beyond_self.schemas import (
     CompressedCameraFrame,
     Header,

@@ -82,7 +82,7 @@ def test_mcap_recording_of_camera_frames(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     import beyond_self.schemas as s
-    from beyond_self.runtime.recording_writer import RecordingWriter
+    from beyond_self.runtime.recording.writer import RecordingWriter
 
     exp = simulate_experiment("tap", "yellow", "circle", "big", np.random.default_rng(9))
     path = tmp_path / "rec.mcap"

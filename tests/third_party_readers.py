@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from busutil_net import REPO
 
-from beyond_self.runtime.recording import inspect_recording
+from beyond_self.runtime.recording.reader import inspect_recording
 
 CHECKER = REPO / "tests" / "js" / "mcap_check.js"
 

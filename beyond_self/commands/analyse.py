@@ -28,11 +28,11 @@ from beyond_self.cognition.gestures.logs import hand_log_stream
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.fleet_recording import recorded_robot
-from beyond_self.runtime.images import image_from_message
-from beyond_self.runtime.recording import inspect_recording, read_recording, require_mcap
-from beyond_self.runtime.recording_damage import Losses
-from beyond_self.runtime.replay import Cue, looped, recorded_cues
+from beyond_self.runtime.recording.damage import Losses
+from beyond_self.runtime.recording.fleet import recorded_robot
+from beyond_self.runtime.recording.images import image_from_message
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording, require_mcap
+from beyond_self.runtime.recording.replay import Cue, looped, recorded_cues
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
 from beyond_self.schemas.keys import TABLETOP_CAMERA, split_key
 from beyond_self.services.options import check_options, load_options
@@ -60,7 +60,7 @@ def _inputs(
 ) -> Iterator[SkeletonInput | CameraInput]:
     """The skeleton and camera frames of a recording, as the ingest plays them: what does not
     decode or does not move forward in time is dropped and counted in `losses`
-    (runtime.recording_damage), the same frames every command drops; of a fleet's recording,
+    (runtime.recording.damage), the same frames every command drops; of a fleet's recording,
     robot `robot`'s (runtime.fleet.recorded_robot)."""
     tally = losses if losses is not None else Losses(str(path))
     source = recorded_robot(inspect_recording(path), robot)
@@ -98,7 +98,8 @@ def looped_inputs(
     path: Path, passes: int, hand: str = "right_hand", torso: str = "torso"
 ) -> Iterator[SkeletonInput | CameraInput]:
     """The inputs of `passes` passes of a recording, each restamped after the last, as the
-    ingest plays it with `loop: true` (runtime.replay.looped): what `up` over a looped source
+    ingest plays it with `loop: true` (runtime.recording.replay.looped): what `up` over a looped
+    source
     must tell."""
     info = inspect_recording(path)
     if info.start is None or info.end is None:

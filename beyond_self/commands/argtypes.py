@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from beyond_self.runtime.replay_control import RATE_MAX
+from beyond_self.runtime.recording.replay_control import RATE_MAX
 
 SEED_MAX = 2**32 - 1  # numpy's legacy seeding and our simulators take 32-bit seeds
 SECONDS_MAX = 366 * 86400.0  # a year: longer is a typo, and asyncio deadlines stay exact
@@ -71,7 +71,8 @@ def count(lo: int = 1, hi: int = 2**62, what: str = "") -> Callable[[str], float
 
 
 seed = number(int, lo=0, hi=SEED_MAX, what="seed")
-# a replay's speed as typed: 0 means as fast as possible (runtime.replay_control.rate_option
+# a replay's speed as typed: 0 means as fast as possible
+# (runtime.recording.replay_control.rate_option
 # turns it into the engine's None), so every command takes the same values
 rate = number(float, lo=0, hi=RATE_MAX, what="speed factor, 0: as fast as possible")
 

@@ -19,9 +19,9 @@ from rich.table import Table
 from beyond_self.commands import argtypes
 from beyond_self.commands.evidence_args import add_evidence_arguments, parse_evidence_args
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.subscription import Received
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import Received
 from beyond_self.schemas import AffordanceAnswer, AffordanceQuery, Header
 
 HELP = "query the running affordance reasoner (exact posterior, with optional gesture evidence)"

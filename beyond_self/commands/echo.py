@@ -8,9 +8,9 @@ import sys
 
 from beyond_self.commands import argtypes
 from beyond_self.commands.terminal import stop_on_signals
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.subscription import decode_any
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import decode_any
 from beyond_self.schemas.codec import SchemaError, to_recording_json
 
 HELP = "print the messages on a key expression, decoded"

@@ -16,9 +16,9 @@ from pathlib import Path
 from beyond_self.commands import argtypes
 from beyond_self.commands.terminal import run_until_stopped
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.foxglove_bridge import DEFAULT_PORT, FoxgloveBridge
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.foxglove.bridge import DEFAULT_PORT, FoxgloveBridge
 from beyond_self.runtime.log import setup_logging
 
 HELP = "serve the bus to Foxglove over its WebSocket protocol"
@@ -53,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     setup_logging(fmt="text")
     if args.layout:
-        from beyond_self.runtime.foxglove_layout import layout_json
+        from beyond_self.runtime.foxglove.layout import layout_json
 
         robot = args.robot or config_from_args(args).robot
         Path(args.layout).write_text(layout_json(robot), encoding="utf-8")

@@ -22,9 +22,9 @@ from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.cognition.vision.pipeline import describe_frame
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.foxglove_views import VIEWS
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.runtime.foxglove.views import VIEWS
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.schemas import (
     ActionPosterior,
     AffordancePrediction,

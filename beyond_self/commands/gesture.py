@@ -178,7 +178,7 @@ def models_from(spec: str, *, include_garbage: bool = False) -> GestureModels:
 
 def _mcap_gestures(path: Path, push_as: str | None) -> list[LabelledGesture]:
     """Labelled gestures of one MCAP recording (labels: see the module docstring)."""
-    from beyond_self.runtime.recording import inspect_recording, read_recording
+    from beyond_self.runtime.recording.reader import inspect_recording, read_recording
     from beyond_self.schemas.keys import STREAMS
     from beyond_self.schemas.messages import SkeletonFrame
 

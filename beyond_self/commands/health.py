@@ -18,8 +18,8 @@ from pathlib import Path
 
 from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.schemas import ServiceHealth
 
 HELP = "exit 0 when the named (default: locally running) services are alive on the bus"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from beyond_self.commands import rate_watch
-from beyond_self.runtime.rates import RateStats
+from beyond_self.runtime.bus.rates import RateStats
 
 HELP = "message rate of a key over a sliding window (from stamps and from arrival)"
 add_arguments = rate_watch.add_arguments

@@ -17,10 +17,10 @@ import zenoh
 
 from beyond_self.commands import argtypes
 from beyond_self.commands.bus_keys import check_key
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.rates import RateWindow
-from beyond_self.runtime.subscription import decode_any
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.rates import RateWindow
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import decode_any
 from beyond_self.schemas.codec import SchemaError, wire_encoding
 from beyond_self.schemas.messages import ServiceHealth
 

@@ -8,7 +8,7 @@ from dataclasses import asdict
 from typing import Any
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.recording import RecordingInfo, inspect_recording
+from beyond_self.runtime.recording.reader import RecordingInfo, inspect_recording
 from beyond_self.schemas.messages import Time
 
 HELP = "list the channels, schemas, message counts and duration of an MCAP recording"

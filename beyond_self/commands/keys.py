@@ -2,7 +2,7 @@
 
 Identities are the services' names, the sides' (`router`, `robot`, `workstation`) and `tools`
 (read-only), each bound to the robots it may act for; a fleet adds one certificate per robot and
-one per workstation (runtime/keystore.py, runtime/acl.py). DIR defaults to
+one per workstation (runtime/security/keystore.py, runtime/security/acl.py). DIR defaults to
 $BEYOND_ZENOH_SECURE. A router makes its rules from the certificates when it starts, so restart
 it after adding one.
 """
@@ -73,7 +73,7 @@ def _directory(args: argparse.Namespace, required: bool = True) -> Path | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from beyond_self.runtime import keystore
+    from beyond_self.runtime.security import keystore
     from beyond_self.schemas.keys import typed_pattern
     from beyond_self.services import registry
 

@@ -14,10 +14,10 @@ from beyond_self.commands import argtypes
 from beyond_self.commands.bus_keys import check_key
 from beyond_self.commands.terminal import stop_on_signals
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.rates import RateStats, RateWindow
-from beyond_self.runtime.subscription import RawSample, decode_any
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.rates import RateStats, RateWindow
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import RawSample, decode_any
 from beyond_self.schemas.codec import SchemaError
 
 Show = Callable[[str, RateStats], str]

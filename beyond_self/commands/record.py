@@ -8,11 +8,11 @@ import sys
 
 from beyond_self.commands import argtypes
 from beyond_self.commands.terminal import run_until_stopped
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.log import setup_logging
-from beyond_self.runtime.recorder import record
-from beyond_self.runtime.recording_writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE
+from beyond_self.runtime.recording.recorder import record
+from beyond_self.runtime.recording.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE
 
 HELP = "record bus traffic on key expressions into an MCAP file"
 

@@ -18,13 +18,13 @@ from collections.abc import Iterator
 from beyond_self.commands import argtypes
 from beyond_self.commands.terminal import stop_on_signals
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.fleet_recording import recorded_robots
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.log import setup_logging
-from beyond_self.runtime.recording import RecordedMessage, inspect_recording, require_mcap
-from beyond_self.runtime.replay import replay
-from beyond_self.runtime.replay_control import ReplayControl, rate_option, remapper
+from beyond_self.runtime.recording.fleet import recorded_robots
+from beyond_self.runtime.recording.reader import RecordedMessage, inspect_recording, require_mcap
+from beyond_self.runtime.recording.replay import replay
+from beyond_self.runtime.recording.replay_control import ReplayControl, rate_option, remapper
 from beyond_self.schemas.keys import check_name
 
 HELP = "publish an MCAP recording on the bus in stamp order"
@@ -197,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
                 start=args.start,
                 end=args.end,
                 # $BEYOND_ROBOT too, as recordings/README.md says; a fleet's recording plays
-                # every robot's keys as recorded (runtime.fleet_recording)
+                # every robot's keys as recorded (runtime.recording.fleet)
                 robot=config.robot
                 if len(recorded_robots(inspect_recording(args.file))) <= 1
                 else None,

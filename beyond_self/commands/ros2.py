@@ -1,5 +1,5 @@
 """`beyond ros2`: the ROS 2 face of a deployment: `export` writes a recording as a rosbag2 bag
-(runtime.ros2_bag), `bridge` joins a running deployment to a ROS 2 graph over rmw_zenoh
+(runtime.ros2.bag), `bridge` joins a running deployment to a ROS 2 graph over rmw_zenoh
 (services.ros2_bridge)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any
 
 from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
 from beyond_self.schemas.keys import DEFAULT_ROBOT
 from beyond_self.schemas.ros2 import DEFAULT_CONNECT, Ros2Topics
 
@@ -98,8 +98,8 @@ def run(args: argparse.Namespace) -> int:
         Ros2Bridge.main(
             config=config_from_args(args), out_dir=str(args.out_dir), **ros2_options(args)
         )
-    from beyond_self.runtime.recording import require_mcap
-    from beyond_self.runtime.ros2_bag import export
+    from beyond_self.runtime.recording.reader import require_mcap
+    from beyond_self.runtime.ros2.bag import export
 
     if args.ros2_command == "export":
         require_mcap(args.recording)

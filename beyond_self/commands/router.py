@@ -9,9 +9,9 @@ import threading
 
 import zenoh
 
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.config import ROUTER_LISTEN, describe
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.config import ROUTER_LISTEN, describe
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.services import registry
 
 HELP = "run a Zenoh router (multi-host deployments); peers/clients connect to it"

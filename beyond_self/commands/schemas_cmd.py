@@ -32,7 +32,9 @@ def keys_of(cls: type[Message]) -> list[str]:
     keys = [f"beyond/<robot>/{suffix}" for suffix, c in STREAMS.values() if c is cls]
     if cls.type_name() == "ServiceHealth":
         keys.append(f"beyond/<robot>/{HEALTH}/<service>")
-    if cls.type_name() == "Progress":  # published, and answered by players (runtime.pacing)
+    if (
+        cls.type_name() == "Progress"
+    ):  # published, and answered by players (runtime.recording.pacing)
         keys.append(f"beyond/<robot>/{PROGRESS}/<service>")
     return keys
 

@@ -175,8 +175,8 @@ def _print_table(report: dict[str, Any]) -> None:
 def camera_frames(path: Path) -> Iterator[tuple[int, np.ndarray]]:
     """(stamp ns, RGB frame) of every tabletop camera message (raw or compressed) in a
     recording (not a person's camera, schemas.keys.TABLETOP_CAMERA)."""
-    from beyond_self.runtime.images import image_from_message
-    from beyond_self.runtime.recording import read_recording
+    from beyond_self.runtime.recording.images import image_from_message
+    from beyond_self.runtime.recording.reader import read_recording
     from beyond_self.schemas.keys import TABLETOP_CAMERA, split_key
     from beyond_self.schemas.messages import CameraFrame, CompressedCameraFrame
 

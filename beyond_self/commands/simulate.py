@@ -34,16 +34,16 @@ from beyond_self.cognition.scene import (
 from beyond_self.commands import argtypes
 from beyond_self.commands.terminal import progress_bar
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.images import image_from_message, message_from_image
-from beyond_self.runtime.recording import inspect_recording, read_recording
-from beyond_self.runtime.recording_writer import RecordingWriter
+from beyond_self.runtime.recording.images import image_from_message, message_from_image
+from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, Header, Joint, SkeletonFrame
 from beyond_self.schemas.keys import DEFAULT_ROBOT, Keys
 
 HELP = "write a seeded synthetic recording (skeleton + tabletop camera) of a scene to MCAP"
 
 SOURCE = "simulator"
-FRAME_ID = "camera"  # as runtime.images names it
+FRAME_ID = "camera"  # as runtime.recording.images names it
 FORMATS = ("jpeg", "png", "raw")
 POSITION_DECIMALS = 4  # 0.1 mm: finer than any body tracker, and the JSON stays short
 METADATA_NAME = "beyond"

@@ -6,9 +6,9 @@ import argparse
 import asyncio
 
 from beyond_self.commands import argtypes
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.rates import RateWindow
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.rates import RateWindow
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.schemas.codec import type_from_encoding
 from beyond_self.schemas.keys import type_for_key
 

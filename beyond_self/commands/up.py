@@ -30,11 +30,11 @@ from beyond_self.core.errors import InputError, unknown
 from beyond_self.live_view import render
 from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime import outputs
-from beyond_self.runtime.bus import Bus
-from beyond_self.runtime.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.config import BusConfig
-from beyond_self.runtime.process import exit_process
-from beyond_self.runtime.recording import require_mcap
+from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.recording.reader import require_mcap
+from beyond_self.runtime.resilience.process import exit_process
 from beyond_self.schemas.keys import check_name
 from beyond_self.services.deployment import Deployment, Ending
 from beyond_self.services.options import load_options
@@ -210,8 +210,8 @@ def secure_router(
     keeps running when the network between the machines fails; that router listens on
     loopback only, on the bus's port (7447 unless told) if free, else on a free port: a second
     workstation of a fleet on the first one's host links to the first one's router there."""
-    from beyond_self.runtime import keystore
-    from beyond_self.runtime.secure import router_listen
+    from beyond_self.runtime.security import keystore
+    from beyond_self.runtime.security.secure import router_listen
 
     assert config.secure is not None
     remote = list(config.connect or ()) + list(config.routers)
@@ -430,7 +430,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     hints: list[asyncio.Task[None]] = []
     try:
         if args.foxglove:  # imported only when asked for: the SDK is not free to load
-            from beyond_self.runtime.foxglove_bridge import start_in_background
+            from beyond_self.runtime.foxglove.bridge import start_in_background
 
             side.attach(await start_in_background(bus, args.foxglove))
             lines.emit(f"Foxglove: open a WebSocket connection to ws://localhost:{args.foxglove}")

@@ -1,0 +1,2 @@
+"""The Zenoh session and everything said on it: configuration, typed publish/subscribe,
+queries, presence."""

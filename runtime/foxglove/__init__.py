@@ -1,0 +1,1 @@
+"""Foxglove: the live WebSocket bridge, its layout and the derived views."""

@@ -1,0 +1,1 @@
+"""MCAP recordings: reading, writing, recording the bus, replaying it."""

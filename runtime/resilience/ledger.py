@@ -1,0 +1,361 @@
+"""Exactly once at the consumer: what each service has handled, by identity, and who knows it.
+
+Every per-gesture and per-frame output has an identity (schemas.identity). Three rules, applied
+by the Service base, make a killed and restarted service neither stall nor repeat anything
+(docs/concepts/exactly-once.md): a consumer acts on each identity once (`Handled`); a restarted
+producer does not send again what every consumer of its key has handled (`Ledger`s published
+and kept by everyone, `LedgerBook`); and a service whose handling is a side effect takes its
+predecessor's `Handled` for those inputs (`once`). What a service has handled only grows, so
+several copies of one ledger are merged; its `resume` numbers come from the newest copy.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import bisect
+import contextlib
+import logging
+import time
+from collections.abc import Callable, Coroutine, Iterable, Mapping
+from typing import Any
+
+from beyond_self.core.errors import InputError
+from beyond_self.runtime.bus.delivery import STATUS
+from beyond_self.runtime.bus.publisher import Publisher
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.bus.subscription import consume
+from beyond_self.runtime.log import event
+from beyond_self.schemas.base import Header, Message
+from beyond_self.schemas.identity import Identity, identify
+from beyond_self.schemas.messages import LEDGER_RANGES, Ledger, Range
+
+SEGMENTS_KEPT = 256  # per key and kind: older segments are forgotten (no cache holds them)
+RANGES_KEPT = 64  # per key, kind and segment: older ranges are forgotten
+SEGMENT_EVENTS = ("start", "end", "cancel")
+
+
+class Handled:
+    """Identities handled, per input key: kind -> segment -> sorted, disjoint [first, last]
+    ranges of frames. Bounded: forgetting (the oldest segments, the oldest ranges) only ever
+    makes a producer send more, never less."""
+
+    def __init__(self) -> None:
+        self.keys: dict[str, dict[str, dict[int, list[list[int]]]]] = {}
+
+    def declare(self, key: str) -> None:
+        """`key` is taken, so it is listed (and its producers learn it is wanted) before any
+        message on it has been handled."""
+        self.keys.setdefault(key, {})
+
+    def has(self, key: str, ident: Identity) -> bool:
+        ranges = self.keys.get(key, {}).get(ident.kind, {}).get(ident.segment_id)
+        if not ranges:
+            return False
+        i = bisect.bisect_right(ranges, [ident.frame, float("inf")]) - 1
+        return i >= 0 and ranges[i][0] <= ident.frame <= ranges[i][1]
+
+    def add(self, key: str, ident: Identity) -> bool:
+        """Record `ident` handled on `key`; whether it was new."""
+        if self.has(key, ident):
+            return False
+        self._add_range(key, ident.kind, ident.segment_id, ident.frame, ident.frame)
+        return True
+
+    def _add_range(self, key: str, kind: str, segment: int, first: int, last: int) -> None:
+        segments = self.keys.setdefault(key, {}).setdefault(kind, {})
+        ranges = segments.get(segment)
+        if ranges is None:
+            ranges = segments[segment] = []
+            if len(segments) > SEGMENTS_KEPT:
+                del segments[min(segments)]
+        i = bisect.bisect_left(ranges, [first, first])
+        ranges.insert(i, [first, last])
+        merged: list[list[int]] = []
+        for lo, hi in ranges:  # short lists: merge overlapping and adjacent ranges
+            if merged and lo <= merged[-1][1] + 1:
+                merged[-1][1] = max(merged[-1][1], hi)
+            else:
+                merged.append([lo, hi])
+        ranges[:] = merged[-RANGES_KEPT:]
+
+    def segments(self, key: str, kind: str) -> set[int]:
+        """Segment ids with `kind` handled on `key`."""
+        return set(self.keys.get(key, {}).get(kind, {}))
+
+    # -- on the wire ------------------------------------------------------------------------
+
+    def wire(self) -> dict[str, dict[str, list[Range]]]:
+        out: dict[str, dict[str, list[Range]]] = {}
+        for key, kinds in self.keys.items():
+            out[key] = {}
+            for kind, segments in kinds.items():
+                flat = [(s, lo, hi) for s, ranges in segments.items() for lo, hi in ranges]
+                out[key][kind] = flat[-LEDGER_RANGES:]
+        return out
+
+    def merge(
+        self,
+        handled: Mapping[str, Mapping[str, Iterable[Range]]],
+        keys: Iterable[str] | None = None,
+    ) -> None:
+        """Add what another record says was handled (on `keys` only, if given)."""
+        wanted = None if keys is None else set(keys)
+        for key, kinds in handled.items():
+            if wanted is not None and key not in wanted:
+                continue
+            self.declare(key)
+            for kind, ranges in kinds.items():
+                for segment, first, last in ranges:
+                    self._add_range(key, kind, segment, first, last)
+
+
+class LedgerBook:
+    """The last word of every service of a robot on what it handled (its own `Ledger`s, heard
+    or asked): merged over its instances (what was done, what a successor takes over), and
+    that of its newest instance alone (what the one alive now has)."""
+
+    def __init__(self) -> None:
+        self.handled: dict[str, Handled] = {}
+        self.current: dict[str, tuple[int, Handled]] = {}  # service -> (instance, its handled)
+        self.resume: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, numbers)
+        self.positions: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, key ->)
+        self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
+
+    def heard(self, ledger: Ledger) -> None:
+        name = ledger.service
+        self.handled.setdefault(name, Handled()).merge(ledger.handled)
+        instance, handled = self.current.get(name, (-1, Handled()))
+        if ledger.instance > instance:
+            instance, handled = ledger.instance, Handled()
+            self.current[name] = (instance, handled)
+        if ledger.instance == instance:
+            handled.merge(ledger.handled)
+            self.last[name] = ledger
+        stamp, _ = self.resume.get(name, (-1, {}))
+        numbers = {**ledger.resume, **ledger.resume_stamps}
+        if numbers and ledger.header.stamp >= stamp:
+            self.resume[name] = (ledger.header.stamp, numbers)
+        stamp, _ = self.positions.get(name, (-1, {}))
+        if ledger.positions and ledger.header.stamp >= stamp:
+            self.positions[name] = (ledger.header.stamp, dict(ledger.positions))
+
+    def instance_of(self, service: str) -> int:
+        """The newest instance of `service` heard of (-1: none)."""
+        return self.current.get(service, (-1, Handled()))[0]
+
+    def resume_of(self, service: str) -> dict[str, int]:
+        return dict(self.resume.get(service, (-1, {}))[1])
+
+    def needed(self, keys: Iterable[str]) -> dict[str, int]:
+        """Per key of `keys`, the oldest input position of any service's snapshot."""
+        wanted = set(keys)
+        out: dict[str, int] = {}
+        for _, positions in self.positions.values():
+            for key, stamp in positions.items():
+                if key in wanted:
+                    out[key] = min(stamp, out.get(key, stamp))
+        return out
+
+    def consumers_have(self, key: str, ident: Identity, producer: str) -> bool:
+        """Every service (but `producer`) that takes `key` has handled `ident` in its instance
+        alive now, and there is at least one: what a restarted producer need not send again.
+        A consumer restarted too has handled none of it yet, and may need it to rebuild its
+        state (the object segmenter, a gesture under way)."""
+        takers = [h for n, (_, h) in self.current.items() if n != producer and key in h.keys]
+        return bool(takers) and all(h.has(key, ident) for h in takers)
+
+    def done(self, key: str, kind: str, producer: str) -> set[int]:
+        """Segments whose `kind` on `key` every service (but `producer`) taking it has handled
+        (none when nobody takes it)."""
+        takers = [h for n, h in self.handled.items() if n != producer and key in h.keys]
+        if not takers:
+            return set()
+        return set.intersection(*(h.segments(key, kind) for h in takers))
+
+    def taken(self, key: str, producer: str) -> bool:
+        """Some service (but `producer`) takes `key`: its identities are worth checking."""
+        return any(key in h.keys for n, h in self.handled.items() if n != producer)
+
+
+# asking the others for the ledgers at start: answered at once by idle services, but a service
+# busy on a loaded machine may take seconds, and its answer is what keeps a sentence from being
+# said twice (the query ends as soon as every service has answered)
+ASK_TIMEOUT_S = 10.0
+# a restarted service asks again until its predecessor's record is among the answers: a session
+# just opened may not know the others' queryables yet, and its first query then ends at once
+# with no answer at all; taking itself for a first instance, a restarted reasoner would wait
+# for a gesture its predecessor had finished, and a restarted speech service say a sentence again
+ASK_AGAIN_S = 0.1
+
+
+class Keeper:
+    """A service's part in exactly-once: its own `Handled`, the `LedgerBook` of the others', its
+    `Ledger` published and answered for, and the checks the Service base makes with them."""
+
+    def __init__(self, name: str, header: Callable[[type[Ledger], int | None], Header]) -> None:
+        self.name = name
+        self.handled = Handled()
+        self.book = LedgerBook()
+        self.instance = 0  # its predecessor's plus one, once it has asked
+        self.duplicates = 0  # messages skipped: their identity was handled already
+        # what this service's next instance resumes from (its checkpoint)
+        self.resume: dict[str, int] = {}
+        self.resume_stamps: dict[str, int] = {}
+        self.positions: dict[str, int] = {}  # sensor key -> first stamp a successor needs
+        self._header = header
+        self._pub: Publisher[Ledger] | None = None
+        self._dirty = False
+
+    async def ask(self, bus: Bus, log: logging.Logger, *, restarted: bool = False) -> None:
+        """What the others know (their ledgers, and the copies they kept of everyone's, this
+        service's predecessor's among them): called before the service opens its streams.
+        `restarted` (its supervisor says so): ask until the predecessor's record is among the
+        answers, for at most ASK_TIMEOUT_S; it is somewhere unless the predecessor died before
+        its first ledger went out."""
+        began = time.monotonic()
+        while True:
+            left = ASK_TIMEOUT_S - (time.monotonic() - began)
+            with contextlib.suppress(InputError, TimeoutError):  # a malformed one: no ledgers
+                replies = await bus.query(
+                    bus.keys.ledger(), Ledger, timeout=max(left, ASK_AGAIN_S), every=True
+                )
+                for reply in replies:
+                    self.book.heard(reply.message)
+            if not restarted or self.name in self.book.handled or left <= ASK_AGAIN_S:
+                break
+            await asyncio.sleep(ASK_AGAIN_S)
+        self.instance = self.book.instance_of(self.name) + 1
+        took = round(time.monotonic() - began, 3)
+        if self.name in self.book.handled:
+            event(log, logging.INFO, "resuming after a previous instance", asked_s=took)
+        elif restarted:
+            event(log, logging.WARNING, "restarted, but no service kept a record of the "
+                  "previous instance: starting afresh", asked_s=took)  # fmt: skip
+
+    def predecessor(self) -> dict[str, int]:
+        """The numbers the previous instance of this service left to resume from ({} if none)."""
+        return self.book.resume_of(self.name)
+
+    def adopt(self, keys: Iterable[str]) -> None:
+        """Take the predecessor's handled identities on `keys`: not to act on them again."""
+        before = self.book.handled.get(self.name)
+        if before is not None:
+            self.handled.merge(before.wire(), keys)
+
+    def open(
+        self, bus: Bus, on_error: Callable[[str, Exception], None]
+    ) -> Coroutine[Any, Any, None]:
+        """Publish this service's ledger, answer for everyone's, and keep hearing the others';
+        returns the coroutine to run beside the handlers."""
+        self.announce(bus)
+
+        async def answer(_key: str, _request: None) -> list[tuple[str, Message]]:
+            mine = self.ledger()
+            others = [m for n, m in self.book.last.items() if n != self.name]
+            return [(bus.keys.ledger(m.service), m) for m in [mine, *others]]
+
+        bus.queryable(bus.keys.ledger(), None, answer, on_error=on_error)
+        sub = bus.subscribe(bus.keys.ledger(), Ledger, STATUS)
+
+        def heard(msg: Ledger) -> None:
+            if msg.service != self.name:
+                self.book.heard(msg)
+
+        return consume(sub, heard, on_error)
+
+    def announce(self, bus: Bus) -> None:
+        """Publish this ledger from now on (`publish`, `tick`): all a consumer that serves and
+        resumes nothing needs (a monitor), since every service keeps and answers for it."""
+        self._pub = bus.publisher(bus.keys.ledger(self.name), Ledger, STATUS)
+        self._pub.put(self.ledger())
+
+    def ledger(self) -> Ledger:
+        return Ledger(
+            header=self._header(Ledger, None),
+            service=self.name,
+            instance=self.instance,
+            handled=self.handled.wire(),
+            resume=dict(self.resume),
+            resume_stamps=dict(self.resume_stamps),
+            positions=dict(self.positions),
+        )
+
+    def publish(self) -> None:
+        self._dirty = False
+        if self._pub is not None:
+            self._pub.put(self.ledger())
+
+    def tick(self) -> None:
+        """With health: publish what changed since (per-frame entries, a new checkpoint)."""
+        if self._dirty:
+            self.publish()
+
+    def checkpoint(
+        self,
+        stamps: Mapping[str, int],
+        counts: Mapping[str, int] | None = None,
+        positions: Mapping[str, int] | None = None,
+    ) -> None:
+        """Where a next instance would resume, its stamps and counts (`predecessor` gives both
+        back as one mapping), and per sensor key the first stamp it needs (`positions`)."""
+        counts, at = dict(counts or {}), dict(positions or {})
+        if dict(stamps) != self.resume_stamps or counts != self.resume or at != self.positions:
+            self.resume_stamps, self.resume, self.positions = dict(stamps), counts, at
+            self._dirty = True
+
+    # -- the checks -------------------------------------------------------------------------
+
+    def duplicate(self, key: str, message: Message) -> Identity | None:
+        """The identity of a message already handled on `key` (counted), else None."""
+        ident = identify(key, message)
+        if ident is not None and self.handled.has(key, ident):
+            self.duplicates += 1
+            return ident
+        return None
+
+    def record(self, key: str, message: Message) -> bool:
+        """`message` on `key` has been handled (a per-gesture one is told at once): whether
+        it is new (False: handled already, or it has no identity)."""
+        ident = identify(key, message)
+        if ident is None or not self.handled.add(key, ident):
+            return False
+        if ident.per_gesture:
+            self.publish()
+        else:
+            self._dirty = True
+        return True
+
+    def seen_downstream(self, key: str, kinds: Iterable[str]) -> set[int]:
+        """Segment ids some consumer of `key` has handled with one of `kinds`: where a
+        restarted producer that cannot rebuild its state exactly numbers on, and what it must
+        close."""
+        return {
+            segment for n, h in self.book.handled.items() if n != self.name
+            for kind in kinds for segment in h.segments(key, kind)
+        }  # fmt: skip
+
+    def unsaid(self, said_key: str, gestures: Iterable[int]) -> list[int]:
+        """Of `gestures`, oldest first, those some service taking `said_key` (the
+        descriptions) has not handled: after a takeover their outputs may have died with the
+        workstation, so a successor goes back to a checkpoint before the oldest ([] when
+        nobody takes the descriptions: nothing to go back for)."""
+        if not self.book.taken(said_key, self.name):
+            return []
+        said = self.book.done(said_key, "description", self.name)
+        return sorted(n for n in gestures if n not in said)
+
+    def done_downstream(self, key: str, kind: str) -> set[int]:
+        """Segments whose `kind` every consumer of this service's `key` has handled: a
+        restarted service need not work on them again."""
+        return self.book.done(key, kind, self.name)
+
+    def suppressed(self, key: str, message: Message) -> bool:
+        """Every consumer of `key` has handled `message` already: do not send it again. A
+        gesture's start, end or cancel is always sent (two a gesture): a consumer restarted
+        at the same moment may not be heard of yet, and it cannot rebuild without them."""
+        if not self.book.taken(key, self.name):
+            return False
+        ident = identify(key, message)
+        if ident is None or ident.kind in SEGMENT_EVENTS:
+            return False
+        return self.book.consumers_have(key, ident, self.name)

@@ -1,0 +1,200 @@
+"""Snapshots of a service's state, on its own machine: the newest few, each written atomically.
+
+A piece of cognition that keeps state between messages (the gesture tracker, the object watch, the
+fusion join) says what a successor needs as a msgspec Struct (`snapshot()`) and is rebuilt from one
+(`restore`), together with the input position the snapshot reflects: per sensor key, the first stamp
+to be played again (runtime.resilience.ledger `positions`; the source plays from there). The store
+keeps the last `keep` in the service's state folder, each written to a temporary file, synced,
+renamed into place and the folder synced: a SIGKILL or a power cut leaves the old snapshot or the
+new one, never half. `Snapshots` is
+the base's part: it tells them in the ledger and chooses one on start.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections.abc import Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+import msgspec
+
+from beyond_self.runtime.resilience.ledger import Keeper
+
+S = TypeVar("S", bound=msgspec.Struct)
+
+# checkpoints a producer keeps, one per gesture count, for a successor to go back to
+CHECKPOINTS_KEPT = 8
+
+
+def per_gesture(resume: Mapping[str, int], name: str) -> dict[int, int]:
+    """What a predecessor left per gesture count as "<name>@N" (`at_gestures`): N -> value."""
+    prefix = f"{name}@"
+    return {
+        int(key.removeprefix(prefix)): value
+        for key, value in resume.items()
+        if key.startswith(prefix) and key.removeprefix(prefix).isdigit()
+    }
+
+
+def at_gestures(name: str, values: Mapping[int, int]) -> dict[str, int]:
+    """`values` per gesture count as a ledger's resume entries, "<name>@N"."""
+    return {f"{name}@{n}": value for n, value in values.items()}
+
+
+def keep_newest(history: dict[int, Any]) -> None:
+    """Drop all but the CHECKPOINTS_KEPT highest gesture counts of `history`."""
+    for old in sorted(history)[:-CHECKPOINTS_KEPT]:
+        del history[old]
+
+
+KEEP = 4
+EVERY_S = 2.0  # a snapshot stored on the machine at least this often (wall time: the machine's)
+GESTURES = "gestures"  # the ledger entry of the gesture count a snapshot was taken after
+
+
+class Positioned(msgspec.Struct, frozen=True):
+    """A snapshot as stored: its number (one more than the last), the input position it
+    reflects (sensor key -> first stamp needed again) and the state itself, encoded."""
+
+    number: int
+    positions: dict[str, int]
+    state: bytes
+
+
+class SnapshotStore:
+    """`save` a state, `newest` to restore one; numbered files `<number>.snap`."""
+
+    def __init__(self, folder: Path, keep: int = KEEP) -> None:
+        self.folder = folder / "snapshots"
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.keep = keep
+        self.bytes_written = 0
+        found = self.numbers()
+        self.number = found[-1] if found else 0
+
+    def numbers(self) -> list[int]:
+        return sorted(int(p.stem) for p in self.folder.glob("*.snap") if p.stem.isdigit())
+
+    def save(self, state: msgspec.Struct, positions: dict[str, int]) -> int:
+        """Store `state` durably as the newest snapshot; its size in bytes."""
+        self.number += 1
+        data = msgspec.msgpack.encode(
+            Positioned(self.number, dict(positions), msgspec.msgpack.encode(state))
+        )
+        path = self.folder / f"{self.number:010d}.snap"
+        temporary = path.with_suffix(".tmp")
+        with temporary.open("wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(temporary, path)
+        folder = os.open(self.folder, os.O_RDONLY)
+        try:
+            os.fsync(folder)
+        finally:
+            os.close(folder)
+        for old in self.numbers()[: -self.keep]:
+            with contextlib.suppress(FileNotFoundError):
+                (self.folder / f"{old:010d}.snap").unlink()
+        self.bytes_written += len(data)
+        return len(data)
+
+    def newest(self, cls: type[S]) -> tuple[S, dict[str, int]] | None:
+        """The newest snapshot that decodes as `cls`, with its positions (None: none)."""
+        for number in reversed(self.numbers()):
+            path = self.folder / f"{number:010d}.snap"
+            try:
+                stored = msgspec.msgpack.decode(path.read_bytes(), type=Positioned)
+                return msgspec.msgpack.decode(stored.state, type=cls), stored.positions
+            except (OSError, msgspec.DecodeError, msgspec.ValidationError):
+                continue  # another version's, or gone: an older one may do
+        return None
+
+
+class Snapshots(Generic[S]):
+    """A service's snapshots of one state type, taken by the base (`Service.keep_state`): told
+    with its ledger (so a successor anywhere on the bus, a fleet's standby, finds them: the
+    newest, and the newest at each of the last gesture counts, as the state's integer fields)
+    and stored on its machine (`SnapshotStore`: on a new gesture count and at most every
+    `every_s` seconds otherwise)."""
+
+    def __init__(
+        self,
+        cls: type[S],
+        keeper: Keeper,
+        store: SnapshotStore | None,
+        said_key: str,
+        every_s: float = EVERY_S,
+    ) -> None:
+        self.cls = cls
+        self.keeper = keeper
+        self.store = store
+        self.said_key = said_key
+        self.every_s = every_s
+        self.fields = [f for f in msgspec.structs.fields(cls) if f.type is int]
+        resume = keeper.predecessor()
+        self.history: dict[int, S] = {}  # gesture count -> the newest snapshot at it
+        for n in per_gesture(resume, GESTURES):
+            state = self._state(resume, f"@{n}")
+            if state is not None:
+                self.history[n] = state
+        self.gestures = resume.get(GESTURES, 0)
+        self.newest = self._state(resume, "")
+        self._stored_at = -float("inf")
+        self.taken_count = 0
+        self.stored: Future[int] | None = None  # the last save handed to the writer
+        # one thread writes them, in order: an fsync takes milliseconds, not the event loop's
+        self._writer = ThreadPoolExecutor(1, "snapshots") if store is not None else None
+
+    def _state(self, resume: Mapping[str, int], suffix: str) -> S | None:
+        values = {f.name: resume.get(f.name + suffix) for f in self.fields}
+        if any(v is None for v in values.values()):
+            return None
+        return self.cls(**values)
+
+    def chosen(self, restarted: bool) -> S | None:
+        """The snapshot to restore: the predecessor's newest, or, when the gestures it had seen
+        are not all said yet (a workstation taken over: the outputs in between died with it),
+        the newest one before the oldest gesture not said; else, restarted with no record on
+        the bus, the newest on this machine. None: start afresh."""
+        if self.newest is None:
+            if not restarted or self.store is None:
+                return None
+            found = self.store.newest(self.cls)
+            return None if found is None else found[0]
+        unsaid = self.keeper.unsaid(self.said_key, range(1, self.gestures + 1))
+        if not self.history or not unsaid:
+            return self.newest
+        before = [n for n in self.history if n < min(unsaid)] or [min(self.history)]
+        return self.history[max(before)]
+
+    def taken(self, state: S, positions: Mapping[str, int], gestures: int) -> None:
+        """`state` is this service's newest snapshot, after `gestures` gestures, needing its
+        inputs again from `positions` (sensor key -> stamp)."""
+        first_at_count = gestures not in self.history
+        self.history[gestures] = state
+        keep_newest(self.history)
+        stamps: dict[str, int] = {}
+        counts: dict[str, int] = {GESTURES: gestures}
+        for name, value in msgspec.structs.asdict(state).items():
+            if not isinstance(value, int):
+                continue
+            kept = stamps if name.endswith("stamp") else counts
+            kept[name] = value
+            kept |= at_gestures(name, {n: getattr(s, name) for n, s in self.history.items()})
+        counts |= at_gestures(GESTURES, {n: n for n in self.history})
+        self.keeper.checkpoint(stamps, counts, positions)
+        self.taken_count += 1
+        now = time.monotonic()
+        if self._writer is not None and (first_at_count or now - self._stored_at >= self.every_s):
+            assert self.store is not None
+            self._stored_at = now
+            self.stored = self._writer.submit(self.store.save, state, dict(positions))
+        if first_at_count:
+            # told at once, not with the next health report: at rate max a second of wall time
+            # is many gestures, and a successor needs a snapshot its source still has input for
+            self.keeper.publish()

@@ -1,0 +1,2 @@
+"""ROS 2 without ROS installed: rmw_zenoh's keys and attachments, CDR conversion through
+rosbags, rosbag2 bags as recordings."""

@@ -1,0 +1,1 @@
+"""The secure bus: keystore, certificates, access rules."""
