@@ -20,6 +20,7 @@ Last line: one JSON object.
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import importlib.util
 import json
@@ -214,6 +215,11 @@ async def resume_time() -> dict[str, float]:
 
 
 def main() -> int:
+    # no options: --help says what it measures and exits
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.parse_args()
     sys.path.insert(0, str(REPO / "bench"))
     figures = source_log_cost()
     figures |= snapshot_cost()
