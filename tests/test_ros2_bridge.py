@@ -1,29 +1,37 @@
 """The ROS 2 bridge, judged by an independent implementation of rmw_zenoh's protocol
 (zenoh-ros2-sdk on PyPI: its own key expressions, type hashes, attachment parsing and rosbags
 decoding) through a plain Zenoh router: `beyond up --ros2` says each sentence of a recording
-once on /<robot>/description, also when the bridge is SIGKILLed in the middle."""
+once on /<robot>/description, also when the bridge is SIGKILLed in the middle; and a recording
+its publisher plays as a ROS 2 body tracker and camera into `beyond up --live-source` is
+described as `beyond analyse` describes the recording."""
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 import zenoh
-from busutil_net import env_for, free_port, private_config
+from busutil_net import env_for, free_port, private_config, run_beyond
 from ros2util import STORE, zero
 from zenoh_ros2_sdk.attachment import Attachment
 
+from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.recording.reader import read_recording
 from beyond_self.runtime.ros2.node import attachment, read_attachment
 from beyond_self.schemas import ros2 as r
+from beyond_self.schemas.messages import CompressedCameraFrame, Progress, SkeletonFrame
 from beyond_self.services.launcher import BEYOND
 
 THREE = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"
@@ -185,9 +193,6 @@ async def test_ros2_body_markers_and_camera_are_a_live_source(
     data keys in CDR rosbags serialized (no code of ours on that side): the Azure Kinect
     driver's markers (K4ABT ids, no names) become joints under our names, a CompressedImage
     an RGB image."""
-    import asyncio
-
-    import numpy as np
     from PIL import Image
 
     from beyond_self.services.ros2_source import source
@@ -242,3 +247,194 @@ async def test_ros2_body_markers_and_camera_are_a_live_source(
     assert kinds["skeleton"] == {"right_hand": (0.1, 0.2, 1.5, 1.0), "torso": (0.0, 0.0, 2.0, 1.0)}
     camera = kinds["camera"]
     assert isinstance(camera, np.ndarray) and camera.shape == (8, 12, 3)
+
+
+TOUCH = THREE.parent / "touch-box.mcap"  # the smallest shipped recording with a described touch
+
+
+def frameless(lines: list[str]) -> list[str]:
+    """Gesture lines without frame numbers: a recording numbers each stream's frames, a live
+    source's ingest numbers its items across streams (ROS messages carry no frame index), so
+    the same frame has another number; stamps, and so everything else, are the same."""
+    return [re.sub(r"frame \d+", "frame N", line) for line in lines if line.startswith("gesture ")]
+
+
+def k4abt_markers(types: dict[str, Any], frame: SkeletonFrame) -> dict[str, Any]:
+    """The fields of a MarkerArray as the Azure Kinect ROS driver publishes a body: a sphere
+    per joint, id body*100 + K4ABT joint id, metres, no joint name in `text`."""
+    stamp = types["builtin_interfaces/msg/Time"](
+        sec=frame.header.stamp // 10**9, nanosec=frame.header.stamp % 10**9
+    )
+    header = types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame.frame_id)
+    fields = {n: zero(node) for n, node in STORE.fielddefs["visualization_msgs/msg/Marker"][1]}
+    markers = []
+    for name, joint in frame.joints.items():
+        k4abt = next(k for k, ours in r.OPENNI_OF_K4ABT.items() if ours == name)
+        point = types["geometry_msgs/msg/Point"](*joint.position)
+        upright = types["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0)
+        fields.update(
+            header=header,
+            id=frame.user * 100 + r.K4ABT_JOINTS.index(k4abt),
+            type=2,  # SPHERE
+            pose=types["geometry_msgs/msg/Pose"](position=point, orientation=upright),
+            color=types["std_msgs/msg/ColorRGBA"](0.0, 0.6, 1.0, joint.confidence),
+        )
+        markers.append(types["visualization_msgs/msg/Marker"](**fields))
+    return {"markers": markers}
+
+
+def jpeg_image(types: dict[str, Any], frame: CompressedCameraFrame) -> dict[str, Any]:
+    """The fields of a sensor_msgs/CompressedImage of a recorded JPEG frame, its own stamp."""
+    stamp = types["builtin_interfaces/msg/Time"](
+        sec=frame.header.stamp // 10**9, nanosec=frame.header.stamp % 10**9
+    )
+    header = types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame.frame_id)
+    return {"header": header, "format": frame.format, "data": np.frombuffer(frame.data, np.uint8)}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+async def test_a_ros2_body_tracker_and_camera_are_described_as_analyse_does(
+    tmp_path: Path,
+) -> None:
+    """zenoh-ros2-sdk's publisher (its own keys, attachment and CDR) plays touch-box.mcap as
+    a ROS 2 body tracker (Azure Kinect markers) and a CompressedImage camera, through a plain
+    Zenoh router, into `beyond up --live-source ros2_source`: `up` prints `analyse`'s lines.
+    A live source is never held back (its queues drop their oldest), so the publisher is paced
+    by the pipeline: each message goes out once every consumer of its stream has handled the
+    one before (their Progress), which makes the run independent of timing: no queue ever
+    holds more than one message, and every gesture sees every frame."""
+    from zenoh_ros2_sdk import ROS2Publisher
+    from zenoh_ros2_sdk.session import ZenohSession
+
+    code, out, err = await run_beyond(
+        ["analyse", str(TOUCH)], env=env_for(private_config()), cwd=tmp_path, timeout=60
+    )
+    assert code == 0, err[-3000:]
+    expected = frameless(out.splitlines())
+    assert any(': "' in line for line in expected), expected  # a described gesture
+
+    port = free_port()
+    config = private_config()
+    ns = f"/{config.robot}"
+    bus = Bus.open(config)
+    keys = bus.keys
+    handled: dict[str, dict[str, int]] = {}  # consumer -> sensor key -> last stamp handled
+    moved = asyncio.Event()
+
+    async def progress() -> None:
+        async for received in bus.subscribe(keys.progress(), Progress):
+            handled[received.message.service] = dict(received.message.handled)
+            moved.set()
+
+    async def until(done: Callable[[], bool], what: str, timeout_s: float = 20.0) -> None:
+        try:
+            async with asyncio.timeout(timeout_s):
+                while not done():
+                    moved.clear()
+                    await moved.wait()
+        except TimeoutError:
+            raise AssertionError(f"no progress in {timeout_s} s: {what}; {handled}") from None
+
+    def consumers_of(key: str) -> set[str]:
+        return {name for name, stamps in handled.items() if key in stamps}
+
+    loop = asyncio.get_running_loop()
+    watching = loop.create_task(progress())
+    lines: list[str] = []
+    said = asyncio.Event()
+    env = env_for(
+        config,
+        BEYOND_ROS2_CONNECT=f"tcp/127.0.0.1:{port}",
+        ROS_DOMAIN_ID="0",
+        BEYOND_ROS2_SKELETON=f"{ns}/body_tracking_data",
+        BEYOND_ROS2_CAMERA=f"{ns}/camera/image/compressed",
+        BEYOND_ROS2_TF="",
+        BEYOND_ROS2_CAMERA_RAW="",
+    )
+    with plain_router(port) as router:
+        up = await asyncio.create_subprocess_exec(
+            *BEYOND, "up", "--live-source", "beyond_self.services.ros2_source:source",
+            "--without", "speech", "--no-live", "--timeout", "60",
+            env=env, cwd=tmp_path, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        assert up.stdout is not None and up.stderr is not None
+
+        async def read_lines() -> None:
+            assert up.stdout is not None
+            async for raw in up.stdout:
+                lines.append(raw.decode().rstrip("\n"))
+                if ': "' in lines[-1]:
+                    said.set()
+
+        reading = loop.create_task(read_lines())
+        errors = loop.create_task(up.stderr.read())
+        subscribed: set[str] = set()
+        source_ready = asyncio.Event()
+
+        def on_token(key: str) -> None:
+            subscribed.add(key)
+            if len(subscribed) == 2:
+                source_ready.set()
+
+        def token(sample: zenoh.Sample) -> None:  # on Zenoh's thread
+            if "/MS/" in str(sample.key_expr) and sample.kind == zenoh.SampleKind.PUT:
+                loop.call_soon_threadsafe(on_token, str(sample.key_expr))
+
+        # the live source's subscriptions, as `ros2 topic info` sees them: liveliness tokens
+        router.liveliness().declare_subscriber("@ros2_lv/0/**", token, history=True)
+        session = ZenohSession.get_instance("127.0.0.1", port)
+        try:
+            assert session.router_port == port  # not another test's session
+            sdk_types = session.store.types
+            publishers = {
+                keys.skeleton: ROS2Publisher(
+                    topic=f"{ns}/body_tracking_data", msg_type=r.MARKER_ARRAY,
+                    msg_definition=STORE.generate_msgdef(r.MARKER_ARRAY)[0],
+                    type_hash=STORE.hash_rihs01(r.MARKER_ARRAY), domain_id=0,
+                    router_ip="127.0.0.1", router_port=port,
+                ),
+                keys.camera: ROS2Publisher(
+                    topic=f"{ns}/camera/image/compressed", msg_type=r.COMPRESSED_IMAGE,
+                    msg_definition=STORE.generate_msgdef(r.COMPRESSED_IMAGE)[0],
+                    type_hash=STORE.hash_rihs01(r.COMPRESSED_IMAGE), domain_id=0,
+                    router_ip="127.0.0.1", router_port=port,
+                ),
+            }  # fmt: skip
+            # the live source has subscribed to both topics, and the consumers of both
+            # streams report where they are
+            await asyncio.wait_for(source_ready.wait(), 30)
+            await until(lambda: all(consumers_of(k) for k in publishers), "the consumers")
+            consumers = {key: consumers_of(key) for key in publishers}
+
+            def caught_up(key: str, stamp: int) -> Callable[[], bool]:
+                return lambda: all(handled[name][key] >= stamp for name in consumers[key])
+
+            for item in read_recording(TOUCH):
+                message = item.message()
+                stamp = message.header.stamp
+                if isinstance(message, SkeletonFrame):
+                    key = keys.skeleton
+                    publishers[key].publish(**k4abt_markers(sdk_types, message))
+                else:
+                    assert isinstance(message, CompressedCameraFrame)
+                    key = keys.camera
+                    publishers[key].publish(**jpeg_image(sdk_types, message))
+                await until(caught_up(key, stamp), f"{key} at {stamp}")
+            try:
+                await asyncio.wait_for(said.wait(), 20)
+            except TimeoutError:
+                raise AssertionError(f"no sentence 20 s after the last frame: {lines}") from None
+            up.send_signal(signal.SIGINT)
+            await asyncio.wait_for(up.wait(), 30)
+            await reading
+        finally:
+            if up.returncode is None:
+                up.kill()
+                await up.wait()
+            watching.cancel()
+            session.close()
+            bus.close()
+        stderr = (await errors).decode()
+    assert up.returncode == 0, stderr[-3000:]  # stopped as a user stops it, cleanly
+    assert frameless(lines) == expected, stderr[-3000:]
