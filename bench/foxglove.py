@@ -229,10 +229,11 @@ def expected_messages() -> int:
 
 
 def sdk_port(bridge: subprocess.Popen[str]) -> int:
-    """foxglove-sdk's own port inside `beyond foxglove` (its log says), then its log drained."""
+    """foxglove-sdk's own port inside `beyond foxglove` (its DEBUG log says), then its log
+    drained."""
     assert bridge.stderr is not None
     for line in bridge.stderr:
-        found = re.search(r"Started server on 127\.0\.0\.1:(\d+)", line)
+        found = re.search(r"foxglove-sdk server behind the front on 127\.0\.0\.1:(\d+)", line)
         if found:
             threading.Thread(target=bridge.stderr.read, daemon=True).start()
             return int(found.group(1))
@@ -258,7 +259,7 @@ async def run_once(setup: str) -> dict[str, float]:
             ws_port = free_port()
             bridge = subprocess.Popen(
                 [*BEYOND, "foxglove", "--ws-port", str(ws_port)],
-                env=env(config),
+                env={**env(config), "BEYOND_LOG_LEVEL": "DEBUG"},
                 stderr=subprocess.PIPE,
                 text=True,
             )

@@ -72,6 +72,8 @@ class FoxgloveBridge:
             detail = str(exc).split(":", 1)[-1].strip()
             raise InputError(f"cannot start the Foxglove server ({detail})") from None
         self._front = HandshakeFront(sock, int(self._server.port))
+        # at DEBUG only: a port of our own processes, for benchmarks that bypass the front
+        log.debug("foxglove-sdk server behind the front on 127.0.0.1:%d", int(self._server.port))
         self.port = self._front.port
         self._channels: dict[str, Any] = {}
         self._views: dict[str, Any] = {}
