@@ -4,7 +4,6 @@ skeleton frame 150 (a robot left idle, then resumed) gives the lines `beyond ana
 
 from __future__ import annotations
 
-import asyncio
 import itertools
 from pathlib import Path
 
@@ -15,7 +14,6 @@ import beyond_self.schemas as s
 from beyond_self.runtime.recording.reader import inspect_recording, read_recording
 from beyond_self.runtime.recording.replay import restamped
 from beyond_self.runtime.recording.writer import RecordingWriter
-from beyond_self.services.launcher import BEYOND
 
 RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"
 HOUR_NS = 3600 * 10**9
@@ -57,19 +55,10 @@ async def test_an_hour_gap_gives_the_offline_lines_at_rate_max(tmp_path: Path) -
     )
     assert code == 0, errors[-2000:]
     assert len(gesture_lines(offline)) > 3
-    up = await asyncio.create_subprocess_exec(
-        *BEYOND, "up", "--recording", str(gap), "--rate", "0", "--no-live", "--timeout", "50",
-        env=env, cwd=tmp_path, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
+    up = ["up", "--recording", str(gap), "--rate", "0", "--no-live", "--timeout", "50"]
     try:
-        out, err = await asyncio.wait_for(up.communicate(), 60)
+        code, printed, errors = await run_beyond(up, env=env, cwd=tmp_path, timeout=60)
     except TimeoutError:
         pytest.fail("beyond up on the hour-gap recording did not end within a minute")
-    finally:
-        if up.returncode is None:
-            up.kill()
-            await up.wait()
-    printed, errors = out.decode(), err.decode()
-    code = await up.wait()
     assert code == 0, printed + errors[-3000:]
     assert gesture_lines(printed) == gesture_lines(offline), printed + errors[-3000:]

@@ -174,20 +174,12 @@ async def test_a_recording_that_begins_with_frames_without_a_hand_plays_to_its_e
                 message = msgspec.structs.replace(message, joints=joints)
             out.write(item.key, message)
     env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}
-    up = await asyncio.create_subprocess_exec(
-        *BEYOND, "up", "--recording", str(bad), "--rate", "0", "--no-live", "--timeout", "50",
-        env=env, cwd=tmp_path, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
+    up = ["up", "--recording", str(bad), "--rate", "0", "--no-live", "--timeout", "50"]
     try:
-        out_bytes, err_bytes = await asyncio.wait_for(up.communicate(), 60)
+        code, printed, errors = await run_beyond(up, env=env, cwd=tmp_path, timeout=60)
     except TimeoutError:
         pytest.fail("beyond up stalled on a recording that begins with refused frames")
-    finally:
-        if up.returncode is None:
-            up.kill()
-            await up.wait()
-    printed, errors = out_bytes.decode(), err_bytes.decode()
-    assert await up.wait() == 0, printed + errors[-3000:]
+    assert code == 0, printed + errors[-3000:]
     said = [line for line in printed.splitlines() if line.startswith("gesture ")]
     assert said and said[-1].endswith('"the robot touched the ball but the ball is still"'), printed
     assert "refused=30" in errors  # the gesture streamer's own count, as it stopped
