@@ -52,14 +52,18 @@ async def monitor() -> AsyncIterator[PipelineMonitor]:
 def described(monitor: PipelineMonitor, segment_id: int, seq: int) -> None:
     monitor.on_segment(segment(seq, "start", segment_id))
     monitor.on_segment(segment(seq + 1, "end", segment_id))
-    monitor.on_description(
-        s.Description(
-            header=s.Description.original_header("describer", seq, 1000 + seq),
-            segment_id=segment_id,
-            sentences=[s.ScoredSentence(text="he taps the box", score=0.0)],
-            evidence=s.Evidence(), final=True,
-        )
-    )  # fmt: skip
+    monitor.on_description(description(seq, segment_id, 1000 + seq))
+
+
+def description(seq: int, segment_id: int, stamp: int) -> s.Description:
+    """A final description of `segment_id`, as the describer publishes one."""
+    return s.Description(
+        header=s.Description.original_header("describer", seq, stamp),
+        segment_id=segment_id,
+        sentences=[s.ScoredSentence(text="he taps the box", score=0.0)],
+        evidence=s.Evidence(),
+        final=True,
+    )
 
 
 def test_a_cut_gesture_is_counted_named_and_is_a_loss(monitor: PipelineMonitor) -> None:
@@ -199,14 +203,7 @@ async def test_a_fleet_workstation_counts_the_gestures_of_the_robots_it_serves()
                     segments.put(segment(n, "start", n))
                     segments.put(segment(n + 1, "end", n))
                 if (robot, n) != ("lab-1", 2):  # its description has not come
-                    descriptions.put(
-                        s.Description(
-                            header=s.Description.original_header("describer", n, 2000 + n),
-                            segment_id=n,
-                            sentences=[s.ScoredSentence(text="he taps it", score=0.0)],
-                            evidence=s.Evidence(), final=True,
-                        )
-                    )  # fmt: skip
+                    descriptions.put(description(n, n, 2000 + n))
         pubs["lab-2"][0].put(segment(7, "start", 2))
         pubs["lab-2"][0].put(segment(8, "cancel", 2, reason="its frames are gone", cut=True))
         fleet = monitor.fleet
