@@ -19,7 +19,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from beyond_self.runtime.bus.config import BusConfig
-from beyond_self.schemas import Header, Joint, Keys, ServiceHealth, SkeletonFrame
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.schemas import Header, Joint, Keys, Ledger, Message, ServiceHealth, SkeletonFrame
 
 REPO = Path(__file__).resolve().parent.parent
 EXAMPLES = Path(__file__).resolve().parent / "runtime_examples"
@@ -170,3 +171,25 @@ def skeleton_recording(path: Path, actions: list[str], seed: int, robot: str = "
             }
             header = Header(version=1, source="sim", seq=i, stamp=t0 + i * 33_333_333)
             writer.write(key, SkeletonFrame(header=header, frame=i + 1, joints=joints))
+
+
+def serve_cut_predecessor(bus: Bus, first: int) -> None:
+    """Answer ledger queries on `bus` as a run whose gesture streamer told its checkpoint at
+    `first` after gesture 1, and whose reasoner has gesture 1 whole and gesture 2's start only:
+    a restarted streamer whose skeleton cache starts after `first` cannot rebuild gesture 2."""
+    key = bus.keys.gesture_segment
+    kept = [
+        Ledger(
+            header=Ledger.original_header("gestures", 9, first), service="gestures",
+            resume={"segments": 1, "events": 3}, resume_stamps={"stamp": first},
+        ),
+        Ledger(
+            header=Ledger.original_header("reasoner", 9, first), service="reasoner",
+            handled={key: {"start": [(1, 0, 0), (2, 0, 0)], "end": [(1, 0, 0)]}},
+        ),
+    ]  # fmt: skip
+
+    async def answer(_key: str, _request: None) -> list[tuple[str, Message]]:
+        return [(bus.keys.ledger(m.service), m) for m in kept]
+
+    bus.queryable(bus.keys.ledger(), None, answer)

@@ -8,7 +8,7 @@ import asyncio
 from collections.abc import AsyncIterator, Callable
 
 import pytest
-from busutil_net import private_config
+from busutil_net import private_config, serve_cut_predecessor
 
 import beyond_self.schemas as s
 from beyond_self.cognition.gestures import synthesize_continuous
@@ -129,22 +129,7 @@ async def test_the_streamers_cut_reaches_the_summary(monkeypatch: pytest.MonkeyP
     config = private_config()
     first = 10**18
     with Bus.open(config) as others, Bus.open(config) as bus:
-        key = bus.keys.gesture_segment
-        kept = [
-            s.Ledger(
-                header=s.Ledger.original_header("gestures", 9, first), service="gestures",
-                resume={"segments": 1, "events": 3}, resume_stamps={"stamp": first},
-            ),
-            s.Ledger(
-                header=s.Ledger.original_header("reasoner", 9, first), service="reasoner",
-                handled={key: {"start": [(1, 0, 0), (2, 0, 0)], "end": [(1, 0, 0)]}},
-            ),
-        ]  # fmt: skip
-
-        async def answer(_key: str, _request: None) -> list[tuple[str, s.Message]]:
-            return [(others.keys.ledger(m.service), m) for m in kept]
-
-        others.queryable(others.keys.ledger(), None, answer)
+        serve_cut_predecessor(others, first)
         monitor = PipelineMonitor(others, lambda _line: None)
         monitor.start()
         service = service_class("gestures")(bus=bus, health_period=0.05)

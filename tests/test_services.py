@@ -8,7 +8,7 @@ from collections.abc import AsyncIterator
 
 import msgspec
 import pytest
-from busutil_net import private_config
+from busutil_net import private_config, serve_cut_predecessor
 
 import beyond_self.schemas as s
 from beyond_self.cognition.gestures import synthesize_continuous
@@ -175,21 +175,7 @@ async def test_a_restarted_streamer_without_its_checkpoints_frames_cancels_the_g
     first = 10**18
     with Bus.open(config) as others, Bus.open(config) as bus:
         key = bus.keys.gesture_segment
-        kept = [
-            s.Ledger(
-                header=s.Ledger.original_header("gestures", 9, first), service="gestures",
-                resume={"segments": 1, "events": 3}, resume_stamps={"stamp": first},
-            ),
-            s.Ledger(
-                header=s.Ledger.original_header("reasoner", 9, first), service="reasoner",
-                handled={key: {"start": [(1, 0, 0), (2, 0, 0)], "end": [(1, 0, 0)]}},
-            ),
-        ]  # fmt: skip
-
-        async def answer(_key: str, _request: None) -> list[tuple[str, s.Message]]:
-            return [(others.keys.ledger(m.service), m) for m in kept]
-
-        others.queryable(others.keys.ledger(), None, answer)
+        serve_cut_predecessor(others, first)
         service = await _start("gestures", bus)
         segments = others.subscribe(key, s.GestureSegment)
         pub = others.publisher(others.keys.skeleton, s.SkeletonFrame)
