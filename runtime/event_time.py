@@ -3,23 +3,28 @@
 A sensor key (a `paced` input: one body tracker, one camera per robot) belongs to one source,
 the header's `source` of the first message its handler accepts; a message from any other
 publisher on it is foreign: refused, counted, never a clock. Within the owner's stream a
-message not after the last one handled is stale (a restarted source repeats itself); a jump
-forward is a pause, which is legitimate. A message the handler refuses as bad input moves
-nothing: no stream time, no owner; only how far a player may count the stream as read.
+message not after the last one handled is a repeat when that very stamp was read (a restarted
+source plays again from where its consumers need), else stale: lost; a jump forward is a
+pause. A message the handler refuses as bad input moves nothing: no stream time, no owner; only
+how far a player may count the stream as read.
 docs/concepts/event-time.md says why.
 """
 
 from __future__ import annotations
 
 import enum
+from array import array
+from bisect import bisect_left, insort
 from dataclasses import dataclass, field
 
 UNOWNED_SOURCES = 16  # sources whose refused frames are remembered before a key has an owner
+RECENT_STAMPS = 1024  # the owner's stamps read, kept (at most twice this) to tell a repeat
 
 
 class Verdict(enum.Enum):
     FRESH = "fresh"  # the owner's (or the first accepted source's) and after its last: handle
-    STALE = "stale"  # not after the last message handled from the key's owner: a repeat
+    REPEAT = "repeat"  # a stamp of the owner's already read: a restarted source plays again
+    STALE = "stale"  # not after the owner's last handled, and never read: out of order, lost
     FOREIGN = "foreign"  # from a source other than the key's owner
 
 
@@ -29,6 +34,20 @@ class _Stream:
     handled: int = -1  # the owner's last stamp handled: its time
     read: int = -1  # the owner's last stamp taken, handled or refused (flow control)
     unowned: dict[str, int] = field(default_factory=dict)  # no owner yet: last refused, by source
+    recent: array[int] = field(default_factory=lambda: array("q"))  # owner's stamps read, sorted
+
+    def remember(self, stamp: int) -> None:
+        recent = self.recent
+        if not recent or stamp > recent[-1]:
+            recent.append(stamp)
+        else:
+            insort(recent, stamp)
+        if len(recent) > 2 * RECENT_STAMPS:
+            del recent[:RECENT_STAMPS]
+
+    def seen(self, stamp: int) -> bool:
+        i = bisect_left(self.recent, stamp)
+        return i < len(self.recent) and self.recent[i] == stamp
 
 
 class SourceTimes:
@@ -37,7 +56,8 @@ class SourceTimes:
 
     def __init__(self) -> None:
         self._streams: dict[str, _Stream] = {}
-        self.stale = 0  # repeats: not after the last message handled from the key's owner
+        self.stale = 0  # not after the owner's last handled and never read: lost
+        self.repeated = 0  # read already: a restarted source playing again, nothing lost
         self.foreign = 0  # from a source other than the key's owner
         self.refused = 0  # refused by the handler as bad input
 
@@ -62,6 +82,9 @@ class SourceTimes:
             self.foreign += 1
             return Verdict.FOREIGN
         if stamp <= stream.handled:
+            if stream.seen(stamp):
+                self.repeated += 1
+                return Verdict.REPEAT
             self.stale += 1
             return Verdict.STALE
         return Verdict.FRESH
@@ -87,6 +110,7 @@ class SourceTimes:
             return False
         stream.handled = max(stream.handled, stamp)
         stream.read = max(stream.read, stamp)
+        stream.remember(stamp)
         return True
 
     def refuse(self, key: str, source: str, stamp: int) -> None:
@@ -101,6 +125,7 @@ class SourceTimes:
             return
         if stream.owner == source:
             stream.read = max(stream.read, stamp)
+            stream.remember(stamp)
         elif stream.owner is None and (
             source in stream.unowned or len(stream.unowned) < UNOWNED_SOURCES
         ):

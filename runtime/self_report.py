@@ -63,7 +63,8 @@ def stop_counts(service: Service, health: ServiceHealth) -> dict[str, Any]:
     counts.update(recovered=recovered, missed=missed)
     counts["not_logged"] = service.account.once.repeats  # problems of a shape logged before
     counts["duplicates"] = service.ledgers.duplicates  # handled already: skipped
-    counts["stale"] = health.stale  # sensor messages not after the last one handled
+    counts["stale"] = health.stale  # sensor messages out of order, never read: lost
+    counts["repeated"] = service.times.repeated  # read already: a restarted source played again
     counts["foreign"] = health.foreign  # sensor messages of a source not their key's own
     counts["refused"] = health.refused  # refused by a handler as bad input
     counts["suppressed"] = sum(p.suppressed for p in service.publishers)  # consumers had it

@@ -4,7 +4,7 @@ a refused message moves nothing, and a jump forward is a pause, not an attack.""
 
 from __future__ import annotations
 
-from beyond_self.runtime.event_time import SourceTimes, Verdict
+from beyond_self.runtime.event_time import RECENT_STAMPS, SourceTimes, Verdict
 
 KEY = "beyond/robot/sensors/skeleton"
 HOUR = 3600 * 10**9
@@ -26,14 +26,26 @@ def test_the_first_source_taken_owns_the_key_and_a_stranger_never_moves_its_time
     assert times.stale == 0
 
 
-def test_a_repeat_of_the_owner_is_stale_and_a_pause_is_not() -> None:
+def test_a_repeat_is_no_loss_an_unread_old_stamp_is_stale_and_a_pause_is_neither() -> None:
     times = SourceTimes()
     times.track(KEY)
     times.take(KEY, "ingest", 100)
-    assert times.verdict(KEY, "ingest", 100) is Verdict.STALE
-    assert times.verdict(KEY, "ingest", 50) is Verdict.STALE
-    assert times.stale == 2
+    times.refuse(KEY, "ingest", 101)  # read, though refused: its repeat is a repeat too
+    # a restarted source plays again from where its consumers need: nothing is lost
+    assert times.verdict(KEY, "ingest", 100) is Verdict.REPEAT
+    assert times.verdict(KEY, "ingest", 101) is Verdict.FRESH  # after the last *handled*
+    assert times.verdict(KEY, "ingest", 50) is Verdict.STALE  # never read: out of order, lost
+    assert (times.repeated, times.stale) == (1, 1)
     assert times.verdict(KEY, "ingest", 100 + 24 * HOUR) is Verdict.FRESH  # a day idle
+
+
+def test_repeats_are_told_within_a_bounded_count_of_stamps() -> None:
+    times = SourceTimes()
+    times.track(KEY)
+    for stamp in range(1, 5 * RECENT_STAMPS):
+        times.take(KEY, "ingest", stamp)
+    assert times.verdict(KEY, "ingest", 5 * RECENT_STAMPS - 1) is Verdict.REPEAT
+    assert times.verdict(KEY, "ingest", 1) is Verdict.STALE  # forgotten: counted as lost
 
 
 def test_a_refused_message_claims_nothing_and_moves_no_time() -> None:
