@@ -25,6 +25,8 @@ from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.bus.subscription import Received, consume
 from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.resilience.ledger import Keeper
+from beyond_self.runtime.resilience.run_state import Printed, RunState
+from beyond_self.runtime.resilience.state import LedgerFile
 from beyond_self.schemas import (
     ActionPosterior,
     AffordancePrediction,
@@ -62,6 +64,7 @@ class PipelineMonitor:
         name: str | None = None,
         clock: Clock | None = None,
         robots: list[str] | None = None,
+        state: RunState | None = None,
     ) -> None:
         self.bus = bus
         self.name = name
@@ -97,14 +100,28 @@ class PipelineMonitor:
         # a fleet workstation: the robots it serves (their patterns), counted apart
         self.fleet = FleetTally(bus, robots) if robots else None
         self._tasks: list[asyncio.Task[None]] = []
+        # the run this one goes on with (runtime.resilience.run_state): what it told is not
+        # told again, and counts in the summary
+        self.state = state
+        self.previous: dict[int, Printed] = dict(state.before) if state is not None else {}
+        if state is not None:
+            self.ledgers.keep_on_disk(LedgerFile(state.watcher))
 
     @classmethod
-    def of(cls, side: Deployment, bus: Bus, emit: Callable[[str], None]) -> PipelineMonitor:
+    def of(
+        cls,
+        side: Deployment,
+        bus: Bus,
+        emit: Callable[[str], None],
+        state: RunState | None = None,
+    ) -> PipelineMonitor:
         """The watcher of deployment `side`: a consumer under its name, on its clock; a fleet
-        workstation's also counts the gestures of the robots it serves."""
+        workstation's also counts the gestures of the robots it serves; with `state`, it goes
+        on with the run that state holds."""
         config = side.config
         robots = [p for p in (config.robots, config.standby) if p is not None]
-        return cls(bus, emit, name=side.watcher, clock=Clock(side.clock), robots=robots)
+        clock = Clock(side.clock)
+        return cls(bus, emit, name=side.watcher, clock=clock, robots=robots, state=state)
 
     def start(self) -> None:
         keys = self.bus.keys
@@ -153,7 +170,10 @@ class PipelineMonitor:
         ident = identify(received.key, received.message)
         if ident is None:
             return True
-        if self.ledgers.record(received.key, received.message):
+        told = ident.segment_id in self.previous and not isinstance(
+            received.message, DetectedObjects
+        )
+        if self.ledgers.record(received.key, received.message) and not told:
             return True
         self.duplicates += 1
         return False
@@ -175,7 +195,12 @@ class PipelineMonitor:
             self.fleet.stop()
 
     def _flush(self) -> None:
-        for line in self.report.release():
+        lines = self.report.release()
+        if self.state is not None:  # told before it is printed: a kill between loses no repeat
+            for n, g in self.report.gestures.items():
+                if g.printed and n not in self.state.before:
+                    self.state.told(Printed(n, bool(g.description)))
+        for line in lines:
             self.emit(line)
 
     # -- handlers ------------------------------------------------------------------------
@@ -200,6 +225,8 @@ class PipelineMonitor:
             self.report.cancelled(msg.segment_id)
             if msg.cut:
                 self.cut[msg.segment_id] = msg.reason
+                if self.state is not None:
+                    self.state.told(Printed(msg.segment_id, False, msg.reason or "cut"))
         else:
             self.report.ended(msg.segment_id, msg.frame)
         self._flush()
@@ -293,7 +320,8 @@ class PipelineMonitor:
     def losses(self) -> list[str]:
         """What the run lost, one phrase each: gestures cut (their frames were lost: they cannot
         be described) and sensor frames dropped as stale; empty when nothing was."""
-        cut = [(f"gesture {n}", self.cut[n]) for n in sorted(self.cut)]
+        before = {n: p.cut for n, p in self.previous.items() if p.cut}
+        cut = [(f"gesture {n}", why) for n, why in sorted((before | self.cut).items())]
         stale: dict[str, int] = {}
         for (service, _), count in self.stale.items():
             stale[service] = stale.get(service, 0) + count
@@ -319,6 +347,9 @@ class PipelineMonitor:
         gestures = [g for g in self.report.gestures.values() if g.started is not None]
         described = sum(1 for g in gestures if g.description)
         total = len(gestures) + len(self.cut)
+        if self.previous:  # the run this one went on with
+            described += sum(1 for p in self.previous.values() if p.described)
+            total += len(self.previous)
         robots = ""
         if self.fleet is not None:  # a fleet workstation: its robots' gestures, not its own
             fleet_described, fleet_total = self.fleet.counts()

@@ -36,7 +36,7 @@ from beyond_self.runtime.resilience import heap, process
 from beyond_self.runtime.resilience.accounting import ErrorAccount
 from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
-from beyond_self.runtime.resilience.source_log import state_dir
+from beyond_self.runtime.resilience.state import LedgerFile, state_dir
 from beyond_self.runtime.security.acl import check_declared
 from beyond_self.runtime.self_report import (
     health_of,
@@ -395,9 +395,13 @@ class Service:
         undeclare_token: Callable[[], None] | None = None
         try:
             # before setup: a restarted one resumes
+            self.ledgers.said_key = self.bus.keys.description
+            if (folder := state_dir(self.bus.keys.robot, self.name)) is not None:
+                self.ledgers.file = LedgerFile(folder)
             await self.ledgers.ask(self.bus, self.log, restarted=restarts() > 0)
             await self.setup()
-            self.ledgers.adopt(self._once)
+            outputs = [p.key for p in self._publishers if p.cls in IDENTIFIED]
+            self.ledgers.adopt(self._once, outputs)
             self.spawn(self.ledgers.open(self.bus, self.report_error), "ledger")
             for sub, handler in self._subscriptions:
                 self.spawn(self._consume(sub, handler), sub.key)

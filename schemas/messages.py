@@ -500,7 +500,8 @@ class Ledger(Message, frozen=True):
     and its counts there; the object segmenter's camera restart point). Stamps apart: they
     exceed 2^53, and the JSON form writes them as times.
     `positions`: sensor key -> the first stamp on it the next instance needs again (its
-    snapshot's input position): a restarted source plays again from there (services/ingest.py).
+    snapshot's input position): a restarted source plays again from there (services/ingest.py);
+    `<key>@N`: where a successor that goes back to gesture N (not said yet) needs it from.
     Every service publishes its own on `ledger/<service>` when it changes, keeps the last one
     of every other service of its robot, and answers for all of them on query, so a service's
     record outlives the service.

@@ -34,7 +34,8 @@ from beyond_self.runtime.recording.reader import inspect_recording, read_recordi
 from beyond_self.runtime.recording.replay import Cue, Player, looped, recorded_cues
 from beyond_self.runtime.recording.replay_control import rate_option
 from beyond_self.runtime.resilience.accounting import bounded
-from beyond_self.runtime.resilience.source_log import DEFAULT_MAX_MB, SourceLog, state_dir
+from beyond_self.runtime.resilience.source_log import DEFAULT_MAX_MB, SourceLog
+from beyond_self.runtime.resilience.state import state_dir
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     CameraFrame,
@@ -184,6 +185,12 @@ class SensorIngest(Service):
         self.resume = self.pacer.handled_by_all()
         for key, stamp in self.ledgers.book.needed(self.resume).items():
             self.resume[key] = min(self.resume[key], stamp - 1)
+        if self.ledgers.instance > 0 and all(s < 0 for s in self.resume.values()):
+            # every consumer starts afresh too (the deployment was killed whole): they go back
+            # to the oldest gesture not said yet, and need its frames again
+            self.resume.update(
+                {k: s - 1 for k, s in self.ledgers.book.needed(self.resume, self._unsaid()).items()}
+            )
         if self.source_log is not None and self.ledgers.instance > 0:
             again = self.source_log.play_again({k: s + 1 for k, s in self.resume.items()})
             event(self.log, logging.INFO, "played again from the source log", messages=again)
@@ -228,6 +235,12 @@ class SensorIngest(Service):
         )
         if self.pose_counts is not None:  # per-frame work a live video shed is said, counted
             event(self.log, logging.INFO, "pose", **vars(self.pose_counts))
+
+    def _unsaid(self) -> int | None:
+        """The oldest gesture a consumer saw start and not every consumer has heard said."""
+        keys = self.bus.keys
+        started = self.ledgers.seen_downstream(keys.gesture_segment, ("start",))
+        return min(self.ledgers.unsaid(keys.description, started), default=None)
 
     def _sent(self, stream: str, stamp: int) -> None:
         self.published += 1

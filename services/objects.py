@@ -139,6 +139,8 @@ class ObjectSegmenter(Service):
         point = max(0, self.watch.restart_point)
         keys = self.bus.keys
         positions = {keys.camera: point, keys.camera_compressed: point}
+        for key in (keys.camera, keys.camera_compressed):  # the one kept at each gesture's start
+            positions |= at_gestures(key, self.history)
         self.ledgers.checkpoint({"camera": point} | points, positions=positions)
 
     def on_gestures_progress(self, msg: Progress) -> None:

@@ -29,6 +29,15 @@ def run_outputs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
         os.environ[OUT_DIR_VAR] = before
 
 
+@pytest.fixture(autouse=True)
+def test_outputs(run_outputs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Each test's own outputs folder, below the session's: what an interrupted `beyond up`
+    keeps to go on with (runtime.resilience.run_state) is not found by the next test's."""
+    folder = run_outputs / tmp_path.name
+    monkeypatch.setenv(OUT_DIR_VAR, str(folder))
+    return folder
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     root = shared_data_dir()

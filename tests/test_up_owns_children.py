@@ -1,5 +1,7 @@
-"""`beyond up` owns its services (issue 39): SIGKILLed mid-gesture, it leaves none behind; a
-second `up` for a robot whose services are on the bus says so in one line and exits 2."""
+"""`beyond up` owns its services (issue 39): SIGKILLed mid-gesture, it leaves none behind, and the
+same command again goes on with the run (both runs' lines together are `analyse`'s, each sentence
+said once); a second `up` for a robot whose services are on the bus says so in one line and
+exits 2."""
 
 from __future__ import annotations
 
@@ -39,17 +41,26 @@ def descendants(pid: int) -> list[int]:
     return found
 
 
+def gesture_lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.startswith("gesture ")]
+
+
 @pytest.mark.slow
-async def test_up_killed_mid_gesture_leaves_no_service_and_a_second_up_exits_2(
-    tmp_path: Path, show: Callable[[str], None]
+async def test_up_killed_mid_gesture_leaves_no_service_and_goes_on_when_run_again(
+    tmp_path: Path, show: Callable[[str], None], test_outputs: Path
 ) -> None:
     config = private_config()
     env = {**env_for(config), "BEYOND_LOG_FORMAT": "text"}
     args = ["up", "--recording", str(RECORDING), "--rate", "1", "--no-live", "--timeout", "90"]
-    with Bus.open(config) as bus, (tmp_path / "up.err").open("w") as err:
+    first_out = tmp_path / "up.out"
+    with (
+        Bus.open(config) as bus,
+        (tmp_path / "up.err").open("w") as err,
+        first_out.open("w") as out,
+    ):
         segments = bus.subscribe(bus.keys.gesture_segment, s.GestureSegment, EVENTS)
         up = await asyncio.create_subprocess_exec(
-            *BEYOND, *args, env=env, cwd=tmp_path, stdout=asyncio.subprocess.DEVNULL, stderr=err
+            *BEYOND, *args, env=env, cwd=tmp_path, stdout=out, stderr=err
         )
         children: list[int] = []
         try:
@@ -60,8 +71,13 @@ async def test_up_killed_mid_gesture_leaves_no_service_and_a_second_up_exits_2(
             assert out == ""
             assert len(said.splitlines()) == 1, said
             assert said.startswith(f"beyond up: error: robot {config.robot!r} already has ingest")
-            first = (await segments.recv(timeout=60)).message
-            assert first.event == "start"  # mid-gesture: started, not yet ended
+            seen = (await segments.recv(timeout=60)).message
+            while (seen.segment_id, seen.event) != (2, "start"):  # mid-gesture: the second's
+                seen = (await segments.recv(timeout=60)).message
+            for _ in range(600):  # and the first gesture told (under load it may come later)
+                if any('"' in line for line in gesture_lines(first_out.read_text())):
+                    break
+                await asyncio.sleep(0.1)
             children = descendants(up.pid)
             assert len(children) >= len(services)  # and the object segmenter's describer
             up.send_signal(signal.SIGKILL)
@@ -78,3 +94,19 @@ async def test_up_killed_mid_gesture_leaves_no_service_and_a_second_up_exits_2(
             for pid in children:
                 if not gone(pid):
                     os.kill(pid, signal.SIGKILL)
+    # the same command again, from the same folder: it goes on from what the first run left
+    code, again, said = await run_beyond(args, env=env, cwd=tmp_path, timeout=150)
+    assert code == 0, said[-3000:]
+    assert "[up] going on with the run begun" in said, said[-3000:]
+    code, analysed, why = await run_beyond(
+        ["analyse", str(RECORDING)], env=env, cwd=tmp_path, timeout=120
+    )
+    assert code == 0, why
+    before = gesture_lines(first_out.read_text())
+    assert before, "the first run told nothing before its kill"
+    assert before + gesture_lines(again) == gesture_lines(analysed)
+    sentences = [line.split(': "', 1)[1][:-1] for line in gesture_lines(analysed) if ': "' in line]
+    spoken = (test_outputs / "speech" / "speech.log").read_text().splitlines()
+    assert [line.split("\t")[-1] for line in spoken] == sentences  # each said once, in order
+    assert "3 of 3 gesture(s) described" in again
+    show(f"killed after {len(before)} line(s); the second run printed {len(gesture_lines(again))}")

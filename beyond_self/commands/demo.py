@@ -44,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
 
     parser = argparse.ArgumentParser(prog="beyond demo")
     up.add_arguments(parser)
-    argv = ["--recording", str(DEMO_RECORDING), *(["--no-live"] if args.no_live else [])]
+    # a show, not a job to finish: each one starts from the beginning
+    argv = ["--recording", str(DEMO_RECORDING), "--fresh", *(["--no-live"] if args.no_live else [])]
     if args.out_dir is not None:
         argv += ["--out-dir", str(args.out_dir)]
     return up.run(parser.parse_args(argv))

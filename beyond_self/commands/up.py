@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import os
 import sys
 import time
@@ -35,6 +36,7 @@ from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.recording.reader import require_mcap
 from beyond_self.runtime.resilience.process import exit_process
+from beyond_self.runtime.resilience.run_state import RunState, run_state_root
 from beyond_self.schemas.keys import check_name
 from beyond_self.services.deployment import Deployment, Ending
 from beyond_self.services.options import load_options
@@ -97,6 +99,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="speed factor of a replayed source (default 1; 0: as fast as possible)",
     )
     parser.add_argument("--no-live", action="store_true", help="no live view, event lines only")
+    parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="start over: clear the state an unfinished run of this side left (by default the "
+        "same command goes on from it)",
+    )
     add_out_dir(parser)
     parser.add_argument(
         "--foxglove",
@@ -425,7 +433,10 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
             f"robot {side.config.robot!r} already has {', '.join(running)} on the bus (another "
             "beyond up?); stop it first, or give this one another --robot"
         )
-    pipeline = PipelineMonitor.of(side, bus, lines.emit)
+    state = run_state(args, side)
+    if said := state.begin(run_command(args, side), fresh=args.fresh):
+        print(f"[up] {said}", file=sys.stderr, flush=True)
+    pipeline = PipelineMonitor.of(side, bus, lines.emit, state)
     loop = asyncio.get_running_loop()
     hints: list[asyncio.Task[None]] = []
     try:
@@ -455,8 +466,35 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     if failed := side.unclean():
         lines.emit(f"services that did not stop cleanly: {failed}")
         return 1
+    if ending.reason == "done":  # complete: the same command again starts over
+        state.clear()
     end = pipeline.stream_end
     return exit_status(ending, end.damage if end is not None else "", pipeline.losses())
+
+
+def run_state(args: argparse.Namespace, side: Deployment) -> RunState:
+    """The side's state on this machine (runtime.resilience.run_state), given to its services."""
+    out = getattr(args, "out_dir", None)
+    root = run_state_root(out.resolve() if out is not None else None)
+    state = RunState(root, side.config.robot, side.watcher or "up", side.services)
+    side.env.update(state.env())
+    return state
+
+
+# what does not change a run's results: the same command but for these goes on from its state
+PRESENTATION = frozenset(("fresh", "no_live", "timeout", "foxglove", "func", "command"))
+
+
+def run_command(args: argparse.Namespace, side: Deployment) -> str:
+    """The run's identity: the side's services and every option that shapes its results, the
+    source's path resolved."""
+    options = {
+        k: str(Path(v).resolve()) if k in ("recording", "log", "video") and v else v
+        for k, v in sorted(vars(args).items())
+        if k not in PRESENTATION and not callable(v)
+    }
+    everything = {"robot": side.config.robot, "services": side.services, **options}
+    return json.dumps(everything, sort_keys=True, default=str)
 
 
 def exit_status(ending: Ending, damage: str, lost: list[str]) -> int:

@@ -19,14 +19,17 @@ import time
 from collections.abc import Callable, Coroutine, Iterable, Mapping
 from typing import Any
 
+import msgspec
+
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import STATUS
 from beyond_self.runtime.bus.publisher import Publisher
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.bus.subscription import consume
 from beyond_self.runtime.log import event
+from beyond_self.runtime.resilience.state import LedgerFile
 from beyond_self.schemas.base import Header, Message
-from beyond_self.schemas.identity import Identity, identify
+from beyond_self.schemas.identity import GESTURE_KINDS, Identity, identify
 from beyond_self.schemas.messages import LEDGER_RANGES, Ledger, Range
 
 SEGMENTS_KEPT = 256  # per key and kind: older segments are forgotten (no cache holds them)
@@ -120,17 +123,26 @@ class LedgerBook:
         self.resume: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, numbers)
         self.positions: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, key ->)
         self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
+        self.past: dict[str, int] = {}  # service -> its newest instance known to be dead
 
-    def heard(self, ledger: Ledger) -> None:
+    def heard(self, ledger: Ledger, *, alive: bool = True) -> None:
+        """Take `ledger` in; `alive=False`: kept on disk by an instance that died (the whole
+        deployment was killed), so what it handled is done but nothing it has now."""
         name = ledger.service
         self.handled.setdefault(name, Handled()).merge(ledger.handled)
-        instance, handled = self.current.get(name, (-1, Handled()))
-        if ledger.instance > instance:
-            instance, handled = ledger.instance, Handled()
-            self.current[name] = (instance, handled)
-        if ledger.instance == instance:
-            handled.merge(ledger.handled)
-            self.last[name] = ledger
+        if not alive:
+            self.past[name] = max(self.past.get(name, -1), ledger.instance)
+            kept = self.last.get(name)
+            if kept is None or kept.instance <= ledger.instance:
+                self.last[name] = ledger
+        else:
+            instance, handled = self.current.get(name, (-1, Handled()))
+            if ledger.instance > instance:
+                instance, handled = ledger.instance, Handled()
+                self.current[name] = (instance, handled)
+            if ledger.instance == instance:
+                handled.merge(ledger.handled)
+                self.last[name] = ledger
         stamp, _ = self.resume.get(name, (-1, {}))
         numbers = {**ledger.resume, **ledger.resume_stamps}
         if numbers and ledger.header.stamp >= stamp:
@@ -141,19 +153,28 @@ class LedgerBook:
 
     def instance_of(self, service: str) -> int:
         """The newest instance of `service` heard of (-1: none)."""
-        return self.current.get(service, (-1, Handled()))[0]
+        return max(self.current.get(service, (-1, Handled()))[0], self.past.get(service, -1))
 
     def resume_of(self, service: str) -> dict[str, int]:
         return dict(self.resume.get(service, (-1, {}))[1])
 
-    def needed(self, keys: Iterable[str]) -> dict[str, int]:
-        """Per key of `keys`, the oldest input position of any service's snapshot."""
+    def needed(self, keys: Iterable[str], back_to: int | None = None) -> dict[str, int]:
+        """Per key of `keys`, the oldest input position of any service's snapshot; with
+        `back_to` (a gesture not said yet), each service's "<key>@N" with the highest N up to
+        it where it has one (from there its successor derives gesture N again)."""
         wanted = set(keys)
         out: dict[str, int] = {}
         for _, positions in self.positions.values():
-            for key, stamp in positions.items():
-                if key in wanted:
-                    out[key] = min(stamp, out.get(key, stamp))
+            mine: dict[str, tuple[int, int]] = {}  # key -> (N, stamp); N = -1: the newest
+            for entry, stamp in positions.items():
+                key, _, count = entry.partition("@")
+                n = int(count) if count.isdigit() else -1
+                if key not in wanted or (count and (back_to is None or not 0 <= n <= back_to)):
+                    continue
+                if key not in mine or n > mine[key][0]:
+                    mine[key] = (n, stamp)
+            for key, (_, stamp) in mine.items():
+                out[key] = min(stamp, out.get(key, stamp))
         return out
 
     def consumers_have(self, key: str, ident: Identity, producer: str) -> bool:
@@ -161,8 +182,17 @@ class LedgerBook:
         alive now, and there is at least one: what a restarted producer need not send again.
         A consumer restarted too has handled none of it yet, and may need it to rebuild its
         state (the object segmenter, a gesture under way)."""
-        takers = [h for n, (_, h) in self.current.items() if n != producer and key in h.keys]
-        return bool(takers) and all(h.has(key, ident) for h in takers)
+        takers = [n for n, h in self.handled.items() if n != producer and key in h.keys]
+        if not takers:
+            return False
+        for name in takers:
+            instance, handled = self.current.get(name, (-1, None))
+            # known only from its state folder: its successor is not heard yet, and has nothing
+            if handled is None or instance <= self.past.get(name, -1):
+                return False
+            if not handled.has(key, ident):
+                return False
+        return True
 
     def done(self, key: str, kind: str, producer: str) -> set[int]:
         """Segments whose `kind` on `key` every service (but `producer`) taking it has handled
@@ -171,6 +201,17 @@ class LedgerBook:
         if not takers:
             return set()
         return set.intersection(*(h.segments(key, kind) for h in takers))
+
+    def delivered(self, key: str, producer: str) -> set[int] | None:
+        """Segments of which every service (but `producer`) taking `key` has handled a
+        per-gesture result (None when nobody takes it)."""
+        takers = [h for n, h in self.handled.items() if n != producer and key in h.keys]
+        if not takers:
+            return None
+        return set.intersection(
+            *({s for kind in set(h.keys[key]) & GESTURE_KINDS for s in h.segments(key, kind)}
+              for h in takers)
+        )  # fmt: skip
 
     def taken(self, key: str, producer: str) -> bool:
         """Some service (but `producer`) takes `key`: its identities are worth checking."""
@@ -205,6 +246,9 @@ class Keeper:
         self._header = header
         self._pub: Publisher[Ledger] | None = None
         self._dirty = False
+        self.file: LedgerFile | None = None  # kept on this machine too (a state folder)
+        self.kept = Handled()  # what its predecessors handled, as its state folder says
+        self.said_key = ""  # the descriptions' key: a gesture is done once it is said
 
     async def ask(self, bus: Bus, log: logging.Logger, *, restarted: bool = False) -> None:
         """What the others know (their ledgers, and the copies they kept of everyone's, this
@@ -213,6 +257,11 @@ class Keeper:
         answers, for at most ASK_TIMEOUT_S; it is somewhere unless the predecessor died before
         its first ledger went out."""
         began = time.monotonic()
+        if self.file is not None:  # this machine's records outlive a deployment killed whole
+            for kept in self.file.siblings():
+                self.book.heard(kept, alive=False)
+                if kept.service == self.name:
+                    self.kept.merge(kept.handled)
         while True:
             left = ASK_TIMEOUT_S - (time.monotonic() - began)
             with contextlib.suppress(InputError, TimeoutError):  # a malformed one: no ledgers
@@ -232,15 +281,37 @@ class Keeper:
             event(log, logging.WARNING, "restarted, but no service kept a record of the "
                   "previous instance: starting afresh", asked_s=took)  # fmt: skip
 
+    def keep_on_disk(self, file: LedgerFile) -> None:
+        """Keep this ledger in `file` too, going on from the one found there (for a consumer
+        that asks no one: a monitor)."""
+        self.file = file
+        for kept in file.siblings():
+            if kept.service == self.name:
+                self.kept.merge(kept.handled)
+                self.instance = max(self.instance, kept.instance + 1)
+
     def predecessor(self) -> dict[str, int]:
         """The numbers the previous instance of this service left to resume from ({} if none)."""
         return self.book.resume_of(self.name)
 
-    def adopt(self, keys: Iterable[str]) -> None:
-        """Take the predecessor's handled identities on `keys`: not to act on them again."""
+    def adopt(self, keys: Iterable[str], outputs: Iterable[str] = ()) -> None:
+        """Take the predecessor's handled identities on `keys`: not to act on them again;
+        with identified `outputs`, only for the gestures whose results on every one of them
+        reached every consumer (a result that died with a consumer is made again)."""
         before = self.book.handled.get(self.name)
-        if before is not None:
-            self.handled.merge(before.wire(), keys)
+        if before is None:
+            return
+        taken = Handled()
+        taken.merge(before.wire(), keys)
+        for key in outputs:
+            delivered = self.book.delivered(key, self.name)
+            if delivered is None:
+                continue
+            for kinds in taken.keys.values():
+                for segments in kinds.values():
+                    for segment in [s for s in segments if s not in delivered]:
+                        del segments[segment]
+        self.handled.merge(taken.wire())
 
     def open(
         self, bus: Bus, on_error: Callable[[str, Exception], None]
@@ -267,7 +338,7 @@ class Keeper:
         """Publish this ledger from now on (`publish`, `tick`): all a consumer that serves and
         resumes nothing needs (a monitor), since every service keeps and answers for it."""
         self._pub = bus.publisher(bus.keys.ledger(self.name), Ledger, STATUS)
-        self._pub.put(self.ledger())
+        self.publish()
 
     def ledger(self) -> Ledger:
         return Ledger(
@@ -282,8 +353,13 @@ class Keeper:
 
     def publish(self) -> None:
         self._dirty = False
-        if self._pub is not None:
-            self._pub.put(self.ledger())
+        if self._pub is not None or self.file is not None:
+            ledger = self.ledger()
+            if self.file is not None:  # with what its predecessors handled: it is all done
+                self.kept.merge(ledger.handled)
+                self.file.save(msgspec.structs.replace(ledger, handled=self.kept.wire()))
+            if self._pub is not None:
+                self._pub.put(ledger)
 
     def tick(self) -> None:
         """With health: publish what changed since (per-frame entries, a new checkpoint)."""
@@ -345,9 +421,14 @@ class Keeper:
         return sorted(n for n in gestures if n not in said)
 
     def done_downstream(self, key: str, kind: str) -> set[int]:
-        """Segments whose `kind` every consumer of this service's `key` has handled: a
-        restarted service need not work on them again."""
-        return self.book.done(key, kind, self.name)
+        """Segments whose `kind` every consumer of this service's `key` has handled and whose
+        description every consumer of descriptions has (`said_key`): a restarted service need
+        not work on them again. One not said yet is derived again (its description died with
+        a consumer: the whole deployment was killed)."""
+        done = self.book.done(key, kind, self.name)
+        if self.said_key and self.book.taken(self.said_key, self.name):
+            done &= self.book.done(self.said_key, "description", self.name)
+        return done
 
     def suppressed(self, key: str, message: Message) -> bool:
         """Every consumer of `key` has handled `message` already: do not send it again. A

@@ -138,6 +138,7 @@ class Snapshots(Generic[S]):
         self.fields = [f for f in msgspec.structs.fields(cls) if f.type is int]
         resume = keeper.predecessor()
         self.history: dict[int, S] = {}  # gesture count -> the newest snapshot at it
+        self.positions: dict[int, dict[str, int]] = {}  # gesture count -> its input position
         for n in per_gesture(resume, GESTURES):
             state = self._state(resume, f"@{n}")
             if state is not None:
@@ -177,7 +178,9 @@ class Snapshots(Generic[S]):
         inputs again from `positions` (sensor key -> stamp)."""
         first_at_count = gestures not in self.history
         self.history[gestures] = state
+        self.positions[gestures] = dict(positions)
         keep_newest(self.history)
+        keep_newest(self.positions)
         stamps: dict[str, int] = {}
         counts: dict[str, int] = {GESTURES: gestures}
         for name, value in msgspec.structs.asdict(state).items():
@@ -187,7 +190,9 @@ class Snapshots(Generic[S]):
             kept[name] = value
             kept |= at_gestures(name, {n: getattr(s, name) for n, s in self.history.items()})
         counts |= at_gestures(GESTURES, {n: n for n in self.history})
-        self.keeper.checkpoint(stamps, counts, positions)
+        # "<key>@N": where a successor goes back to derive gesture N again (schemas.Ledger)
+        at = {f"{k}@{n + 1}": v for n, kept in self.positions.items() for k, v in kept.items()}
+        self.keeper.checkpoint(stamps, counts, {**positions, **at})
         self.taken_count += 1
         now = time.monotonic()
         if self._writer is not None and (first_at_count or now - self._stored_at >= self.every_s):

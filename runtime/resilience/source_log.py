@@ -38,13 +38,6 @@ FLUSH_BYTES = 1 << 20
 _IOV = 512  # pieces per writev (the system's limit is 1024)
 
 
-def state_dir(robot: str, service: str) -> Path | None:
-    """The state folder of `service` of `robot` on this machine, under $BEYOND_STATE_DIR (None
-    when it is not set: the service keeps no state on disk)."""
-    base = os.environ.get("BEYOND_STATE_DIR")
-    return Path(base) / robot / service if base else None
-
-
 MAGIC = b"\x89MCAP0\r\n"
 _MESSAGE = struct.Struct("<BQHIQQ")  # opcode, length, channel, sequence, log and publish time
 
