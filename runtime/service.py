@@ -203,6 +203,16 @@ class Service:
 
         self.bus.watch_tokens(key_expr, guarded)
 
+    def done_downstream(self, key: str, kind: str) -> set[int]:
+        """Gestures whose `kind` on this service's output `key` every consumer has, and which
+        are said: a successor does not work on them again (runtime.resilience.ledger)."""
+        return self.ledgers.done_downstream(key, kind)
+
+    def seen_downstream(self, key: str, kinds: tuple[str, ...]) -> set[int]:
+        """Gestures some consumer of this service's output `key` has had with one of `kinds`
+        (a predecessor's numbering, what it closed)."""
+        return self.ledgers.seen_downstream(key, kinds)
+
     def keep_state(self, cls: type[S]) -> tuple[Snapshots[S], S | None]:
         """Snapshots of this service's `cls` state, taken by `Snapshots.taken`, and the one to
         restore (None: start afresh): told with its ledger, stored in its state folder when

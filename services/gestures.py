@@ -140,8 +140,8 @@ class GestureStreamer(Service):
         (consumers would wait on it for ever), and number on after every gesture a consumer
         has."""
         key = self.bus.keys.gesture_segment
-        seen = self.ledgers.seen_downstream(key, SEGMENT_KINDS)
-        closed = self.ledgers.seen_downstream(key, ("end", "cancel"))
+        seen = self.seen_downstream(key, SEGMENT_KINDS)
+        closed = self.seen_downstream(key, ("end", "cancel"))
         cut = sorted(seen - closed)
         stamp = frame.header.stamp
         reason = f"its frames before {stamp} are gone (source and streamer restarted)"

@@ -23,7 +23,6 @@ from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.bus.subscription import Subscription
 from beyond_self.runtime.recording.images import CameraMessage, image_from_message
-from beyond_self.runtime.resilience.snapshots import at_gestures, keep_newest, per_gesture
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     CameraFrame,
@@ -44,6 +43,14 @@ from beyond_self.services.frame_describer import FrameDescriber
 
 _YIELDS_TO_EVENTS = 8  # turns of the event loop a camera frame gives waiting gesture events
 LIVE_NICENESS = 10  # of a live source's describer process: what the gestures leave, it gets
+
+
+class WatchState(msgspec.Struct, frozen=True):
+    """The segmenter's snapshot: the first camera stamp its watch needs again (the restart
+    point), and the gestures started by then."""
+
+    stamp: int
+    started: int
 
 
 class ObjectSegmenter(Service):
@@ -92,15 +99,17 @@ class ObjectSegmenter(Service):
         self.describer = shared.frame_describer(self.clusters_path, niceness)
         keys = self.bus.keys
         # restarted: the gestures whose effects every consumer has are not measured again, and
-        # the camera history before the predecessor's restart point is not gone over again
-        done = self.ledgers.done_downstream(keys.effects, "effects")
+        # the camera history before the snapshot's restart point is not gone over again
+        done = self.done_downstream(keys.effects, "effects")
         self.watch.done(done)
-        resume = self.ledgers.predecessor()
-        self.history, self.resume_from = self._restart_point(resume)
+        self.snapshots, restored = self.keep_state(WatchState)
+        self.resume_from, self.gestures_started = (
+            (restored.stamp, restored.started) if restored else (-1, 0)
+        )
         # for pacing, the start and the end of every gesture closed before (its effects told,
         # or cancelled) count as received: a gesture streamer restarted before this one may not
         # send them again (its predecessor's consumer had them), and this one does not need them
-        closed = done | self.ledgers.seen_downstream(keys.gesture_segment, ("cancel",))
+        closed = done | self.seen_downstream(keys.gesture_segment, ("cancel",))
         self.received_before = 2 * next(n for n in range(1, len(closed) + 2) if n not in closed) - 2
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
         self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
@@ -121,27 +130,13 @@ class ObjectSegmenter(Service):
             self.spawn(self._describe_newest(), "objects of the newest frame")
         self.spawn(self._catch_up(), "gesture windows")
 
-    def _restart_point(self, resume: dict[str, int]) -> tuple[dict[int, int], int]:
-        """The restart points the predecessor kept at each gesture's start, and the camera
-        stamp to go back to: its newest restart point, or, when a gesture it saw start is not
-        said yet (a workstation taken over: that gesture's results died with it, and the
-        gesture streamer's successor derives it again), the point kept at that gesture's
-        start, so its frames are there to measure it again. -1: from the first frame."""
-        history = per_gesture(resume, "camera")
-        newest = resume.get("camera", -1)
-        unsaid = self.ledgers.unsaid(self.bus.keys.description, history)
-        return history, min(newest, history[unsaid[0]]) if unsaid else newest
-
-    def _tell_checkpoint(self) -> None:
-        """Where a successor would resume: the restart point now, and the one at each of the
-        last gestures' starts (`_restart_point`)."""
-        points = at_gestures("camera", self.history)
+    def _snapshot(self, started: int) -> None:
+        """The watch's restart point now, after `started` gestures: a successor that goes back
+        to gesture `started + 1` measures it again from there (runtime.resilience.snapshots)."""
         point = max(0, self.watch.restart_point)
         keys = self.bus.keys
         positions = {keys.camera: point, keys.camera_compressed: point}
-        for key in (keys.camera, keys.camera_compressed):  # the one kept at each gesture's start
-            positions |= at_gestures(key, self.history)
-        self.ledgers.checkpoint({"camera": point} | points, positions=positions)
+        self.snapshots.taken(WatchState(point, started), positions, gestures=started)
 
     def on_gestures_progress(self, msg: Progress) -> None:
         stamp = msg.handled.get(self.bus.keys.skeleton, -1)
@@ -174,7 +169,7 @@ class ObjectSegmenter(Service):
             return  # before the predecessor's restart point: nobody needs it again
         image = image_from_message(msg)
         self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image))
-        self._tell_checkpoint()
+        self._snapshot(self.gestures_started)
         if not self.skip_frames:
             await self._describe(msg, image)  # before the frame counts as handled: paced
             return
@@ -231,10 +226,9 @@ class ObjectSegmenter(Service):
         self._gestures_complete()
         if event.event == "start":
             self.emit(self.watch.started(event.segment_id, event.start_stamp, event.header))
-            # its window's frames from here on: what a successor needs to measure it again
-            self.history.setdefault(event.segment_id, max(0, self.watch.restart_point))
-            keep_newest(self.history)
-            self._tell_checkpoint()
+            if event.segment_id > self.gestures_started:  # its window's frames from here on
+                self._snapshot(event.segment_id - 1)
+                self.gestures_started = event.segment_id
         elif event.event == "cancel":
             self.emit(self.watch.cancelled(event.segment_id))
         elif event.end_stamp is not None:

@@ -187,8 +187,9 @@ class LedgerBook:
             return False
         for name in takers:
             instance, handled = self.current.get(name, (-1, None))
-            # known only from its state folder: its successor is not heard yet, and has nothing
-            if handled is None or instance <= self.past.get(name, -1):
+            # known only from its state folder, as an instance that died: its successor is not
+            # heard yet, and has nothing
+            if handled is None or instance < self.past.get(name, -1):
                 return False
             if not handled.has(key, ident):
                 return False
