@@ -61,6 +61,7 @@ class _Segment:
     def __init__(
         self, path: Path, flush_s: float, io: ThreadPoolExecutor, encodings: dict[str, str]
     ) -> None:
+        self.path = path
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         self._io = io
         self._encodings = encodings  # key -> wire encoding
@@ -129,6 +130,8 @@ class SourceLog:
         existing = self.segments()
         self._next = int(existing[-1].stem) + 1 if existing else 0
         self._writer: _Segment | None = None
+        # each file's size as appended, not as written yet: the writing thread may lag behind
+        self._sizes = {path: path.stat().st_size for path in existing}
         # one thread writes the files, in order: publishing does not wait for the kernel
         self._io = ThreadPoolExecutor(1, "source-log")
         self._by_key: dict[str, Publisher[Any]] = {}
@@ -149,12 +152,16 @@ class SourceLog:
     def _rotate(self) -> _Segment:
         if self._writer is not None:
             self._writer.close()
+            self._sizes[self._writer.path] = self._writer.total
         path = self.folder / f"{self._next:08d}.mcap"
         self._next += 1
         writer = self._writer = _Segment(path, self.flush_s, self._io, self._encodings)
-        segments = self.segments()
-        while len(segments) > 1 and sum(p.stat().st_size for p in segments) > self.max_bytes:
-            segments.pop(0).unlink(missing_ok=True)
+        self._sizes[path] = 0
+        while len(self._sizes) > 1 and sum(self._sizes.values()) > self.max_bytes:
+            oldest = min(self._sizes, key=lambda p: int(p.stem))
+            del self._sizes[oldest]
+            # on the writing thread, after what it still has to write there
+            self._io.submit(oldest.unlink, True)
         return writer
 
     def record(self, *publishers: Iterable[Publisher[Any]] | Publisher[Any]) -> None:
