@@ -227,6 +227,7 @@ async def whole_resume_time() -> dict[str, float]:
     from beyond_self.runtime.bus.config import BusConfig
     from beyond_self.runtime.bus.delivery import STATUS
     from beyond_self.runtime.bus.session import Bus
+    from beyond_self.runtime.bus.subscription import Subscription
 
     loop = asyncio.get_running_loop()
     config = BusConfig(robot="benchwhole", port=17793)
@@ -240,27 +241,29 @@ async def whole_resume_time() -> dict[str, float]:
         }
         command = [sys.executable, "-m", "beyond_self", "up", "--recording", str(RECORDING)]
         command += ["--rate", "1", "--no-live", "--timeout", "60"]
-        sub = bus.subscribe(bus.keys.progress("gestures"), s.Progress, STATUS)
         skeleton = bus.keys.skeleton
 
-        async def first_output(after: float) -> float:
+        async def first_output(sub: Subscription[s.Progress], after: float) -> float:
             async for received in sub:
-                handled = received.message.handled.get(skeleton, -1)
-                if handled >= 0 and loop.time() > after:
+                if received.message.handled.get(skeleton, -1) >= 0:
+                    sub.close()
                     return loop.time() - after
             raise RuntimeError("no progress")
 
+        def progress() -> Subscription[s.Progress]:  # opened before the run it hears
+            return bus.subscribe(bus.keys.progress("gestures"), s.Progress, STATUS)
+
         quiet = asyncio.subprocess.DEVNULL
-        began = loop.time()
+        sub, began = progress(), loop.time()
         up = await asyncio.create_subprocess_exec(*command, env=env, stdout=quiet, stderr=quiet)
-        fresh = await asyncio.wait_for(first_output(began), 60)
+        fresh = await asyncio.wait_for(first_output(sub, began), 60)
         await asyncio.sleep(max(0.0, began + 11.0 - loop.time()))  # gesture 2 is under way
         up.kill()
         await up.wait()
         await asyncio.sleep(2.0)  # its services die with it (runtime.resilience.lifeline)
-        began = loop.time()
+        sub, began = progress(), loop.time()
         again = await asyncio.create_subprocess_exec(*command, env=env, stdout=quiet, stderr=quiet)
-        resumed = await asyncio.wait_for(first_output(began), 60)
+        resumed = await asyncio.wait_for(first_output(sub, began), 60)
         code = await asyncio.wait_for(again.wait(), 120)
     print(
         f"resume, whole deployment SIGKILLed: first output {resumed:.2f} s after `beyond up` "
