@@ -17,6 +17,7 @@ import logging
 import time
 import zlib
 from collections.abc import Callable, Coroutine, Sequence
+from pathlib import Path
 from typing import Any, NoReturn, TypeVar, overload
 
 import msgspec
@@ -100,6 +101,7 @@ class Service:
         self._publishers: list[Publisher[Any]] = []
         self._progress = ProgressReport(self.name, self.header)
         self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.resilience.ledger)
+        self.fleet_member = False  # run by runtime.fleet for one robot of many
         self._once: set[str] = set()  # keys whose handling is not repeated after a restart
         self.times = SourceTimes()  # whose time each sensor key keeps (runtime.event_time)
         self._recovery_reported: tuple[int, int] = (0, 0)
@@ -213,11 +215,16 @@ class Service:
         (a predecessor's numbering, what it closed)."""
         return self.ledgers.seen_downstream(key, kinds)
 
+    def state_folder(self) -> Path | None:
+        """This service's state folder on this machine (runtime.resilience.state); None without
+        one, or when a fleet runs it for one of its robots (the robot's side keeps its own)."""
+        return None if self.fleet_member else state_dir(self.bus.keys.robot, self.name)
+
     def keep_state(self, cls: type[S]) -> tuple[Snapshots[S], S | None]:
         """Snapshots of this service's `cls` state, taken by `Snapshots.taken`, and the one to
         restore (None: start afresh): told with its ledger, stored in its state folder when
         there is one (runtime.resilience.snapshots)."""
-        folder = state_dir(self.bus.keys.robot, self.name)
+        folder = self.state_folder()
         store = SnapshotStore(folder) if folder is not None else None
         snapshots = Snapshots(cls, self.ledgers, store, self.bus.keys.description)
         return snapshots, snapshots.chosen(restarted=restarts() > 0)
@@ -406,7 +413,7 @@ class Service:
         try:
             # before setup: a restarted one resumes
             self.ledgers.said_key = self.bus.keys.description
-            if (folder := state_dir(self.bus.keys.robot, self.name)) is not None:
+            if (folder := self.state_folder()) is not None:
                 self.ledgers.file = LedgerFile(folder)
             await self.ledgers.ask(self.bus, self.log, restarted=restarts() > 0)
             await self.setup()

@@ -35,6 +35,8 @@ def test_outputs(run_outputs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPa
     keeps to go on with (runtime.resilience.run_state) is not found by the next test's."""
     folder = run_outputs / tmp_path.name
     monkeypatch.setenv(OUT_DIR_VAR, str(folder))
+    # and for a process started without our variables: not the state folder of the user
+    monkeypatch.setenv("XDG_STATE_HOME", str(folder / "xdg"))
     return folder
 
 

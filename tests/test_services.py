@@ -204,10 +204,11 @@ async def test_a_restarted_streamer_without_its_checkpoints_frames_cancels_the_g
 async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said(
     monkeypatch: pytest.MonkeyPatch, said: list[int], expected: int
 ) -> None:
-    """Taken over: the predecessor's newest restart point (camera stamp 5000) is past gesture
-    2's frames, whose description died with the workstation (the speech service said only
-    1). The gesture streamer's successor derives gesture 2 again, so the object segmenter's
-    goes back to the restart point kept at gesture 2's start; once 2 is said, to the newest."""
+    """Taken over: the predecessor's newest snapshot (restart point, camera stamp 5000) is past
+    gesture 2's frames, whose description died with the workstation (the speech service said
+    only 1). The gesture streamer's successor derives gesture 2 again, so the object
+    segmenter's goes back to the snapshot taken at gesture 2's start (after 1 gesture); once 2
+    is said, to the newest."""
     monkeypatch.setenv(RESTARTS_ENV, "1")
     config = private_config()
     with Bus.open(config) as others, Bus.open(config) as bus:
@@ -215,7 +216,9 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
         kept = [
             s.Ledger(
                 header=s.Ledger.original_header("objects", 9, 1), service="objects",
-                resume_stamps={"camera": 5_000, "camera@1": 200, "camera@2": 1_000},
+                resume_stamps={"stamp": 5_000, "stamp@0": 200, "stamp@1": 1_000},
+                resume={"started": 2, "gestures": 2, "started@0": 0, "gestures@0": 0,
+                        "started@1": 1, "gestures@1": 1},
             ),
             s.Ledger(
                 header=s.Ledger.original_header("speech", 9, 1), service="speech",
@@ -229,7 +232,7 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
         others.queryable(others.keys.ledger(), None, answer)
         service = await _start("objects", bus)
         assert service.resume_from == expected  # type: ignore[attr-defined]
-        assert service.history == {1: 200, 2: 1_000}  # type: ignore[attr-defined]
+        assert service.gestures_started == (1 if expected == 1_000 else 2)  # type: ignore[attr-defined]
         # a gesture that starts now keeps its own point, told to a next successor
         pub = others.publisher(others.keys.gesture_segment, s.GestureSegment)
         await pub.wait_matching(timeout=10)
@@ -237,12 +240,14 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
         pub.put(s.GestureSegment(header=header, event_seq=5, event="start", segment_id=3,
                                  frame=210, start_stamp=7_000))  # fmt: skip
         for _ in range(500):
-            if "camera@3" in service.ledgers.resume_stamps:  # type: ignore[attr-defined]
+            if "stamp@2" in service.ledgers.resume_stamps:  # type: ignore[attr-defined]
                 break
             await asyncio.sleep(0.02)
         stamps = service.ledgers.resume_stamps  # type: ignore[attr-defined]
-        assert stamps["camera@1"] == 200 and stamps["camera@2"] == 1_000
-        assert 0 <= stamps["camera@3"] <= 7_000, stamps
+        assert stamps["stamp@0"] == 200 and stamps["stamp@1"] == 1_000
+        assert 0 <= stamps["stamp@2"] <= 7_000, stamps  # after 2 gestures: gesture 3's point
+        positions = service.ledgers.positions  # type: ignore[attr-defined]
+        assert positions[f"{others.keys.camera}@3"] == stamps["stamp@2"]  # where 3 needs it from
         await _stop(service)
 
 
