@@ -37,10 +37,10 @@ typecheck: $(STAMP)
 docs: $(STAMP)
 	$(RUN) NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(BIN)/mkdocs build --strict --quiet --site-dir site
 
-# Three workers on two cores (much of the suite waits on services starting, podman and paced
+# Four workers on two cores (most of the suite waits on services starting, podman and paced
 # replays), a test file at a time in the order tests/conftest.py gives: the longest files first.
 pytest: $(STAMP)
-	$(RUN) $(BIN)/python -m pytest -q -n 3 --dist loadfile --no-loadscope-reorder
+	$(RUN) $(BIN)/python -m pytest -q -n 4 --dist loadfile --no-loadscope-reorder
 
 bench: $(STAMP)
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done

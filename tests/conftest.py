@@ -146,21 +146,27 @@ def show(request: pytest.FixtureRequest) -> Callable[[str], None]:
 # The files that take longest (most of it waiting on podman, pip, paced replays at real time or
 # services starting again after a kill), longest first: xdist hands them out before the rest.
 LONG_FILES = (
-    "test_containers.py",
     "test_event_time.py",
-    "test_package.py",
-    "test_secure_netns.py",
-    "test_deploy_netns.py",
-    "test_gesture_people.py",
-    "test_pipeline_up.py",
-    "test_chaos_a.py",
     "test_chaos_b.py",
-    "test_damaged_recordings.py",
+    "test_chaos_a.py",
+    "test_containers.py",
+    "test_deploy_netns.py",
+    "test_secure_netns.py",
+    "test_fleet_netns.py",
+    "test_package.py",
+    "test_fleet.py",
     "test_bus_fuzz.py",
-    "test_live_load.py",
-    "test_soak.py",
+    "test_up_owns_children.py",
+    "test_stray_messages.py",
     "test_docs_blocks.py",
+    "test_pipeline_up.py",
     "test_ros2_bridge.py",
+    "test_damaged_recordings.py",
+    "test_live_load.py",
+    "test_ask_hostile.py",
+    "test_stamp_gaps.py",
+    "test_soak.py",
+    "test_gesture_people.py",
 )
 
 

@@ -131,10 +131,9 @@ class LedgerBook:
         name = ledger.service
         self.handled.setdefault(name, Handled()).merge(ledger.handled)
         if not alive:
+            # not answered for (`last`): whoever heard it from us would take it for alive, and
+            # withhold from the successor what the dead instance had
             self.past[name] = max(self.past.get(name, -1), ledger.instance)
-            kept = self.last.get(name)
-            if kept is None or kept.instance <= ledger.instance:
-                self.last[name] = ledger
         else:
             instance, handled = self.current.get(name, (-1, Handled()))
             if ledger.instance > instance:
