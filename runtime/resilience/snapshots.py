@@ -13,7 +13,6 @@ the base's part: it tells them in the ledger and chooses one on start.
 from __future__ import annotations
 
 import contextlib
-import os
 import time
 from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -23,6 +22,7 @@ from typing import Any, Generic, TypeVar
 import msgspec
 
 from beyond_self.runtime.resilience.ledger import Keeper
+from beyond_self.runtime.resilience.state import write_atomically
 
 S = TypeVar("S", bound=msgspec.Struct)
 
@@ -85,18 +85,7 @@ class SnapshotStore:
         data = msgspec.msgpack.encode(
             Positioned(self.number, dict(positions), msgspec.msgpack.encode(state))
         )
-        path = self.folder / f"{self.number:010d}.snap"
-        temporary = path.with_suffix(".tmp")
-        with temporary.open("wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(temporary, path)
-        folder = os.open(self.folder, os.O_RDONLY)
-        try:
-            os.fsync(folder)
-        finally:
-            os.close(folder)
+        write_atomically(self.folder / f"{self.number:010d}.snap", data, sync=True)
         for old in self.numbers()[: -self.keep]:
             with contextlib.suppress(FileNotFoundError):
                 (self.folder / f"{old:010d}.snap").unlink()
