@@ -49,6 +49,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("beyond.monitor")
 LEDGER_TICK_S = 0.5  # how often a named monitor tells the per-frame results it has handled
 POSE_WINDOW_S = 2.0  # a camera source's pose rate is taken over this much of its stream
+NOT_DESCRIBED = "an input it needed was lost on the way; the reasoner's log says which"
 
 
 class PipelineMonitor:
@@ -96,6 +97,9 @@ class PipelineMonitor:
         self._ledger_seq = 0
         self.duplicates = 0  # results received again (and not shown again)
         self.cut: dict[int, str] = {}  # gestures cancelled because their frames were lost: why
+        # gestures that ended and were passed over, a later one described: an input they needed
+        # (a final belief, words) was lost on the way (the reasoner's log says which)
+        self.undescribed: set[int] = set()
         self.stale: dict[tuple[str, int], int] = {}  # (service, restarts): frames dropped stale
         # a fleet workstation: the robots it serves (their patterns), counted apart
         self.fleet = FleetTally(bus, robots) if robots else None
@@ -196,6 +200,11 @@ class PipelineMonitor:
 
     def _flush(self) -> None:
         lines = self.report.release()
+        for n, g in self.report.gestures.items():
+            if g.skipped and g.end_frame is not None and n not in self.undescribed:
+                self.undescribed.add(n)
+                if self.state is not None:
+                    self.state.told(Printed(n, False, NOT_DESCRIBED))
         if self.state is not None:  # told before it is printed: a kill between loses no repeat
             for n, g in self.report.gestures.items():
                 if g.printed and n not in self.state.before:
@@ -329,6 +338,10 @@ class PipelineMonitor:
             cut += self.fleet.cut()
             stale.update(self.fleet.stale())
         lost = []
+        if self.undescribed:
+            which = ", ".join(f"gesture {n}" for n in sorted(self.undescribed))
+            count = len(self.undescribed)
+            lost.append(f"{count} ended but not described ({which}: {NOT_DESCRIBED})")
         if cut:
             why = "; ".join(f"{what}: {reason or 'no reason given'}" for what, reason in cut)
             lost.append(f"{len(cut)} cut (frames lost: {why})")

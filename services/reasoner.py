@@ -14,7 +14,7 @@ from typing import Any
 
 from beyond_self.cognition.bn import BayesNet
 from beyond_self.cognition.bn.evidence import Evidence, build_evidence
-from beyond_self.cognition.episodes import Anticipation, FusionJoin, Outcome
+from beyond_self.cognition.episodes import Anticipation, FusionJoin, Lost, Outcome
 from beyond_self.cognition.episodes.fusion import Prediction
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import EVENTS, FRAMES
@@ -67,7 +67,10 @@ class AffordanceReasoner(Service):
         self.predictions = self.publisher(keys.affordance, AffordancePrediction, FRAMES)
         self.words_out = self.publisher(keys.words, WordProbabilities, EVENTS)
         self.subscribe(keys.gesture_object, GestureObject, self.on_object, EVENTS)
-        self.subscribe(keys.gesture_posterior, ActionPosterior, self.on_posterior, FRAMES)
+        self.beliefs = self.subscribe(
+            keys.gesture_posterior, ActionPosterior, self.on_posterior, FRAMES
+        )
+        self.beliefs_missed = 0  # beliefs no publisher cache held, so far
         self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, EVENTS)
         self.subscribe(keys.effects, ObjectEffects, self.on_effects, EVENTS)
         self.queryable(keys.ask, AffordanceQuery, self.on_ask)
@@ -84,6 +87,9 @@ class AffordanceReasoner(Service):
         self.emit(self.join.object_seen(msg.segment_id, msg.labels))
 
     def on_posterior(self, msg: ActionPosterior) -> None:
+        if (missed := self.beliefs.missed) > self.beliefs_missed:
+            self.emit(self.join.beliefs_missed(msg.segment_id, missed - self.beliefs_missed))
+            self.beliefs_missed = missed
         belief = dict(zip(msg.actions, msg.posterior, strict=True))
         self.emit(
             self.join.belief(
@@ -111,8 +117,11 @@ class AffordanceReasoner(Service):
 
     # -- outputs --------------------------------------------------------------------------
 
-    def emit(self, outputs: list[Anticipation[Header] | Outcome[Header]]) -> None:
+    def emit(self, outputs: list[Anticipation[Header] | Outcome[Header] | Lost]) -> None:
         for out in outputs:
+            if isinstance(out, Lost):  # not described: the watcher counts it lost
+                self.report_error("beliefs", InputError(f"gesture {out.segment_id}: {out.reason}"))
+                continue
             final = isinstance(out, Outcome)
             self.predictions.put(
                 self._prediction(out.ref, out.segment_id, out.frame, out.prediction, final)

@@ -26,6 +26,7 @@ from beyond_self.cognition.episodes import (
     GestureEffects,
     GestureReport,
     GestureTracker,
+    Lost,
     ObjectAtStart,
     ObjectWatch,
     Outcome,
@@ -436,6 +437,24 @@ def test_a_late_reasoner_gets_the_posterior_history_before_the_segment_history(
     outcomes = lost.started(2, second) + lost.belief(2, 0, second, belief, 0, final=True)
     outcomes += lost.ended(2, second, second + 1)
     assert [o.segment_id for o in outcomes if isinstance(o, Outcome)] == [2]
+
+
+def test_a_lost_final_belief_gives_its_gesture_up_and_holds_nothing_back(network: Any) -> None:
+    """A link cut longer than the streamer's cache: gesture 1's final belief is lost for good.
+    Told so with the first belief after the gap, the join gives 1 up at once (`Lost`) and
+    describes 2 and 3; without being told it would wait 30 s of belief stream time."""
+    belief = {"tap": 0.9, "grasp": 0.05, "touch": 0.05}
+    join: FusionJoin[int] = FusionJoin(network, expect_objects=False)
+    out = join.started(1, 0) + join.belief(1, 0, 0, belief, 0) + join.ended(1, 0, 10)
+    out += join.started(2, 20) + join.ended(2, 20, 30) + join.started(3, 40)
+    assert not [o for o in out if isinstance(o, Outcome | Lost)]  # 1 holds 2 back
+    out = join.beliefs_missed(2, 7) + join.belief(2, 1, 30, belief, 1, final=True)
+    out += join.belief(3, 0, 40, belief, 0, final=True) + join.ended(3, 40, 40)
+    told = [(type(o).__name__, o.segment_id) for o in out if isinstance(o, Outcome | Lost)]
+    assert told == [("Lost", 1), ("Outcome", 2), ("Outcome", 3)]
+    assert "7 belief(s)" in next(o.reason for o in out if isinstance(o, Lost))
+    # whatever comes about 1 afterwards (a late repeat) changes nothing
+    assert join.belief(1, 1, 10, belief, 1, final=True) == []
 
 
 def test_a_cancel_after_the_end_changes_nothing(network: Any) -> None:

@@ -79,6 +79,23 @@ def test_a_cut_gesture_is_counted_named_and_is_a_loss(monitor: PipelineMonitor) 
     assert monitor.losses() == ["1 cut (frames lost: gesture 2: its frames before 7 are gone)"]
 
 
+def test_an_ended_gesture_passed_over_is_a_loss(monitor: PipelineMonitor) -> None:
+    """Gesture 1 ended but its final belief never came (lost on a cut link); gesture 2 was
+    described whole: 1 is passed over, and the summary and exit status say it was lost."""
+    monitor.on_segment(segment(1, "start", 1))
+    monitor.on_segment(segment(2, "end", 1))
+    monitor.on_segment(segment(3, "start", 2))
+    monitor.on_segment(segment(4, "end", 2))
+    monitor.report.believed(2)
+    monitor.report.recognised(2, {"tap": 0.9, "grasp": 0.1}, {"Shape": "circle"})
+    assert monitor.losses() == []  # gesture 1 may still come
+    monitor.on_description(description(5, 2, 1005))
+    assert monitor.report.gestures[2].printed and monitor.report.gestures[1].skipped
+    (lost,) = monitor.losses()
+    assert lost.startswith("1 ended but not described (gesture 1: an input it needed was lost")
+    assert monitor.summary() == f"1 of 2 gesture(s) described, {lost}"
+
+
 def test_nothing_lost_is_the_plain_summary(monitor: PipelineMonitor) -> None:
     described(monitor, 1, 1)
     described(monitor, 2, 10)

@@ -48,7 +48,15 @@ class Outcome(Generic[R]):
     effects_dropped: str = ""  # why measured effects were left out, if they were
 
 
-Output = Anticipation[R] | Outcome[R]
+@dataclass(frozen=True)
+class Lost:
+    """A gesture given up: an input it needs can no longer come (`reason`)."""
+
+    segment_id: int
+    reason: str
+
+
+Output = Anticipation[R] | Outcome[R] | Lost
 
 
 @dataclass
@@ -87,6 +95,10 @@ class FusionJoin(Generic[R]):
         self.segment_time = -1  # starts and ends (one publisher, in order)
         self.belief_time = -1  # posteriors (another publisher, in order)
         self.objects_present = False  # the object segmenter is alive (told by the caller)
+        # beliefs no cache held came before one about this gesture: the ones before it that
+        # still lack their final belief will never have it (`beliefs_missed`)
+        self.beliefs_lost_before = -1
+        self.beliefs_lost_why = ""
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -149,6 +161,17 @@ class FusionJoin(Generic[R]):
             self.finished.add(segment_id)
         return self._flush()
 
+    def beliefs_missed(self, before: int, count: int) -> list[Output[R]]:
+        """`count` beliefs were lost for good (no publisher cache held them any more) before
+        one about gesture `before`. One publisher's beliefs arrive in order, so a gesture before
+        `before` still lacking its final belief will never have it: it is given up (`Lost`) now,
+        instead of holding back every gesture after it."""
+        self.beliefs_lost_before = max(self.beliefs_lost_before, before)
+        self.beliefs_lost_why = (
+            f"its final belief was lost ({count} belief(s) no publisher cache held any more)"
+        )
+        return self._flush()
+
     def skeleton_at(self, stamp: int) -> list[Output[R]]:
         return self._advance(stamp)
 
@@ -200,6 +223,11 @@ class FusionJoin(Generic[R]):
         outputs: list[Output[R]] = []
         for segment_id in sorted(self.gestures):
             g = self.gestures[segment_id]
+            if g.final is None and segment_id < self.beliefs_lost_before:
+                outputs.append(Lost(segment_id, self.beliefs_lost_why))
+                del self.gestures[segment_id]
+                self.finished.add(segment_id)
+                continue
             if self._abandoned(g):
                 # no input about it for a deadline of stream time and still incomplete (its
                 # start or end never came): it must not hold back the gestures after it

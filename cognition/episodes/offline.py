@@ -16,7 +16,7 @@ import numpy as np
 
 from beyond_self.cognition.bn.model import BayesNet
 from beyond_self.cognition.descriptions import nbest_exact
-from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Outcome
+from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Lost, Outcome, Output
 from beyond_self.cognition.episodes.objects import GestureEffects, ObjectAtStart, ObjectWatch
 from beyond_self.cognition.episodes.report import GestureReport
 from beyond_self.cognition.episodes.tracker import (
@@ -86,8 +86,10 @@ def analyse_stream(
     run = OfflineRun()
     actions = list(gesture_models.actions)
 
-    def joined(outputs: list[Anticipation[int] | Outcome[int]]) -> None:
+    def joined(outputs: list[Output[int]]) -> None:
         for out in outputs:
+            if isinstance(out, Lost):
+                continue  # only a bus loses beliefs
             if on_event is not None:
                 on_event(out)
             if isinstance(out, Anticipation):

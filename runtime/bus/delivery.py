@@ -19,6 +19,10 @@ from beyond_self.core.errors import InputError
 Congestion = Literal["block", "drop"]
 
 FRAME_CACHE = 1024  # samples: ~30 s of a per-frame stream at 30 Hz
+# Derived per-frame streams cross the robot–workstation link: their caches outlast an outage
+# of two minutes at 30 Hz (a lost final belief is a gesture not described). A few hundred bytes
+# a sample: about 1.2 MB per publisher, once full
+DERIVED_CACHE = 4096
 EVENT_CACHE = 64  # samples: per-gesture streams
 CAMERA_CACHE = 300  # frames: 20 s at 15 fps, longer than a gesture and its lead
 
@@ -55,7 +59,7 @@ RELIABLE = Delivery()
 # Reports that the next one repairs (health, progress): never wait for a slow or dead link.
 STATUS = Delivery(congestion="drop")
 # Derived per-frame streams (posteriors, objects, predictions): recovered after a cut link.
-FRAMES = Delivery(congestion="drop", cache=FRAME_CACHE, recover=True)
+FRAMES = Delivery(congestion="drop", cache=DERIVED_CACHE, recover=True)
 # Per-gesture streams (segment events, effects, words, descriptions): recovered after a cut link.
 EVENTS = Delivery(congestion="drop", cache=EVENT_CACHE, recover=True)
 # Camera frames (never leaving the robot): an object segmenter restarted mid-gesture gets back the
