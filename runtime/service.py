@@ -20,8 +20,6 @@ from collections.abc import Callable, Coroutine, Sequence
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar, overload
 
-import msgspec
-
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.config import BusConfig, load_config
 from beyond_self.runtime.bus.delivery import RELIABLE, STATUS, Delivery
@@ -36,7 +34,8 @@ from beyond_self.runtime.progress import ProgressReport
 from beyond_self.runtime.resilience import heap, process
 from beyond_self.runtime.resilience.accounting import ErrorAccount
 from beyond_self.runtime.resilience.ledger import Keeper
-from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
+from beyond_self.runtime.resilience.resume import InputGate, gated
+from beyond_self.runtime.resilience.snapshots import Restorable, Snapshots, SnapshotStore
 from beyond_self.runtime.resilience.state import LedgerFile, state_dir
 from beyond_self.runtime.security.acl import check_declared
 from beyond_self.runtime.self_report import (
@@ -55,7 +54,7 @@ from beyond_self.schemas.messages import Progress, ServiceHealth, StreamClock
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
-S = TypeVar("S", bound=msgspec.Struct)
+R = TypeVar("R", bound=Restorable)
 
 
 def report_phase(robot: str) -> float:
@@ -103,6 +102,7 @@ class Service:
         self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.resilience.ledger)
         self.fleet_member = False  # run by runtime.fleet for one robot of many
         self._once: set[str] = set()  # keys whose handling is not repeated after a restart
+        self._gates: dict[str, InputGate[Any]] = {}  # sensor key -> its restored position
         self.times = SourceTimes()  # whose time each sensor key keeps (runtime.event_time)
         self._recovery_reported: tuple[int, int] = (0, 0)
         self._tasks: set[asyncio.Task[Any]] = set()
@@ -158,6 +158,8 @@ class Service:
         instance does not handle again what its predecessor handled."""
         self._check_declared("subscribe", key)
         sub = self.bus.subscribe(key, cls, delivery, on_malformed=self.account.malformed)
+        if (gate := self._gates.get(key)) is not None:
+            handler = gated(gate, handler)
         self._subscriptions.append((sub, handler))
         if cls in IDENTIFIED:
             self.ledgers.handled.declare(key)
@@ -220,14 +222,30 @@ class Service:
         one, or when a fleet runs it for one of its robots (the robot's side keeps its own)."""
         return None if self.fleet_member else state_dir(self.bus.keys.robot, self.name)
 
-    def keep_state(self, cls: type[S]) -> tuple[Snapshots[S], S | None]:
-        """Snapshots of this service's `cls` state, taken by `Snapshots.taken`, and the one to
-        restore (None: start afresh): told with its ledger, stored in its state folder when
-        there is one (runtime.resilience.snapshots)."""
+    def keep_state(
+        self,
+        cls: type[R],
+        restore: Callable[[R | None], None],
+        inputs: Sequence[str],
+        on_gap: Callable[[Any, int], None] | None = None,
+    ) -> Snapshots[R]:
+        """Snapshots of this service's `cls` state (`Snapshots.taken`): told with its ledger,
+        stored in its state folder when there is one (runtime.resilience.snapshots). `restore`
+        is called at once with the one to go on from (None: start afresh); the messages of the
+        sensor keys `inputs` then reach their handlers from its position on
+        (runtime.resilience.resume), and `on_gap(message, since)` hears of inputs that are gone
+        (without it, the service takes what comes). Called before those keys are subscribed."""
         folder = self.state_folder()
         store = SnapshotStore(folder) if folder is not None else None
         snapshots = Snapshots(cls, self.ledgers, store, self.bus.keys.description)
-        return snapshots, snapshots.chosen(restarted=restarts() > 0)
+        restored = snapshots.chosen(restarted=restarts() > 0)
+        restore(restored)
+        gate = InputGate(restored, lambda: snapshots.newest, restore, on_gap)
+        for key in inputs:
+            if key in self._gates or any(sub.key == key for sub, _ in self._subscriptions):
+                raise RuntimeError(f"{self.name}: keep_state after {key} was subscribed")
+            self._gates[key] = gate
+        return snapshots
 
     def spawn(self, work: Coroutine[Any, Any, Any], name: str = "task") -> asyncio.Task[Any]:
         """Run `work` beside the handlers until the service stops (then it is cancelled); what

@@ -24,6 +24,7 @@ from beyond_self.cognition.gestures import GestureModels
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import EVENTS, FRAMES, SKELETON
 from beyond_self.runtime.log import event
+from beyond_self.runtime.resilience.snapshots import Restorable
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
 from beyond_self.services import shared
@@ -31,11 +32,10 @@ from beyond_self.services import shared
 SEGMENT_KINDS = ("start", "end", "cancel")
 
 
-class StreamerState(msgspec.Struct, frozen=True):
+class StreamerState(Restorable, frozen=True):
     """The streamer's snapshot: its tracker's (`TrackerSnapshot`) and the events it had told
     there (`event_seq` runs on across restarts)."""
 
-    stamp: int
     segments: int
     events: int
 
@@ -68,18 +68,19 @@ class GestureStreamer(Service):
 
     async def setup(self) -> None:
         self.gesture_models: GestureModels = shared.gesture_models(self.models_path)
-        self.snapshots, restored = self.keep_state(StreamerState)
-        self._restore(restored)
         self.actions = list(self.gesture_models.actions)
         keys = self.bus.keys
+        self.snapshots = self.keep_state(
+            StreamerState, self.restore, inputs=[keys.skeleton], on_gap=self.frames_lost
+        )
         self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, FRAMES)
         self.segments = self.publisher(keys.gesture_segment, GestureSegment, EVENTS)
         self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame, SKELETON, paced=True)
         self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
 
-    def _restore(self, state: StreamerState | None) -> None:
+    def restore(self, state: StreamerState | None) -> None:
         """Rebuild from `state` (None: from the first frame)."""
-        self.resume_from, self.events = (state.stamp, state.events) if state else (-1, 0)
+        self.events = state.events if state else 0
         snapshot = TrackerSnapshot(state.stamp, state.segments) if state else None
         self.tracker: GestureTracker[Header] = GestureTracker.restored(
             self.gesture_models, snapshot, self.buffer_frames
@@ -104,22 +105,9 @@ class GestureStreamer(Service):
         )
 
     def on_frame(self, frame: SkeletonFrame) -> None:
+        if self.finished:
+            return
         stamp = frame.header.stamp
-        if self.finished or stamp < self.resume_from:
-            return  # before the checkpoint: the predecessor's, already told
-        newest = self.snapshots.newest
-        if self.tracker.last_stamp is None and newest and self.resume_from < stamp <= newest.stamp:
-            # going back to a checkpoint before a gesture not yet said, whose frames are gone
-            # from the source's cache (the source was restarted too), while the newest one's
-            # are here: rebuild exactly from the newest, as a plain restart does (the gestures
-            # in between are with the consumers, or lost either way). From here the cut path
-            # below would leave the gesture under way started and never ended, and every
-            # consumer would wait on it
-            self._restore(newest)
-            if stamp < self.resume_from:
-                return
-        if self.tracker.last_stamp is None and stamp > self.resume_from >= 0:
-            self._cut(frame)
         x = self.features(frame)
         events = self.events
         self.emit(self.tracker.push(stamp, frame.frame, x, frame.header))
@@ -134,30 +122,21 @@ class GestureStreamer(Service):
         if self.end_at is not None and stamp >= self.end_at:
             self.finish()
 
-    def _cut(self, frame: SkeletonFrame) -> None:
-        """The frames since the checkpoint are gone (the source was restarted too): cancel
-        each gesture a consumer saw start and none saw end, whose frames no one can give back
-        (consumers would wait on it for ever), and number on after every gesture a consumer
-        has."""
+    def frames_lost(self, frame: SkeletonFrame, since: int) -> None:
+        """The frames from `since` to `frame` are gone (source and streamer restarted): cancel
+        each gesture a consumer saw start and none saw end (they would wait on it for ever)."""
         key = self.bus.keys.gesture_segment
         seen = self.seen_downstream(key, SEGMENT_KINDS)
-        closed = self.seen_downstream(key, ("end", "cancel"))
-        cut = sorted(seen - closed)
+        under_way = seen - self.seen_downstream(key, ("end", "cancel"))
         stamp = frame.header.stamp
         reason = f"its frames before {stamp} are gone (source and streamer restarted)"
-        self.emit([
-            Cancelled(segment_id=n, frame=frame.frame, start_stamp=self.resume_from,
-                      ref=frame.header, reason=reason, cut=True)
-            for n in cut
-        ])  # fmt: skip
-        self.tracker.segment_id = max(self.tracker.segment_id, *seen, 0)
-        self.report_error(
-            "resume",
-            InputError(
-                f"the skeleton cache starts at {stamp}, after the checkpoint "
-                f"{self.resume_from}: gestures under way were cut ({cut})"
-            ),
+        self.emit(
+            self.tracker.frames_lost(
+                under_way, max(seen, default=0), frame.frame, since, frame.header, reason
+            )
         )
+        why = f"the skeleton stream starts again at {stamp}, after the snapshot's {since}"
+        self.report_error("resume", InputError(f"{why}: gestures cut {sorted(under_way)}"))
 
     def published_counts(self) -> dict[str, int]:
         # events carry their running count (event_seq), which a restarted streamer continues:

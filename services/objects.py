@@ -23,6 +23,7 @@ from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.bus.subscription import Subscription
 from beyond_self.runtime.recording.images import CameraMessage, image_from_message
+from beyond_self.runtime.resilience.snapshots import Restorable
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     CameraFrame,
@@ -45,11 +46,10 @@ _YIELDS_TO_EVENTS = 8  # turns of the event loop a camera frame gives waiting ge
 LIVE_NICENESS = 10  # of a live source's describer process: what the gestures leave, it gets
 
 
-class WatchState(msgspec.Struct, frozen=True):
+class WatchState(Restorable, frozen=True):
     """The segmenter's snapshot: the first camera stamp its watch needs again (the restart
-    point), and the gestures started by then."""
+    point, `stamp`), and the gestures started by then."""
 
-    stamp: int
     started: int
 
 
@@ -102,10 +102,8 @@ class ObjectSegmenter(Service):
         # the camera history before the snapshot's restart point is not gone over again
         done = self.done_downstream(keys.effects, "effects")
         self.watch.done(done)
-        self.snapshots, restored = self.keep_state(WatchState)
-        self.resume_from, self.gestures_started = (
-            (restored.stamp, restored.started) if restored else (-1, 0)
-        )
+        cameras = [keys.camera, keys.camera_compressed]
+        self.snapshots = self.keep_state(WatchState, self.restore, inputs=cameras)
         # for pacing, the start and the end of every gesture closed before (its effects told,
         # or cancelled) count as received: a gesture streamer restarted before this one may not
         # send them again (its predecessor's consumer had them), and this one does not need them
@@ -129,6 +127,10 @@ class ObjectSegmenter(Service):
         if self.skip_frames:
             self.spawn(self._describe_newest(), "objects of the newest frame")
         self.spawn(self._catch_up(), "gesture windows")
+
+    def restore(self, state: WatchState | None) -> None:
+        """Go on from `state` (None: from the first frame): the gestures started by then."""
+        self.gestures_started = state.started if state else 0
 
     def _snapshot(self, started: int) -> None:
         """The watch's restart point now, after `started` gestures: a successor that goes back
@@ -165,8 +167,6 @@ class ObjectSegmenter(Service):
             if not any(sub.pending for sub in self.events):
                 break
             await asyncio.sleep(0)
-        if msg.header.stamp < self.resume_from:
-            return  # before the predecessor's restart point: nobody needs it again
         image = image_from_message(msg)
         self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image))
         self._snapshot(self.gestures_started)

@@ -196,7 +196,7 @@ async def test_a_restarted_streamer_without_its_checkpoints_frames_cancels_the_g
             ("start", 4, 7),
             ("end", 4, 8),
         ]
-        assert "gestures under way were cut ([2])" in service.health_report().last_error  # type: ignore[attr-defined]
+        assert "gestures cut [2]" in service.health_report().last_error  # type: ignore[attr-defined]
         await _stop(service)
 
 
@@ -231,7 +231,7 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
 
         others.queryable(others.keys.ledger(), None, answer)
         service = await _start("objects", bus)
-        assert service.resume_from == expected  # type: ignore[attr-defined]
+        assert service._gates[bus.keys.camera].start == expected  # where its input starts
         assert service.gestures_started == (1 if expected == 1_000 else 2)  # type: ignore[attr-defined]
         # a gesture that starts now keeps its own point, told to a next successor
         pub = others.publisher(others.keys.gesture_segment, s.GestureSegment)

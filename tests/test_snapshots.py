@@ -10,7 +10,8 @@ import msgspec
 
 import beyond_self.schemas as s
 from beyond_self.runtime.resilience.ledger import Keeper
-from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
+from beyond_self.runtime.resilience.resume import InputGate
+from beyond_self.runtime.resilience.snapshots import Restorable, Snapshots, SnapshotStore
 
 
 class State(msgspec.Struct, frozen=True):
@@ -43,8 +44,7 @@ def test_a_snapshot_that_does_not_decode_is_passed_over(tmp_path: Path) -> None:
     assert SnapshotStore(tmp_path / "empty").newest(State) is None
 
 
-class Streamer(msgspec.Struct, frozen=True):
-    stamp: int
+class Streamer(Restorable, frozen=True):
     segments: int
     events: int
 
@@ -69,3 +69,43 @@ def test_snapshots_told_with_a_ledger_are_what_a_successor_restores(tmp_path: Pa
     alone = Snapshots(Streamer, Keeper("gestures", header), SnapshotStore(tmp_path), "d")
     assert alone.chosen(restarted=True) == Streamer(300, 2, 4)  # from the machine
     assert alone.chosen(restarted=False) is None  # a first start takes nothing
+
+
+class _At(Restorable, frozen=True):
+    segments: int = 0
+
+
+class _Msg:
+    def __init__(self, stamp: int) -> None:
+        self.header = type("H", (), {"stamp": stamp})()
+
+
+def test_the_input_gate_skips_what_came_before_and_tells_a_gap_once() -> None:
+    """Restored at stamp 100: input before it was the predecessor's; the first one after it
+    (150) says the frames from 100 on are gone, once; with a newest snapshot at 200, a first
+    input at 150 rebuilds from the newest instead and waits for its stamp."""
+    gaps: list[tuple[int, int]] = []
+    restored: list[_At | None] = []
+    gate = InputGate(
+        _At(100),
+        lambda: None,
+        restored.append,
+        lambda m, since: gaps.append((m.header.stamp, since)),
+    )
+    assert [gate.admits(_Msg(s)) for s in (50, 150, 160, 90)] == [False, True, True, False]
+    assert gaps == [(150, 100)] and restored == []
+    on_time = InputGate(
+        _At(100), lambda: None, restored.append, lambda m, since: gaps.append((0, 0))
+    )
+    assert on_time.admits(_Msg(100)) and gaps == [(150, 100)]  # no gap: it starts where it left
+    newest = _At(200, 3)
+    forward = InputGate(
+        _At(100),
+        lambda: newest,
+        restored.append,
+        lambda m, since: gaps.append((m.header.stamp, since)),
+    )
+    assert [forward.admits(_Msg(s)) for s in (150, 180, 200, 210)] == [False, False, True, True]
+    assert restored == [newest] and gaps == [(150, 100)]
+    plain = InputGate(_At(100), lambda: newest, restored.append, None)  # no gap handling
+    assert [plain.admits(_Msg(s)) for s in (99, 150)] == [False, True] and restored == [newest]

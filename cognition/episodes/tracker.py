@@ -180,6 +180,15 @@ class GestureTracker(Generic[R]):
         first = snapshot.segments if snapshot is not None else 0
         return cls(models, buffer_frames=buffer_frames, first_segment_id=first)
 
+    def frames_lost(
+        self, under_way: set[int], numbered: int, frame: int, since: int, ref: R, reason: str
+    ) -> list[Cancelled[R]]:
+        """The frames from stamp `since` up to this frame (number `frame`) are gone: the
+        gestures `under_way` elsewhere (started, not closed) cannot be derived again, and are
+        cancelled as cut; segments number on after `numbered`, the last one started elsewhere."""
+        self.segment_id = max(self.segment_id, numbered)
+        return [Cancelled(n, frame, since, ref, reason, cut=True) for n in sorted(under_way)]
+
     @property
     def memory_frames(self) -> int:
         """Frames a checkpoint must stay quiet for: the segmenter's median and history windows

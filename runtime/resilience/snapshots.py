@@ -24,7 +24,14 @@ import msgspec
 from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.runtime.resilience.state import write_atomically
 
-S = TypeVar("S", bound=msgspec.Struct)
+
+class Restorable(msgspec.Struct, frozen=True):
+    """What every snapshot state is: `stamp` is the first input stamp it needs again."""
+
+    stamp: int
+
+
+S = TypeVar("S", bound=Restorable)
 
 # checkpoints a producer keeps, one per gesture count, for a successor to go back to
 CHECKPOINTS_KEPT = 8
@@ -141,9 +148,12 @@ class Snapshots(Generic[S]):
         self._writer = ThreadPoolExecutor(1, "snapshots") if store is not None else None
 
     def _state(self, resume: Mapping[str, int], suffix: str) -> S | None:
-        values = {f.name: resume.get(f.name + suffix) for f in self.fields}
-        if any(v is None for v in values.values()):
-            return None
+        values: dict[str, int] = {}
+        for f in self.fields:
+            value = resume.get(f.name + suffix)
+            if value is None:
+                return None
+            values[f.name] = value
         return self.cls(**values)
 
     def chosen(self, restarted: bool) -> S | None:
