@@ -86,25 +86,17 @@ def test_the_input_gate_skips_what_came_before_and_tells_a_gap_once() -> None:
     input at 150 rebuilds from the newest instead and waits for its stamp."""
     gaps: list[tuple[int, int]] = []
     restored: list[_At | None] = []
-    gate = InputGate(
-        _At(100),
-        lambda: None,
-        restored.append,
-        lambda m, since: gaps.append((m.header.stamp, since)),
-    )
+
+    def gap(message: _Msg, since: int) -> None:
+        gaps.append((message.header.stamp, since))
+
+    gate = InputGate(_At(100), lambda: None, restored.append, gap)
     assert [gate.admits(_Msg(s)) for s in (50, 150, 160, 90)] == [False, True, True, False]
     assert gaps == [(150, 100)] and restored == []
-    on_time = InputGate(
-        _At(100), lambda: None, restored.append, lambda m, since: gaps.append((0, 0))
-    )
+    on_time = InputGate(_At(100), lambda: None, restored.append, gap)
     assert on_time.admits(_Msg(100)) and gaps == [(150, 100)]  # no gap: it starts where it left
     newest = _At(200, 3)
-    forward = InputGate(
-        _At(100),
-        lambda: newest,
-        restored.append,
-        lambda m, since: gaps.append((m.header.stamp, since)),
-    )
+    forward = InputGate(_At(100), lambda: newest, restored.append, gap)
     assert [forward.admits(_Msg(s)) for s in (150, 180, 200, 210)] == [False, False, True, True]
     assert restored == [newest] and gaps == [(150, 100)]
     plain = InputGate(_At(100), lambda: newest, restored.append, None)  # no gap handling
