@@ -92,15 +92,13 @@ def source_log_cost() -> dict[str, float]:
 
 def snapshot_cost() -> dict[str, float]:
     import beyond_self.schemas as s
-    from beyond_self.cognition.episodes import GestureTracker
+    from beyond_self.cognition.episodes import GestureTracker, TrackerSnapshot, WatchSnapshot
     from beyond_self.cognition.episodes.offline import SkeletonInput
     from beyond_self.cognition.gestures import extract_features
     from beyond_self.cognition.gestures.default_models import default_models
     from beyond_self.commands.analyse import _inputs
     from beyond_self.runtime.resilience.ledger import Keeper
     from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
-    from beyond_self.services.gestures import StreamerState
-    from beyond_self.services.objects import WatchState
 
     frames = [
         (i.stamp, i.frame, extract_features(i.hand, i.torso)[0])
@@ -113,35 +111,30 @@ def snapshot_cost() -> dict[str, float]:
 
     with tempfile.TemporaryDirectory() as folder:
         store = SnapshotStore(Path(folder))
-        snapshots = Snapshots(StreamerState, Keeper("gestures", header), store, "r/description")
+        inputs = ["r/skeleton"]
+        snapshots = Snapshots(TrackerSnapshot, Keeper("gestures", header), store, "d", inputs)
         tracker: GestureTracker[int] = GestureTracker(default_models())
-        told = None
         spent = 0.0
-        taken = 0
         for stamp, number, x in frames:
             tracker.push(stamp, number, x, number)
             began = time.perf_counter()
-            snap = tracker.snapshot()
-            if snap is not None and snap != told:
-                told = snap
-                state = StreamerState(snap.stamp, snap.segments, 0)
-                snapshots.taken(state, {"r/skeleton": snap.stamp}, gestures=snap.segments)
-                taken += 1
+            snapshots.offer(tracker.snapshot())  # what the base does after every message
             spent += time.perf_counter() - began
+        taken = snapshots.taken_count
         if snapshots.stored is not None:
             snapshots.stored.result(10)
         saves = store.number
         save_us = []
         for i in range(50):  # one stored snapshot: encode, write, fsync, rename, fsync folder
             began = time.perf_counter()
-            store.save(StreamerState(i, i, i), {"r/skeleton": i})
+            store.save(TrackerSnapshot(i, i, i), {"r/skeleton": i})
             save_us.append((time.perf_counter() - began) * 1e6)
         size = store.bytes_written / store.number
-        watch = Snapshots(WatchState, Keeper("objects", header), None, "r/description")
+        cameras = ["r/camera", "r/compressed"]
+        watch = Snapshots(WatchSnapshot, Keeper("objects", header), None, "d", cameras)
         began = time.perf_counter()
-        for i in range(len(frames)):  # the object segmenter's, one per camera frame
-            started = i // 200
-            watch.taken(WatchState(i, started), {"r/camera": i, "r/compressed": i}, started)
+        for i in range(len(frames)):  # the object segmenter's, its restart point moving each frame
+            watch.offer(WatchSnapshot(i, i // 200))
         objects_us = (time.perf_counter() - began) / len(frames) * 1e6
     stream_s = len(frames) / 30.0
     share = spent / stream_s

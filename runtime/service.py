@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, NoReturn, TypeVar, overload
 
 from beyond_self.core.errors import InputError
+from beyond_self.core.restorable import Restorable
 from beyond_self.runtime.bus.config import BusConfig, load_config
 from beyond_self.runtime.bus.delivery import RELIABLE, STATUS, Delivery
 from beyond_self.runtime.bus.publisher import Publisher
@@ -35,7 +36,7 @@ from beyond_self.runtime.resilience import heap, process
 from beyond_self.runtime.resilience.accounting import ErrorAccount
 from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.runtime.resilience.resume import InputGate, gated
-from beyond_self.runtime.resilience.snapshots import Restorable, Snapshots, SnapshotStore
+from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
 from beyond_self.runtime.resilience.state import LedgerFile, state_dir
 from beyond_self.runtime.security.acl import check_declared
 from beyond_self.runtime.self_report import (
@@ -103,6 +104,8 @@ class Service:
         self.fleet_member = False  # run by runtime.fleet for one robot of many
         self._once: set[str] = set()  # keys whose handling is not repeated after a restart
         self._gates: dict[str, InputGate[Any]] = {}  # sensor key -> its restored position
+        # what `keep_state` keeps: the snapshots, and how to ask for the state now
+        self._state: tuple[Snapshots[Any], Callable[[], Any]] | None = None
         self.times = SourceTimes()  # whose time each sensor key keeps (runtime.event_time)
         self._recovery_reported: tuple[int, int] = (0, 0)
         self._tasks: set[asyncio.Task[Any]] = set()
@@ -226,18 +229,22 @@ class Service:
         self,
         cls: type[R],
         restore: Callable[[R | None], None],
+        snapshot: Callable[[], R | None],
         inputs: Sequence[str],
         on_gap: Callable[[Any, int], None] | None = None,
     ) -> Snapshots[R]:
-        """Snapshots of this service's `cls` state (`Snapshots.taken`): told with its ledger,
-        stored in its state folder when there is one (runtime.resilience.snapshots). `restore`
-        is called at once with the one to go on from (None: start afresh); the messages of the
-        sensor keys `inputs` then reach their handlers from its position on
-        (runtime.resilience.resume), and `on_gap(message, since)` hears of inputs that are gone
-        (without it, the service takes what comes). Called before those keys are subscribed."""
+        """Keep this service's `cls` state across kills (runtime.resilience.snapshots): `restore`
+        is called at once with the one to go on from (None: start afresh); after every message
+        handled, `snapshot()` says the state now, taken when it moved (told with the ledger,
+        stored in the state folder when there is one). The messages of the sensor keys `inputs`
+        reach their handlers from the restored state's stamp on (runtime.resilience.resume), and
+        `on_gap(message, since)` hears of inputs that are gone (without it, the service takes
+        what comes). Called in `setup()`, before those keys are subscribed."""
+        if self._state is not None:
+            raise RuntimeError(f"{self.name}: keep_state called twice")
         folder = self.state_folder()
         store = SnapshotStore(folder) if folder is not None else None
-        snapshots = Snapshots(cls, self.ledgers, store, self.bus.keys.description)
+        snapshots = Snapshots(cls, self.ledgers, store, self.bus.keys.description, inputs)
         restored = snapshots.chosen(restarted=restarts() > 0)
         restore(restored)
         gate = InputGate(restored, lambda: snapshots.newest, restore, on_gap)
@@ -245,6 +252,7 @@ class Service:
             if key in self._gates or any(sub.key == key for sub, _ in self._subscriptions):
                 raise RuntimeError(f"{self.name}: keep_state after {key} was subscribed")
             self._gates[key] = gate
+        self._state = (snapshots, snapshot)
         return snapshots
 
     def spawn(self, work: Coroutine[Any, Any, Any], name: str = "task") -> asyncio.Task[Any]:
@@ -376,6 +384,12 @@ class Service:
                 self.clock.observe(header.stamp)
             if identified and not refused:
                 ledgers.record(received.key, received.message)
+            if self._state is not None:
+                snapshots, snapshot = self._state
+                try:
+                    snapshots.offer(snapshot())
+                except Exception as exc:  # counted; the next message offers one again
+                    self.report_error("snapshot", exc)
             if progress.wanted:
                 self.publish_progress()
 

@@ -4,10 +4,9 @@ gesture, P_HMM(A | G_1^t) with the per-action log-likelihoods out.
 The per-gesture logic is `cognition.episodes.GestureTracker`; this service turns messages into
 its calls and its events into messages, each derived from the skeleton frame it is about. The
 source's `StreamEnd` closes a gesture still under way once the last frame it announces is
-handled, whatever order they arrive in. Crash-only: the tracker's snapshot
-(runtime.resilience.snapshots)
-restores a restarted streamer, which gets the frames since back from the source and continues
-its numbering (docs/concepts/recovery.md).
+handled, whatever order they arrive in. Crash-only: the base keeps the tracker's snapshot
+(`Service.keep_state`), from which a restarted streamer goes on with the frames since, its
+events numbered on (docs/concepts/recovery.md).
 """
 
 from __future__ import annotations
@@ -24,20 +23,11 @@ from beyond_self.cognition.gestures import GestureModels
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import EVENTS, FRAMES, SKELETON
 from beyond_self.runtime.log import event
-from beyond_self.runtime.resilience.snapshots import Restorable
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ActionPosterior, GestureSegment, Header, SkeletonFrame, StreamEnd
 from beyond_self.services import shared
 
 SEGMENT_KINDS = ("start", "end", "cancel")
-
-
-class StreamerState(Restorable, frozen=True):
-    """The streamer's snapshot: its tracker's (`TrackerSnapshot`) and the events it had told
-    there (`event_seq` runs on across restarts)."""
-
-    segments: int
-    events: int
 
 
 class GestureStreamer(Service):
@@ -62,28 +52,28 @@ class GestureStreamer(Service):
         self.torso_joint = torso_joint
         self.buffer_frames = buffer_frames
         self.end_at: int | None = None  # last skeleton stamp of the source, once it has ended
-        self.told: TrackerSnapshot | None = None  # the tracker's snapshot, last taken
-        self.events = 0
         self.finished = False
 
     async def setup(self) -> None:
         self.gesture_models: GestureModels = shared.gesture_models(self.models_path)
         self.actions = list(self.gesture_models.actions)
         keys = self.bus.keys
-        self.snapshots = self.keep_state(
-            StreamerState, self.restore, inputs=[keys.skeleton], on_gap=self.frames_lost
+        self.keep_state(
+            TrackerSnapshot,
+            self.restore,
+            lambda: self.tracker.snapshot(),
+            inputs=[keys.skeleton],
+            on_gap=self.frames_lost,
         )
         self.posteriors = self.publisher(keys.gesture_posterior, ActionPosterior, FRAMES)
         self.segments = self.publisher(keys.gesture_segment, GestureSegment, EVENTS)
         self.subscribe(keys.skeleton, SkeletonFrame, self.on_frame, SKELETON, paced=True)
         self.subscribe(keys.stream_end, StreamEnd, self.on_stream_end, EVENTS)
 
-    def restore(self, state: StreamerState | None) -> None:
+    def restore(self, state: TrackerSnapshot | None) -> None:
         """Rebuild from `state` (None: from the first frame)."""
-        self.events = state.events if state else 0
-        snapshot = TrackerSnapshot(state.stamp, state.segments) if state else None
         self.tracker: GestureTracker[Header] = GestureTracker.restored(
-            self.gesture_models, snapshot, self.buffer_frames
+            self.gesture_models, state, self.buffer_frames
         )
         if state is not None:
             event(
@@ -109,16 +99,7 @@ class GestureStreamer(Service):
             return
         stamp = frame.header.stamp
         x = self.features(frame)
-        events = self.events
         self.emit(self.tracker.push(stamp, frame.frame, x, frame.header))
-        snapshot = self.tracker.snapshot()
-        if snapshot is not None and snapshot != self.told:
-            # a snapshot moves only on a frame with no event (or is the first frame): the
-            # events counted before this frame are those before the snapshot's
-            self.told = snapshot
-            state = StreamerState(snapshot.stamp, snapshot.segments, events)
-            positions = {self.bus.keys.skeleton: snapshot.stamp}
-            self.snapshots.taken(state, positions, gestures=snapshot.segments)
         if self.end_at is not None and stamp >= self.end_at:
             self.finish()
 
@@ -141,7 +122,7 @@ class GestureStreamer(Service):
     def published_counts(self) -> dict[str, int]:
         # events carry their running count (event_seq), which a restarted streamer continues:
         # consumers compare it with what they received
-        return {**super().published_counts(), self.bus.keys.gesture_segment: self.events}
+        return {**super().published_counts(), self.bus.keys.gesture_segment: self.tracker.events}
 
     def on_stream_end(self, msg: StreamEnd) -> None:
         last = msg.last_stamps.get("skeleton")
@@ -160,10 +141,9 @@ class GestureStreamer(Service):
             if isinstance(ev, Belief):
                 self.publish_belief(ev)
             elif isinstance(ev, Started):
-                self.events += 1
                 self.segments.put(
                     GestureSegment(
-                        event_seq=self.events,
+                        event_seq=ev.seq,
                         header=self.derive(ev.ref, GestureSegment),
                         event="start",
                         segment_id=ev.segment_id,
@@ -176,10 +156,9 @@ class GestureStreamer(Service):
                 if isinstance(ev, Cancelled):  # why a started gesture is not described
                     why = {"segment": ev.segment_id, "frame": ev.frame, "reason": ev.reason}
                     event(self.log, logging.INFO, "gesture cancelled", **why)
-                self.events += 1
                 self.segments.put(
                     GestureSegment(
-                        event_seq=self.events,
+                        event_seq=ev.seq,
                         header=self.derive(ev.ref, GestureSegment),
                         event="end" if ended else "cancel",
                         segment_id=ev.segment_id,

@@ -19,11 +19,11 @@ import msgspec
 import numpy as np
 
 from beyond_self.cognition.episodes import GestureEffects, ObjectAtStart, ObjectWatch
+from beyond_self.cognition.episodes.objects import WatchSnapshot
 from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.bus.subscription import Subscription
 from beyond_self.runtime.recording.images import CameraMessage, image_from_message
-from beyond_self.runtime.resilience.snapshots import Restorable
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     CameraFrame,
@@ -44,13 +44,6 @@ from beyond_self.services.frame_describer import FrameDescriber
 
 _YIELDS_TO_EVENTS = 8  # turns of the event loop a camera frame gives waiting gesture events
 LIVE_NICENESS = 10  # of a live source's describer process: what the gestures leave, it gets
-
-
-class WatchState(Restorable, frozen=True):
-    """The segmenter's snapshot: the first camera stamp its watch needs again (the restart
-    point, `stamp`), and the gestures started by then."""
-
-    started: int
 
 
 class ObjectSegmenter(Service):
@@ -103,7 +96,7 @@ class ObjectSegmenter(Service):
         done = self.done_downstream(keys.effects, "effects")
         self.watch.done(done)
         cameras = [keys.camera, keys.camera_compressed]
-        self.snapshots = self.keep_state(WatchState, self.restore, inputs=cameras)
+        self.keep_state(WatchSnapshot, self.watch.resume, self.watch.snapshot, inputs=cameras)
         # for pacing, the start and the end of every gesture closed before (its effects told,
         # or cancelled) count as received: a gesture streamer restarted before this one may not
         # send them again (its predecessor's consumer had them), and this one does not need them
@@ -127,18 +120,6 @@ class ObjectSegmenter(Service):
         if self.skip_frames:
             self.spawn(self._describe_newest(), "objects of the newest frame")
         self.spawn(self._catch_up(), "gesture windows")
-
-    def restore(self, state: WatchState | None) -> None:
-        """Go on from `state` (None: from the first frame): the gestures started by then."""
-        self.gestures_started = state.started if state else 0
-
-    def _snapshot(self, started: int) -> None:
-        """The watch's restart point now, after `started` gestures: a successor that goes back
-        to gesture `started + 1` measures it again from there (runtime.resilience.snapshots)."""
-        point = max(0, self.watch.restart_point)
-        keys = self.bus.keys
-        positions = {keys.camera: point, keys.camera_compressed: point}
-        self.snapshots.taken(WatchState(point, started), positions, gestures=started)
 
     def on_gestures_progress(self, msg: Progress) -> None:
         stamp = msg.handled.get(self.bus.keys.skeleton, -1)
@@ -169,7 +150,6 @@ class ObjectSegmenter(Service):
             await asyncio.sleep(0)
         image = image_from_message(msg)
         self.emit(self.watch.camera(msg.header.stamp, msg.header.seq, image))
-        self._snapshot(self.gestures_started)
         if not self.skip_frames:
             await self._describe(msg, image)  # before the frame counts as handled: paced
             return
@@ -226,9 +206,6 @@ class ObjectSegmenter(Service):
         self._gestures_complete()
         if event.event == "start":
             self.emit(self.watch.started(event.segment_id, event.start_stamp, event.header))
-            if event.segment_id > self.gestures_started:  # its window's frames from here on
-                self._snapshot(event.segment_id - 1)
-                self.gestures_started = event.segment_id
         elif event.event == "cancel":
             self.emit(self.watch.cancelled(event.segment_id))
         elif event.end_stamp is not None:

@@ -181,7 +181,7 @@ def serve_cut_predecessor(bus: Bus, first: int) -> None:
     kept = [
         Ledger(
             header=Ledger.original_header("gestures", 9, first), service="gestures",
-            resume={"segments": 1, "events": 3}, resume_stamps={"stamp": first},
+            resume={"gestures": 1, "events": 3}, resume_stamps={"stamp": first},
         ),
         Ledger(
             header=Ledger.original_header("reasoner", 9, first), service="reasoner",

@@ -10,6 +10,7 @@ import pytest
 
 from beyond_self.cognition.episodes import Belief, Cancelled, Ended, GestureTracker, Started
 from beyond_self.cognition.episodes.offline import SkeletonInput
+from beyond_self.cognition.episodes.tracker import TrackerSnapshot
 from beyond_self.cognition.gestures import extract_features
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.commands.analyse import _inputs
@@ -20,13 +21,13 @@ RECORDINGS = sorted((Path(__file__).resolve().parent.parent / "recordings").glob
 def described(event: Any) -> tuple[Any, ...]:
     """What an event says, comparable across trackers."""
     if isinstance(event, Started):
-        return ("start", event.segment_id, event.frame, event.stamp)
+        return ("start", event.segment_id, event.frame, event.stamp, event.seq)
     if isinstance(event, Belief):
         return ("belief", event.segment_id, event.frame, event.final, tuple(event.posterior))
     if isinstance(event, Ended):
-        return ("end", event.segment_id, event.frame, event.start_stamp, event.end_stamp)
+        return ("end", event.segment_id, event.frame, event.start_stamp, event.end_stamp, event.seq)
     assert isinstance(event, Cancelled)
-    return ("cancel", event.segment_id, event.frame)
+    return ("cancel", event.segment_id, event.frame, event.seq)
 
 
 def frames(path: Path, passes: int = 3) -> list[tuple[int, int, Any]]:
@@ -47,24 +48,26 @@ def test_a_tracker_started_at_any_checkpoint_makes_the_same_events(path: Path) -
     stream = frames(path)
     full: GestureTracker[int] = GestureTracker(models)
     after: list[list[Any]] = []  # events made while pushing frame i
-    checkpoints: dict[tuple[int, int], int] = {}  # checkpoint -> first frame index it was seen
+    checkpoints: dict[TrackerSnapshot, int] = {}  # snapshot -> first frame index it was seen
     for i, (stamp, number, x) in enumerate(stream):
         after.append([described(e) for e in full.push(stamp, number, x, number)])
-        assert full.checkpoint is not None
-        checkpoints.setdefault(full.checkpoint, i)
+        snapshot = full.snapshot()
+        assert snapshot is not None
+        checkpoints.setdefault(snapshot, i)
     tail = [described(e) for e in full.finish()]
     index = {stamp: i for i, (stamp, _, _) in enumerate(stream)}
     assert len(checkpoints) > 3, "quiet stretches give checkpoints besides the first frame"
-    assert max(seg for _, seg in checkpoints) >= 1, "some checkpoint comes after a gesture"
-    assert len({seg for _, seg in checkpoints}) > 2, "checkpoints between several gestures"
+    assert max(c.gestures for c in checkpoints) >= 1, "some checkpoint comes after a gesture"
+    assert len({c.gestures for c in checkpoints}) > 2, "checkpoints between several gestures"
+    assert all(c.events == 2 * c.gestures for c in checkpoints), "quiet: each one started, ended"
     found = list(checkpoints.items())
     sample = [found[round(k * (len(found) - 1) / 4)] for k in range(5)]  # first, ..., last
-    for (stamp, segments), seen_at in sample:
-        start = index[stamp]
+    for snapshot, seen_at in sample:
+        start = index[snapshot.stamp]
         assert seen_at >= start  # a checkpoint is known once its quiet stretch has passed
-        fresh: GestureTracker[int] = GestureTracker(models, first_segment_id=segments)
+        fresh: GestureTracker[int] = GestureTracker.restored(models, snapshot)
         made = [[described(e) for e in fresh.push(s, n, x, n)] for s, n, x in stream[start:]]
-        assert made == after[start:], (path.name, stamp, segments)
+        assert made == after[start:], (path.name, snapshot)
         assert [described(e) for e in fresh.finish()] == tail
 
 

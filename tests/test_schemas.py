@@ -130,7 +130,7 @@ def examples() -> list[s.Message]:
             service="describer",
             instance=1,
             handled={"beyond/robot/language/words": {"words": [(1, 0, 0), (2, 0, 0)]}},
-            resume={"segments": 2, "events": 4},
+            resume={"gestures": 2, "events": 4},
             resume_stamps={"stamp": 1_700_000_000_123_456_789},  # above 2**53: a time in JSON
         ),
         s.Progress(

@@ -207,8 +207,8 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
     """Taken over: the predecessor's newest snapshot (restart point, camera stamp 5000) is past
     gesture 2's frames, whose description died with the workstation (the speech service said
     only 1). The gesture streamer's successor derives gesture 2 again, so the object
-    segmenter's goes back to the snapshot taken at gesture 2's start (after 1 gesture); once 2
-    is said, to the newest."""
+    segmenter's goes back to the newest snapshot before gesture 2 started (after 1 gesture); once
+    2 is said, to the newest."""
     monkeypatch.setenv(RESTARTS_ENV, "1")
     config = private_config()
     with Bus.open(config) as others, Bus.open(config) as bus:
@@ -217,8 +217,7 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
             s.Ledger(
                 header=s.Ledger.original_header("objects", 9, 1), service="objects",
                 resume_stamps={"stamp": 5_000, "stamp@0": 200, "stamp@1": 1_000},
-                resume={"started": 2, "gestures": 2, "started@0": 0, "gestures@0": 0,
-                        "started@1": 1, "gestures@1": 1},
+                resume={"gestures": 2, "gestures@0": 0, "gestures@1": 1},
             ),
             s.Ledger(
                 header=s.Ledger.original_header("speech", 9, 1), service="speech",
@@ -232,22 +231,25 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
         others.queryable(others.keys.ledger(), None, answer)
         service = await _start("objects", bus)
         assert service._gates[bus.keys.camera].start == expected  # where its input starts
-        assert service.gestures_started == (1 if expected == 1_000 else 2)  # type: ignore[attr-defined]
-        # a gesture that starts now keeps its own point, told to a next successor
+        assert service.watch.gestures_started == (1 if expected == 1_000 else 2)  # type: ignore[attr-defined]
+        # a gesture that starts now: the watch's point after it is told to a next successor
         pub = others.publisher(others.keys.gesture_segment, s.GestureSegment)
         await pub.wait_matching(timeout=10)
         header = s.GestureSegment.original_header("gestures", 3, 7_000)
         pub.put(s.GestureSegment(header=header, event_seq=5, event="start", segment_id=3,
                                  frame=210, start_stamp=7_000))  # fmt: skip
         for _ in range(500):
-            if "stamp@2" in service.ledgers.resume_stamps:  # type: ignore[attr-defined]
+            if "stamp@3" in service.ledgers.resume_stamps:  # type: ignore[attr-defined]
                 break
             await asyncio.sleep(0.02)
         stamps = service.ledgers.resume_stamps  # type: ignore[attr-defined]
         assert stamps["stamp@0"] == 200 and stamps["stamp@1"] == 1_000
-        assert 0 <= stamps["stamp@2"] <= 7_000, stamps  # after 2 gestures: gesture 3's point
+        assert 0 <= stamps["stamp@3"] <= 7_000, stamps  # after 3 gestures: gesture 4's point
         positions = service.ledgers.positions  # type: ignore[attr-defined]
-        assert positions[f"{others.keys.camera}@3"] == stamps["stamp@2"]  # where 3 needs it from
+        camera = others.keys.camera
+        assert positions[f"{camera}@4"] == stamps["stamp@3"]  # where 4 needs it from
+        # gesture 3 again: from the newest point before it started, the restored one's or older
+        assert positions[f"{camera}@2"] <= expected and f"{camera}@3" not in positions
         await _stop(service)
 
 

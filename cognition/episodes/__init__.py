@@ -21,6 +21,7 @@ if TYPE_CHECKING:
         GestureEffects,
         ObjectAtStart,
         ObjectWatch,
+        WatchSnapshot,
     )
     from beyond_self.cognition.episodes.report import GestureReport
     from beyond_self.cognition.episodes.tracker import (
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
         Ended,
         GestureTracker,
         Started,
+        TrackerSnapshot,
     )
 
 # name -> the module holding it, imported on first use: the object watch pulls in SciPy's
@@ -36,9 +38,14 @@ if TYPE_CHECKING:
 # and the reasoner never use
 _HOMES = {
     **dict.fromkeys(("Anticipation", "FusionJoin", "Lost", "Outcome"), "fusion"),
-    **dict.fromkeys(("FrameObjects", "GestureEffects", "ObjectAtStart", "ObjectWatch"), "objects"),
+    **dict.fromkeys(
+        ("FrameObjects", "GestureEffects", "ObjectAtStart", "ObjectWatch", "WatchSnapshot"),
+        "objects",
+    ),
     "GestureReport": "report",
-    **dict.fromkeys(("Belief", "Cancelled", "Ended", "GestureTracker", "Started"), "tracker"),
+    **dict.fromkeys(
+        ("Belief", "Cancelled", "Ended", "GestureTracker", "Started", "TrackerSnapshot"), "tracker"
+    ),
 }
 
 
@@ -64,4 +71,6 @@ __all__ = [
     "ObjectWatch",
     "Outcome",
     "Started",
+    "TrackerSnapshot",
+    "WatchSnapshot",
 ]

@@ -25,6 +25,7 @@ from beyond_self.cognition.vision.pipeline import (
     describe_frame,
 )
 from beyond_self.core.errors import InputError
+from beyond_self.core.restorable import Restorable
 
 R = TypeVar("R")
 EFFECT_VARIABLES = ("ObjVel", "HandVel", "ObjHandVel", "Contact")
@@ -73,6 +74,11 @@ class GestureEffects(Generic[R]):
 
 
 Output = ObjectAtStart[R] | GestureEffects[R]
+
+
+class WatchSnapshot(Restorable, frozen=True):
+    """What an object watch is rebuilt from (`ObjectWatch.snapshot`, `resume`): its restart
+    point, the first camera stamp it needs again, and the gestures started by then."""
 
 
 @dataclass
@@ -155,6 +161,17 @@ class ObjectWatch(Generic[R]):
         self.skeleton_time = -1
         self.windows: dict[int, _Window[R]] = {}
         self.told: deque[int] = deque(maxlen=4096)  # gestures told elsewhere (`done`)
+        self.gestures_started = 0  # the highest gesture id started (`snapshot`)
+
+    def snapshot(self) -> WatchSnapshot:
+        """Where a fresh watch takes over from this one (`restart_point`, from 0), and the
+        gestures started by now: restored with `resume`."""
+        return WatchSnapshot(max(0, self.restart_point), self.gestures_started)
+
+    def resume(self, snapshot: WatchSnapshot | None) -> None:
+        """Go on from `snapshot` (None: from the first frame): fed the camera frames from its
+        stamp on, and the gesture events and progress again."""
+        self.gestures_started = snapshot.gestures if snapshot is not None else 0
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -178,13 +195,15 @@ class ObjectWatch(Generic[R]):
         return self._decide()
 
     def started(self, segment_id: int, start_stamp: int, ref: R) -> list[Output[R]]:
-        if segment_id in self.windows or segment_id in self.told:
-            return []  # a repeat (recovered from a cache): already under way, or told
-        if len(self.windows) >= self.max_open:
+        repeat = segment_id in self.windows or segment_id in self.told
+        if not repeat and len(self.windows) >= self.max_open:
             raise InputError(
                 f"gesture {segment_id} refused: {len(self.windows)} gestures already under way "
                 f"(valid: at most {self.max_open} at once)"
             )
+        self.gestures_started = max(self.gestures_started, segment_id)
+        if repeat:
+            return []  # a repeat (recovered from a cache): already under way, or told
         window = _Window(segment_id, start_stamp, start_stamp - self.lead_ns, ref)
         window.opened_at = self.frames_handled
         window.pending.extend(b for b in self.buffer if b.stamp >= window.lo)

@@ -38,6 +38,7 @@ from beyond_self.cognition.gestures.features import (
 from beyond_self.cognition.gestures.logs import MAX_BODY_UNITS, check_positions
 from beyond_self.cognition.gestures.segmentation import Discarded, SegmenterConfig
 from beyond_self.core.errors import InputError
+from beyond_self.core.restorable import Restorable
 
 R = TypeVar("R")
 
@@ -60,6 +61,7 @@ class Started(Generic[R]):
     frame: int
     stamp: int
     ref: R
+    seq: int = 0  # the tracker's running count of start, end and cancel events (`events`)
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,7 @@ class Ended(Generic[R]):
     start_stamp: int
     end_stamp: int
     ref: R
+    seq: int = 0  # as `Started.seq`
 
 
 @dataclass(frozen=True)
@@ -98,6 +101,7 @@ class Cancelled(Generic[R]):
     ref: R
     reason: str = ""  # one line: why the gesture was withdrawn
     cut: bool = False  # it was a gesture, but its frames are gone: a loss, not a withdrawal
+    seq: int = 0  # as `Started.seq`
 
 
 Event = Started[R] | Belief[R] | Ended[R] | Cancelled[R]
@@ -107,8 +111,7 @@ Event = Started[R] | Belief[R] | Ended[R] | Cancelled[R]
 class _Candidate:
     """A frame on trial as the next checkpoint (`GestureTracker._advance`)."""
 
-    stamp: int
-    segment_id: int
+    at: TrackerSnapshot  # the snapshot it would be
     index: int  # the tracker's frame count when it was taken
     shadow: GestureSegmenter  # a fresh segmenter fed from that frame on
 
@@ -130,14 +133,14 @@ class _Frame(msgspec.Struct, Generic[R], frozen=True, gc=False):
     ref: R
 
 
-class TrackerSnapshot(msgspec.Struct, frozen=True):
+class TrackerSnapshot(Restorable, frozen=True):
     """What a tracker is rebuilt from (`GestureTracker.snapshot`, `restored`): a skeleton stamp
     from which a fresh tracker, fed the frames from there on, makes exactly the events this one
-    makes (its checkpoint, `GestureTracker._advance`), and the segments started before it. Its
-    input position is that stamp: the state is empty there, so a snapshot is a few bytes."""
+    makes (its checkpoint, `GestureTracker._advance`), the segments started before it, and the
+    events (`Started`, `Ended`, `Cancelled`) made before it, so that their count runs on. The
+    state is empty at that stamp, so a snapshot is a few bytes."""
 
-    stamp: int
-    segments: int
+    events: int
 
 
 class GestureTracker(Generic[R]):
@@ -150,6 +153,7 @@ class GestureTracker(Generic[R]):
         segmenter: SegmenterConfig | None = None,
         buffer_frames: int = 1800,
         first_segment_id: int = 0,
+        first_events: int = 0,
     ) -> None:
         self.models = models
         self.recognizer = StreamingRecognizer(models)
@@ -157,28 +161,28 @@ class GestureTracker(Generic[R]):
         self.buffer: deque[_Frame[R]] = deque(maxlen=buffer_frames)
         self.index = 0
         self.segment_id = first_segment_id  # segments started before this tracker's first frame
+        self.events = first_events  # start, end and cancel events made (`Started.seq`)
         self.in_gesture = False
         self.last_stamp: int | None = None
         self._start = 0  # stream index of the gesture's first frame
         self._start_stamp = 0
         self._results: list[FrameResult] = []  # the recogniser's, frame by frame since the start
         self._results_from = -1  # stream index of the frame the first of them is about
-        self.checkpoint: tuple[int, int] | None = None  # (stamp, segment_id): see `_advance`
+        self.checkpoint: TrackerSnapshot | None = None  # see `_advance`
         self._candidate: _Candidate | None = None
 
     def snapshot(self) -> TrackerSnapshot | None:
         """The newest snapshot (None before the first frame)."""
-        if self.checkpoint is None:
-            return None
-        return TrackerSnapshot(*self.checkpoint)
+        return self.checkpoint
 
     @classmethod
     def restored(
         cls, models: GestureModels, snapshot: TrackerSnapshot | None, buffer_frames: int = 1800
     ) -> GestureTracker[R]:
         """A tracker to be fed the frames from `snapshot.stamp` on (None: from the first)."""
-        first = snapshot.segments if snapshot is not None else 0
-        return cls(models, buffer_frames=buffer_frames, first_segment_id=first)
+        if snapshot is None:
+            return cls(models, buffer_frames=buffer_frames)
+        return cls(models, None, buffer_frames, snapshot.gestures, snapshot.events)
 
     def frames_lost(
         self, under_way: set[int], numbered: int, frame: int, since: int, ref: R, reason: str
@@ -187,7 +191,15 @@ class GestureTracker(Generic[R]):
         gestures `under_way` elsewhere (started, not closed) cannot be derived again, and are
         cancelled as cut; segments number on after `numbered`, the last one started elsewhere."""
         self.segment_id = max(self.segment_id, numbered)
-        return [Cancelled(n, frame, since, ref, reason, cut=True) for n in sorted(under_way)]
+        return [
+            Cancelled(n, frame, since, ref, reason, cut=True, seq=self._numbered())
+            for n in sorted(under_way)
+        ]
+
+    def _numbered(self) -> int:
+        """The next event's `seq`."""
+        self.events += 1
+        return self.events
 
     @property
     def memory_frames(self) -> int:
@@ -206,20 +218,21 @@ class GestureTracker(Generic[R]):
         Proving rather than bounding keeps the checkpoint exact whatever the segmenter's
         thresholds. A restarted gesture streamer resumes from it (services/gestures.py)."""
         if self.checkpoint is None:
-            self.checkpoint = (stamp, self.segment_id)
+            self.checkpoint = TrackerSnapshot(stamp, self.segment_id, self.events)
         if eventful or self.in_gesture or not self.segmenter.idle:
             self._candidate = None
             return
         if self._candidate is None:
             shadow = GestureSegmenter(self.segmenter.config)
-            self._candidate = _Candidate(stamp, self.segment_id, self.index, shadow)
+            at = TrackerSnapshot(stamp, self.segment_id, self.events)
+            self._candidate = _Candidate(at, self.index, shadow)
         candidate = self._candidate
         if candidate.shadow.push(x) is not None or not candidate.shadow.idle:
             self._candidate = None  # a fresh tracker would have started a gesture here
             return
         quiet = self.index - candidate.index
         if quiet >= self.memory_frames and candidate.shadow.course() == self.segmenter.course():
-            self.checkpoint = (candidate.stamp, candidate.segment_id)
+            self.checkpoint = candidate.at
             self._candidate = None
 
     def push(self, stamp: int, number: int, x: np.ndarray, ref: R) -> list[Event[R]]:
@@ -273,7 +286,9 @@ class GestureTracker(Generic[R]):
     def _cancel(self, reason: str, *, cut: bool = False) -> Cancelled[R]:
         self.in_gesture = False
         last = self.buffer[-1]
-        return Cancelled(self.segment_id, last.number, self._start_stamp, last.ref, reason, cut)
+        return Cancelled(
+            self.segment_id, last.number, self._start_stamp, last.ref, reason, cut, self._numbered()
+        )
 
     def _since(self, start: int, stop: int | None = None) -> list[_Frame[R]]:
         return [f for f in self.buffer if f.t >= start and (stop is None or f.t < stop)]
@@ -298,7 +313,8 @@ class GestureTracker(Generic[R]):
         first = frames[0]
         self._start = first.t
         self._start_stamp = first.stamp
-        events: list[Event[R]] = [Started(self.segment_id, first.number, first.stamp, first.ref)]
+        started = Started(self.segment_id, first.number, first.stamp, first.ref, self._numbered())
+        events: list[Event[R]] = [started]
         self.recognizer.reset()
         self._results, self._results_from = [], first.t
         events += [self._belief(self._recognise(self._features(f)), f) for f in frames]
@@ -327,5 +343,12 @@ class GestureTracker(Generic[R]):
         last = frames[-1]
         return [
             self._belief(result, last, final=True),
-            Ended(self.segment_id, last.number, frames[0].stamp, last.stamp, last.ref),
+            Ended(
+                self.segment_id,
+                last.number,
+                frames[0].stamp,
+                last.stamp,
+                last.ref,
+                self._numbered(),
+            ),
         ]

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from typing import Any, Generic, TypeVar
 
-from beyond_self.runtime.resilience.snapshots import Restorable
+from beyond_self.core.restorable import Restorable
 
 P = TypeVar("P", bound=Restorable)
 

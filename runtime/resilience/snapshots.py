@@ -1,35 +1,29 @@
-"""Snapshots of a service's state, on its own machine: the newest few, each written atomically.
+"""Snapshots of a service's state, taken by its base, on its own machine: the newest few, each
+written atomically.
 
-A piece of cognition that keeps state between messages (the gesture tracker, the object watch, the
-fusion join) says what a successor needs as a msgspec Struct (`snapshot()`) and is rebuilt from one
-(`restore`), together with the input position the snapshot reflects: per sensor key, the first stamp
-to be played again (runtime.resilience.ledger `positions`; the source plays from there). The store
-keeps the last `keep` in the service's state folder, each written to a temporary file, synced,
-renamed into place and the folder synced: a SIGKILL or a power cut leaves the old snapshot or the
-new one, never half. `Snapshots` is
-the base's part: it tells them in the ledger and chooses one on start.
+A piece of cognition that keeps state between messages (the gesture tracker, the object watch)
+says what a successor needs as a `Restorable` (core.restorable): the first input stamp it needs
+again and the gestures started by then. The base asks for it after every message it handles
+(`Snapshots.offer`); when it has moved, it is told in the service's ledger (a successor anywhere
+on the bus finds it) and stored in the service's state folder: written to a temporary file,
+synced, renamed into place and the folder synced, so a SIGKILL or a power cut leaves the old
+snapshot or the new one, never half. On start the base chooses the one to restore (`chosen`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 import msgspec
 
+from beyond_self.core.restorable import Restorable
 from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.runtime.resilience.state import write_atomically
-
-
-class Restorable(msgspec.Struct, frozen=True):
-    """What every snapshot state is: `stamp` is the first input stamp it needs again."""
-
-    stamp: int
-
 
 S = TypeVar("S", bound=Restorable)
 
@@ -60,7 +54,7 @@ def keep_newest(history: dict[int, Any]) -> None:
 
 KEEP = 4
 EVERY_S = 2.0  # a snapshot stored on the machine at least this often (wall time: the machine's)
-GESTURES = "gestures"  # the ledger entry of the gesture count a snapshot was taken after
+GESTURES = "gestures"  # the ledger entry of a snapshot's gesture count (`Restorable.gestures`)
 
 
 class Positioned(msgspec.Struct, frozen=True):
@@ -116,7 +110,7 @@ class Snapshots(Generic[S]):
     with its ledger (so a successor anywhere on the bus, a fleet's standby, finds them: the
     newest, and the newest at each of the last gesture counts, as the state's integer fields)
     and stored on its machine (`SnapshotStore`: on a new gesture count and at most every
-    `every_s` seconds otherwise)."""
+    `every_s` seconds otherwise). Its input position is the state's stamp on each of `inputs`."""
 
     def __init__(
         self,
@@ -124,23 +118,25 @@ class Snapshots(Generic[S]):
         keeper: Keeper,
         store: SnapshotStore | None,
         said_key: str,
+        inputs: Sequence[str],
         every_s: float = EVERY_S,
     ) -> None:
         self.cls = cls
         self.keeper = keeper
         self.store = store
         self.said_key = said_key
+        self.inputs = list(inputs)
         self.every_s = every_s
         self.fields = [f for f in msgspec.structs.fields(cls) if f.type is int]
         resume = keeper.predecessor()
         self.history: dict[int, S] = {}  # gesture count -> the newest snapshot at it
-        self.positions: dict[int, dict[str, int]] = {}  # gesture count -> its input position
         for n in per_gesture(resume, GESTURES):
             state = self._state(resume, f"@{n}")
             if state is not None:
                 self.history[n] = state
         self.gestures = resume.get(GESTURES, 0)
         self.newest = self._state(resume, "")
+        self.last: S | None = None  # the last one offered
         self._stored_at = -float("inf")
         self.taken_count = 0
         self.stored: Future[int] | None = None  # the last save handed to the writer
@@ -172,32 +168,39 @@ class Snapshots(Generic[S]):
         before = [n for n in self.history if n < min(unsaid)] or [min(self.history)]
         return self.history[max(before)]
 
-    def taken(self, state: S, positions: Mapping[str, int], gestures: int) -> None:
-        """`state` is this service's newest snapshot, after `gestures` gestures, needing its
-        inputs again from `positions` (sensor key -> stamp)."""
+    def offer(self, state: S | None) -> None:
+        """The service's state now (None: none yet), after a message: taken if it moved."""
+        if state is not None and state != self.last:
+            self.last = state
+            self.taken(state)
+
+    def positions(self, state: S) -> dict[str, int]:
+        """Where the inputs are played again from for `state`: sensor key -> stamp."""
+        return dict.fromkeys(self.inputs, state.stamp)
+
+    def taken(self, state: S) -> None:
+        """`state` is this service's newest snapshot."""
+        gestures = state.gestures
         first_at_count = gestures not in self.history
         self.history[gestures] = state
-        self.positions[gestures] = dict(positions)
         keep_newest(self.history)
-        keep_newest(self.positions)
         stamps: dict[str, int] = {}
-        counts: dict[str, int] = {GESTURES: gestures}
+        counts: dict[str, int] = {}
         for name, value in msgspec.structs.asdict(state).items():
             if not isinstance(value, int):
                 continue
             kept = stamps if name.endswith("stamp") else counts
             kept[name] = value
             kept |= at_gestures(name, {n: getattr(s, name) for n, s in self.history.items()})
-        counts |= at_gestures(GESTURES, {n: n for n in self.history})
         # "<key>@N": where a successor goes back to derive gesture N again (schemas.Ledger)
-        at = {f"{k}@{n + 1}": v for n, kept in self.positions.items() for k, v in kept.items()}
-        self.keeper.checkpoint(stamps, counts, {**positions, **at})
+        at = {f"{k}@{n + 1}": s.stamp for n, s in self.history.items() for k in self.inputs}
+        self.keeper.checkpoint(stamps, counts, {**self.positions(state), **at})
         self.taken_count += 1
         now = time.monotonic()
         if self._writer is not None and (first_at_count or now - self._stored_at >= self.every_s):
             assert self.store is not None
             self._stored_at = now
-            self.stored = self._writer.submit(self.store.save, state, dict(positions))
+            self.stored = self._writer.submit(self.store.save, state, self.positions(state))
         if first_at_count:
             # told at once, not with the next health report: at rate max a second of wall time
             # is many gestures, and a successor needs a snapshot its source still has input for
