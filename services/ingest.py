@@ -30,7 +30,7 @@ from beyond_self.runtime.recording.damage import Losses
 from beyond_self.runtime.recording.fleet import recorded_robot
 from beyond_self.runtime.recording.images import message_from_image
 from beyond_self.runtime.recording.pacing import DEFAULT_WINDOW_S, Pacer
-from beyond_self.runtime.recording.reader import inspect_recording, read_recording, require_mcap
+from beyond_self.runtime.recording.reader import read_recording, require_mcap, scan_recording
 from beyond_self.runtime.recording.replay import Cue, Player, looped, recorded_cues
 from beyond_self.runtime.recording.replay_control import rate_option
 from beyond_self.runtime.resilience.accounting import bounded
@@ -278,7 +278,7 @@ class SensorIngest(Service):
         }
 
         require_mcap(path)
-        info = inspect_recording(path)
+        info = scan_recording(path)  # its channels and span: each message is decoded as sent
         source = recorded_robot(info, keys.robot)  # a fleet's recording: our robot's part
 
         def rename(key: str) -> str | None:  # our robot's sensor streams; nothing else

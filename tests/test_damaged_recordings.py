@@ -22,7 +22,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from beyond_self.runtime.recording.damage import Losses
-from beyond_self.runtime.recording.reader import inspect_recording
+from beyond_self.runtime.recording.reader import inspect_recording, scan_recording
 from beyond_self.runtime.recording.scan import Walk, mapped
 from beyond_self.services.launcher import BEYOND
 
@@ -202,6 +202,9 @@ def test_a_damaged_chunk_costs_only_itself(tmp_path: Path) -> None:
         damaged = tmp_path / f"{name}.mcap"
         damaged.write_bytes(content)
         info = inspect_recording(damaged)
+        scanned = scan_recording(damaged)  # what a player reads before it plays: the same
+        assert (scanned.start, scanned.end, scanned.messages, scanned.channels) == (
+            info.start, info.end, info.messages, info.channels)  # fmt: skip
         lost = len(frames) - info.messages
         assert 0 < lost < len(frames) // 4, (name, info.messages)  # one chunk, not the rest
         assert info.end is not None and info.end >= frames[-2].header.stamp  # read to the end

@@ -19,12 +19,17 @@ from mcap.reader import make_reader
 import beyond_self.schemas as s
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.session import Bus
-from beyond_self.runtime.recording.reader import inspect_recording, read_recording
+from beyond_self.runtime.recording.reader import (
+    inspect_recording,
+    read_recording,
+    scan_recording,
+)
 from beyond_self.runtime.recording.replay import replay
 from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.services.launcher import BEYOND
 
 ROBOT_KEYS = s.Keys("r1")
+SHIPPED = sorted((Path(__file__).resolve().parent.parent / "recordings").glob("*.mcap"))
 
 
 def camera(i: int, stamp: int) -> s.CameraFrame:
@@ -285,3 +290,13 @@ def test_a_channels_log_times_never_step_back(tmp_path: Path) -> None:
         assert written[stamps[4]] == late_log, flushes
         assert all(written[stamps[i]] == stamps[i] for i in (0, 1, 2, 3, 5))
         assert [r.message() for r in read_recording(path)] == frames
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_a_scan_finds_what_inspect_finds_without_decoding(path: Path) -> None:
+    """A player (`beyond replay`, the ingest) reads a recording's channels and span with
+    `scan_recording` before it plays, and decodes each message once, as it sends it."""
+    info, scanned = inspect_recording(path), scan_recording(path)
+    assert scanned.messages == info.messages > 0
+    assert (scanned.start, scanned.end, scanned.channels) == (info.start, info.end, info.channels)
+    assert scanned.metadata == info.metadata and not scanned.losses.any

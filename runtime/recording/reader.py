@@ -264,6 +264,17 @@ def inspect_recording(path: str | Path) -> RecordingInfo:
     return scanner.info
 
 
+def scan_recording(path: str | Path) -> RecordingInfo:
+    """Channels, counts, time range and metadata, as `inspect_recording` finds them, from one
+    pass over the file's records that decodes no message: what a player needs before it plays
+    (it decodes each message as it sends it, and counts what it drops then). `.losses` holds
+    only the file's own damage. InputError for a file that is no recording."""
+    scanner = _Scanner(path)
+    for _ in scanner.messages():
+        pass
+    return scanner.info
+
+
 def _matcher(patterns: Iterable[str] | None) -> Callable[[str], bool]:
     if not patterns:
         return lambda _key: True

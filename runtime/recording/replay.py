@@ -254,9 +254,9 @@ async def replay(
         clocks.replaying(key)
         return key
 
-    from beyond_self.runtime.recording.reader import inspect_recording
+    from beyond_self.runtime.recording.reader import scan_recording
 
-    info = inspect_recording(path)
+    info = scan_recording(path)  # its channels and span; each message is decoded as it is sent
     pacer: Pacer | None = None
     if pace_for:
         pacer = Pacer(bus, pace_for, [rename(c.topic) for c in info.channels])
