@@ -28,6 +28,7 @@ from beyond_self.services.launcher import (
     LogSink,
     ServiceProcess,
     kill_group,
+    release,
     service_env,
     start_service,
     stop_services,
@@ -159,16 +160,27 @@ class Deployment:
             raise
         return self.bus
 
+    async def prepare(self) -> None:
+        """Start the process of every service not started yet, held: it imports what it runs,
+        most of its start, then waits off the bus until `start` (or `launch`) lets it join.
+        Whatever the caller does meanwhile (open the session, look for another deployment on
+        the bus) overlaps the processes' own start; `stop` ends those never let in."""
+        for name in self.services:
+            if all(sp.name != name for sp in self.processes):
+                await self._spawn(name, held=True)
+
     async def start(self) -> None:
         """Start every service, the source last, and return once each is alive on the bus (its
         health then answers) or has exited (`wait` reports it); TimeoutError if one is
-        neither after ALIVE_TIMEOUT_S.
+        neither after ALIVE_TIMEOUT_S. Every process is started first, held (`prepare`), so
+        the source's interpreter starts beside the others', and joins the bus after them.
 
         The source starts only once the others are alive, each awaited once: its session then
         meets theirs already meshed, and Zenoh routes what it publishes to them directly. Started
         together, a robot's source can learn its consumers through the workstation's router
         first and keep sending them its frames by that detour, and a cut link would then stall
         the robot's own pipeline until Zenoh gives the link up (tests/test_deploy_netns.py)."""
+        await self.prepare()
         bus = await self.open()
         for group in ([n for n in self.services if n != SOURCE], [SOURCE]):
             launched = [await self.launch(name) for name in group if name in self.services]
@@ -185,20 +197,28 @@ class Deployment:
 
     async def launch(self, name: str) -> ServiceProcess:
         """Start service `name` of this deployment, or start it again after it exited: the new
-        process takes the old one's place in `processes` (and in the health watch). `start`
-        launches them all; launch them one by one instead to choose the order (tests)."""
+        process takes the old one's place in `processes` (and in the health watch); one
+        started held (`prepare`) is let in. `start` launches them all; launch them one by one
+        instead to choose the order (tests)."""
         if name not in self.options:
             raise unknown("service of this deployment", name, self.services)
         bus = await self.open()
         if self.watcher is not None and self._token is None:
             # after the caller's subscriptions, before any service: the source waits for it
             self._token = bus.declare_token(bus.keys.alive(self.watcher))
+        held = next((sp for sp in self.processes if sp.name == name and sp.held), None)
+        if held is not None:
+            release(held)
+            return held
+        return await self._spawn(name)
+
+    async def _spawn(self, name: str, *, held: bool = False) -> ServiceProcess:
         old = next((i for i, sp in enumerate(self.processes) if sp.name == name), None)
         if old is not None and self.processes[old].running:
             raise InputError(f"service {name} is already running in this deployment")
         restarts = self.restarts.get(name)
         env = self.env if restarts is None else {**self.env, RESTARTS_ENV: str(restarts.count)}
-        sp = await start_service(name, env, options=self.options[name], sink=self.log)
+        sp = await start_service(name, env, options=self.options[name], sink=self.log, held=held)
         if old is None:
             self.processes.append(sp)
         else:
@@ -253,6 +273,8 @@ class Deployment:
             router = [self.router] if self.router is not None else []
             for sp in [*router, *self.processes]:
                 if sp.running or self._judged.get(sp.name) is sp or sp.name in self._pending:
+                    continue
+                if sp.held:  # it died before it was let in: judged once it is (`start`)
                     continue
                 self._judged[sp.name] = sp
                 kill_group(sp)  # what it started (a synthesizer) dies with it

@@ -1,11 +1,11 @@
 """Start services as separate processes, stream their logs with their names, stop them cleanly.
 
 Each service runs as `python -P -m beyond_self service NAME` with the bus settings in its
-environment, exactly as on another machine, so `beyond up` exercises the real deployment path;
-`-P` keeps the current folder off the import path, so a stray `beyond_self/` there cannot replace
-our code in a child. Output is read in chunks, not lines: a line over asyncio's 64 KiB readline
-limit would end a line reader, and the service would then block on a full pipe. `HealthWatch`
-stops a service that leaves STUCK_AFTER health queries in a row unanswered.
+environment, exactly as on another machine (`-P`: a stray `beyond_self/` in the current folder
+cannot replace our code). One started `held` imports what it runs, then waits off the bus for
+`release` (a line on its stdin). Output is read in chunks, not lines: a line over asyncio's 64 KiB
+readline limit would end a line reader, and the service would then block on a full pipe.
+`HealthWatch` stops a service that leaves STUCK_AFTER health queries in a row unanswered.
 """
 
 from __future__ import annotations
@@ -31,6 +31,8 @@ LINE_MAX = 4096  # characters of one log line passed on (the rest is counted, no
 LINES_KEPT = 1000  # last lines of each service kept in memory
 HEALTH_TIMEOUT_S = 10.0  # a health query unanswered this long is a miss (a busy loop answers)
 STUCK_AFTER = 3  # misses in a row: the service is stuck
+HELD_ENV = "BEYOND_HELD"  # set in a child started held: it waits for `release` on its stdin
+RELEASE = b"go\n"
 
 
 @dataclass
@@ -40,6 +42,7 @@ class ServiceProcess:
     reader: asyncio.Task[None] | None = None
     lines: deque[str] = field(default_factory=lambda: deque(maxlen=LINES_KEPT))
     stuck: bool = False
+    held: bool = False  # started, waiting for `release` before it joins the bus
 
     @property
     def running(self) -> bool:
@@ -71,8 +74,10 @@ async def start_service(
     options: Mapping[str, Any] | None = None,
     sink: LogSink | None = None,
     command: list[str] | None = None,
+    held: bool = False,
 ) -> ServiceProcess:
-    """Start service `name` (or, with `command`, `beyond COMMAND...` under that name)."""
+    """Start service `name` (or, with `command`, `beyond COMMAND...` under that name); `held`:
+    it waits for `release` before it joins the bus."""
     import json
 
     cmd = [*BEYOND, *(command or ["service", name])]
@@ -82,13 +87,14 @@ async def start_service(
         cmd += ["--set", f"{key}={json.dumps(value)}"]
     proc = await asyncio.create_subprocess_exec(  # started from this thread: the event loop's
         *cmd,
-        env={**env, **lifeline.child_env()},  # it dies with us (runtime.resilience.lifeline)
-        stdin=asyncio.subprocess.DEVNULL,
+        # it dies with us (runtime.resilience.lifeline)
+        env={**env, **lifeline.child_env(), **({HELD_ENV: "1"} if held else {})},
+        stdin=asyncio.subprocess.PIPE if held else asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT,
         start_new_session=True,  # Ctrl-C in the terminal reaches `up`, which stops us cleanly
     )
-    sp = ServiceProcess(name, proc)
+    sp = ServiceProcess(name, proc, held=held)
 
     def line(text: str) -> None:
         sp.lines.append(text)
@@ -98,6 +104,30 @@ async def start_service(
     assert proc.stdout is not None
     sp.reader = asyncio.get_running_loop().create_task(read_lines(proc.stdout, line))
     return sp
+
+
+def release(sp: ServiceProcess) -> None:
+    """Let a process started held join the bus (nothing for one that is not held). One that
+    died meanwhile is not written to: its exit is for the supervisor to see."""
+    if not sp.held:
+        return
+    sp.held = False
+    stdin = sp.process.stdin
+    if stdin is None:
+        return
+    if sp.running:
+        with contextlib.suppress(ConnectionError):  # it died just now
+            stdin.write(RELEASE)
+    stdin.close()
+
+
+def wait_for_release() -> bool:
+    """In a process started held (HELD_ENV set): wait until the supervisor releases it (True),
+    or lets it go without (False: its stdin ends first). True at once in any other process.
+    The variable is removed, so what this process starts is not held in turn."""
+    if os.environ.pop(HELD_ENV, None) is None or sys.stdin is None:
+        return True
+    return sys.stdin.buffer.readline() == RELEASE
 
 
 async def read_lines(stream: asyncio.StreamReader, on_line: Callable[[str], None]) -> None:

@@ -13,6 +13,7 @@ import signal
 import sys
 from pathlib import Path
 
+import pytest
 from busutil_net import env_for, private_config
 
 from beyond_self.runtime.bus.session import Bus
@@ -20,6 +21,7 @@ from beyond_self.services.launcher import (
     LINE_MAX,
     HealthWatch,
     read_lines,
+    release,
     start_service,
     stop_services,
 )
@@ -85,3 +87,33 @@ async def test_a_stuck_service_is_reported_and_stopped(tmp_path: Path) -> None:
             await stop_services([sp])
     assert sp.stuck and code in (-signal.SIGTERM, -signal.SIGKILL, 0)
     assert reports and reports[0][0] == "speech" and "no health answer" in reports[0][1]
+
+
+async def test_a_held_service_joins_the_bus_once_released_and_leaves_if_let_go(
+    tmp_path: Path,
+) -> None:
+    """`beyond up` starts its processes held while it looks for another `up` on the bus: none
+    of them may be seen there before it lets them in, and one let go (stdin closed) leaves
+    without ever joining."""
+    config = private_config()
+    env = env_for(config)
+    with Bus.open(config) as bus:
+        seen: list[tuple[str, bool]] = []
+        bus.watch_tokens(bus.keys.alive("*"), lambda key, present: seen.append((key, present)))
+        options = {"out_dir": str(tmp_path)}
+        let_go = await start_service("describer", env, held=True)
+        sp = await start_service("speech", env, options=options, held=True)
+        try:
+            assert let_go.process.stdin is not None
+            let_go.process.stdin.close()
+            assert await asyncio.wait_for(let_go.process.wait(), 120) == 0
+            with pytest.raises(TimeoutError):  # held: alive, but nothing of it on the bus
+                await bus.wait_alive(bus.keys.alive("speech"), timeout=2.0)
+            assert sp.running and sp.held
+            release(sp)
+            await bus.wait_alive(bus.keys.alive("speech"), timeout=60)
+            assert not sp.held
+        finally:
+            codes = await stop_services([sp, let_go])
+    assert codes == {"speech": 0, "describer": 0}
+    assert {key.rsplit("/", 1)[-1] for key, _ in seen} == {"speech"}  # never the one let go

@@ -15,6 +15,7 @@ from typing import Any
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.resilience.process import exit_process
+from beyond_self.services.launcher import wait_for_release
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import SERVICES, service_class
 
@@ -65,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
     config = config_from_args(args)
+    if not wait_for_release():  # started held (services.launcher), and let go without joining
+        return 0
     if config.robots is None:
         cls.main(argv=(), config=config, **options)
     if not cls.fleet:  # a robot's source or voice

@@ -426,14 +426,22 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     timeout = args.timeout
     if timeout is None and ("ingest" in side.services or finite):
         timeout = DEFAULT_TIMEOUT
-    bus = await side.open()
-    if running := await already_up(side, bus):
+    state = run_state(args, side)
+    # the processes start now, held off the bus: their interpreters and imports overlap the
+    # session's opening and the look for another `up`, which refuses before any joins
+    await side.prepare()
+    try:
+        bus = await side.open()
+        running = await already_up(side, bus)
+    except BaseException:
+        await side.stop()
+        raise
+    if running:
         await side.stop()
         raise InputError(
             f"robot {side.config.robot!r} already has {', '.join(running)} on the bus (another "
             "beyond up?); stop it first, or give this one another --robot"
         )
-    state = run_state(args, side)
     if said := state.begin(run_command(args, side), fresh=args.fresh):
         print(f"[up] {said}", file=sys.stderr, flush=True)
     pipeline = PipelineMonitor.of(side, bus, lines.emit, state)
