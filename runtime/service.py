@@ -16,7 +16,7 @@ import asyncio
 import logging
 import time
 import zlib
-from collections.abc import Callable, Coroutine, Sequence
+from collections.abc import Callable, Coroutine, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar, overload
 
@@ -511,6 +511,12 @@ class Service:
         """The service's own options on its command line (`python my_service.py --help`), beside
         the bus options; each parsed value that is not None is passed to the constructor as the
         keyword argument its `dest` names."""
+
+    @classmethod
+    def warm(cls, options: Mapping[str, Any]) -> None:
+        """Load now what `setup` will ask for with these options (a model shared by the
+        process's runs): a process started held (services.launcher) does it before it joins
+        the bus. What fails here is left to `setup`, which says it as it always has."""
 
     @classmethod
     def check_requirements(cls) -> None:

@@ -12,6 +12,7 @@ events numbered on (docs/concepts/recovery.md).
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from typing import Any
 
 import msgspec
@@ -53,6 +54,10 @@ class GestureStreamer(Service):
         self.buffer_frames = buffer_frames
         self.end_at: int | None = None  # last skeleton stamp of the source, once it has ended
         self.finished = False
+
+    @classmethod
+    def warm(cls, options: Mapping[str, Any]) -> None:
+        shared.gesture_models(options.get("models"))
 
     async def setup(self) -> None:
         self.gesture_models: GestureModels = shared.gesture_models(self.models_path)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import deque
+from collections.abc import Mapping
 from typing import Any
 
 import msgspec
@@ -82,6 +83,10 @@ class ObjectSegmenter(Service):
             onset_s=onset_s,
             buffer_bytes=int(buffer_mb * 2**20),
         )
+
+    @classmethod
+    def warm(cls, options: Mapping[str, Any]) -> None:
+        shared.clusters(options.get("clusters"))
 
     async def setup(self) -> None:
         self.watch: ObjectWatch[Header] = ObjectWatch(

@@ -10,6 +10,7 @@ With `objects: false` nothing waits for vision; an absent segmenter is waited ou
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from beyond_self.cognition.bn import BayesNet
@@ -54,6 +55,10 @@ class AffordanceReasoner(Service):
         self.model_path = model
         self.expect_objects = objects
         self.deadline_s = deadline_s
+
+    @classmethod
+    def warm(cls, options: Mapping[str, Any]) -> None:
+        shared.network(options.get("model"))  # learned from the synthetic data without a file
 
     async def setup(self) -> None:
         self.model: BayesNet = shared.network(self.model_path)

@@ -9,12 +9,13 @@ they parse as JSON, else strings). The bus joins as the environment and bus opti
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 from typing import Any
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.resilience.process import exit_process
+from beyond_self.runtime.resilience.process import configure, exit_process
 from beyond_self.services.launcher import wait_for_release
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import SERVICES, service_class
@@ -66,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
     config = config_from_args(args)
+    configure()
+    with contextlib.suppress(Exception):  # what fails is said by the service's setup
+        cls.warm(options)
     if not wait_for_release():  # started held (services.launcher), and let go without joining
         return 0
     if config.robots is None:

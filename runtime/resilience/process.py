@@ -36,16 +36,15 @@ def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
 SWITCH_INTERVAL_S = 0.02
 
 
-def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
-    """Run `work()` in a fresh event loop with logging set up, BLAS on one thread, the GIL's
-    switch interval for one busy loop (`SWITCH_INTERVAL_S`) and the heap settled after set-up
-    (runtime.resilience.heap); 0, or 2 for bad input (one line logged, no traceback).
-
-    Why one BLAS thread: a service is one event loop among the pipeline's processes, and its
-    matrix products are small (the table model's upsampling, the network's factors). OpenBLAS's
-    own threads spin while they wait for work, so on a loaded machine they take the cores the
-    other services need: the object segmenter's per-frame description took 2 to 3 times longer
-    beside three busy processes with them than without (bench/pipeline.py, stage costs)."""
+def configure() -> None:
+    """Set this process up as a service's own: logging, BLAS on one thread, the GIL's switch
+    interval for one busy loop (`SWITCH_INTERVAL_S`) and the heap settled after set-up
+    (runtime.resilience.heap). Once; `run_to_completion` does it, a process started held
+    (services.launcher) before it waits."""
+    global _configured
+    if _configured:
+        return
+    _configured = True
     import numpy  # noqa: F401  (loads OpenBLAS, so the limit reaches it)
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
@@ -53,6 +52,21 @@ def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     heap.manage()
     setup_logging()
+
+
+_configured = False
+
+
+def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
+    """Run `work()` in a fresh event loop in a process set up as a service's (`configure`); 0,
+    or 2 for bad input (one line logged, no traceback).
+
+    Why one BLAS thread: a service is one event loop among the pipeline's processes, and its
+    matrix products are small (the table model's upsampling, the network's factors). OpenBLAS's
+    own threads spin while they wait for work, so on a loaded machine they take the cores the
+    other services need: the object segmenter's per-frame description took 2 to 3 times longer
+    beside three busy processes with them than without (bench/pipeline.py, stage costs)."""
+    configure()
     try:
         asyncio.run(work())
     except InputError as exc:
