@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import os
 import signal
@@ -36,15 +37,12 @@ def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
 SWITCH_INTERVAL_S = 0.02
 
 
+@functools.cache  # once per process
 def configure() -> None:
     """Set this process up as a service's own: logging, BLAS on one thread, the GIL's switch
     interval for one busy loop (`SWITCH_INTERVAL_S`) and the heap settled after set-up
     (runtime.resilience.heap). Once; `run_to_completion` does it, a process started held
     (services.launcher) before it waits."""
-    global _configured
-    if _configured:
-        return
-    _configured = True
     import numpy  # noqa: F401  (loads OpenBLAS, so the limit reaches it)
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
@@ -52,9 +50,6 @@ def configure() -> None:
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     heap.manage()
     setup_logging()
-
-
-_configured = False
 
 
 def run_to_completion(work: Callable[[], Coroutine[Any, Any, None]]) -> int:
