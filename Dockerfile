@@ -49,7 +49,7 @@ RUN if [ -n "$CA_BUNDLE" ]; then export PIP_CERT="$CA_BUNDLE"; fi \
 # The project (.dockerignore lets only its packages, README and deploy configs in); the
 # configs are also baked in as /etc/beyond, the defaults that compose mounts ./deploy over.
 COPY . ./
-COPY deploy /etc/beyond
+COPY beyond_self/deploy /etc/beyond
 RUN python -m pip install --no-cache-dir --no-deps --no-build-isolation . \
     && python -c "import zenoh.ext, beyond_self.cli, beyond_self.services.registry" \
     && rm -rf build *.egg-info

@@ -3,9 +3,9 @@
 The article's data is never copied into the repository (licence and size); it is read from
 `../shared/data` beside the checkout, or from the folder named by $BEYOND_DATA.
 
-Bundled resources (the recordings the main job replays) sit beside the layers: in a checkout at
-its root, in an installed wheel inside the `beyond_self` package. `ROOT` is that folder in both
-cases (the links in `beyond_self/` resolve to the checkout), so no code asks which it is.
+Bundled resources (the recordings the main job replays) sit inside the `beyond_self` package, in a
+checkout and in an installed wheel alike: `ROOT` is that package folder, so no code asks which it
+is. In a checkout the article's data is looked for beside the checkout (`ROOT.parent.parent`).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from beyond_self.core.errors import InputError
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORDINGS = ROOT / "recordings"
+BESIDE_CHECKOUT = ROOT.parent.parent / "shared" / "data"
 DEMO_RECORDING = RECORDINGS / "tap-ball-grasp-box.mcap"
 SOURCES = (
     "giampierosalvi/AffordancesAndSpeech (folder bayesian_net/) and "
@@ -28,7 +29,7 @@ def shared_data_dir() -> Path | None:
     """The article's data folder if present: $BEYOND_DATA, else ../shared/data beside the repo."""
     env = os.environ.get("BEYOND_DATA")
     candidates = [Path(env)] if env else []
-    candidates.append(ROOT.parent / "shared" / "data")
+    candidates.append(BESIDE_CHECKOUT)
     for path in candidates:
         if (path / "salvi2012").is_dir() or (path / "saponaro2019").is_dir():
             return path
@@ -41,7 +42,7 @@ def require_shared_data(relative: str = "") -> Path:
     if root is None:
         raise InputError(
             "the article's data folder was not found (looked in $BEYOND_DATA and "
-            f"{ROOT.parent / 'shared' / 'data'}); get it from {SOURCES}"
+            f"{BESIDE_CHECKOUT}); get it from {SOURCES}"
         )
     path = root / relative
     if not path.exists():
@@ -63,7 +64,7 @@ def data_set(spec: str, keep: tuple[str, ...] = ()) -> str:
         found = sorted(p for p in (root / spec, *root.glob(f"*/{spec}")) if p.exists())
         if found:
             return str(found[0])
-    where = str(root) if root else f"none in $BEYOND_DATA or {ROOT.parent / 'shared' / 'data'}"
+    where = str(root) if root else f"none in $BEYOND_DATA or {BESIDE_CHECKOUT}"
     valid = "".join(f"'{k}', " for k in keep)
     raise InputError(
         f"{spec} is not a file or folder here, nor a data set of the article's data folder "
