@@ -549,7 +549,7 @@ def test_the_checker_reads_the_dockerfile(tmp_path: Path) -> None:
     text = (REPO / "Dockerfile").read_text(encoding="utf-8")
     assert '"beyond", "health"' in text
     (tmp_path / "Dockerfile").write_text(text.replace('"beyond", "health"', '"beyond", "helth"'))
-    (tmp_path / "schemas").unlink()
+    (tmp_path / "beyond_self").unlink()
     problems = check_compose(load_compose(), tmp_path)
     assert any("command ['helth'] is not a beyond command" in p for p in problems), problems
-    assert any("copies schemas, which does not exist" in p for p in problems), problems
+    assert any("copies beyond_self, which does not exist" in p for p in problems), problems
