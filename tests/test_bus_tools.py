@@ -172,9 +172,38 @@ async def test_pub_sends_a_valid_message_and_refuses_an_invalid_one() -> None:
     assert "confidence" in err and "<= 1.0" in err
 
 
+async def test_pub_sends_again_what_echo_json_printed() -> None:
+    """A line of `beyond echo --json` is what `beyond pub` takes, as it is: the same message
+    arrives again (header and all); the line of another key is refused."""
+    config = private_config()
+    (sent,) = skeleton_frames(1)
+    with Bus.open(config) as bus:
+        key = bus.keys.skeleton
+        echo = await beyond(config, "echo", key, "--json", "--count", "1")
+        publisher = bus.publisher(key, s.SkeletonFrame)
+        await publisher.wait_matching(timeout=60)  # echo has subscribed
+        publisher.put(sent)
+        line, err = await asyncio.wait_for(echo.communicate(), 60)
+        assert echo.returncode == 0, err.decode()
+        sub = bus.subscribe(key, s.SkeletonFrame)
+        pub = await asyncio.create_subprocess_exec(
+            *BEYOND, "pub", key, "SkeletonFrame", "-",
+            env=env_for(config), stdin=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        _, err = await asyncio.wait_for(pub.communicate(line), 60)
+        assert pub.returncode == 0, err.decode()
+        got = await sub.recv(60)
+    assert got.message == sent
+    other = f"beyond/{config.robot}/gesture/posterior"
+    rc, _, err = run_cli(config, "pub", other, "ActionPosterior", line.decode())
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert f"heard on '{key}'" in err
+
+
 @pytest.mark.parametrize(
     "args, says",
     [
+        (["echo", "beyond/r/nope"], "unknown key 'beyond/r/nope'"),
         (["hz", "beyond/r/sensors/skeletn"], "unknown key 'beyond/r/sensors/skeletn'"),
         (["bw", "nope"], "valid: beyond/"),
         (["info", "beyond/r/sensors/*"], "unknown key"),
