@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import jsonschema
+import msgspec
 import pytest
 from busutil_net import REPO, env_for, private_config, skeleton_frames
 
@@ -152,6 +153,28 @@ async def test_info_names_publishers_and_subscribers_from_health() -> None:
     assert info["publishers"] == [] and info["any_subscriber"] is True
     assert info["wire_encoding"] == "application/msgpack;SkeletonFrame/v1"
     assert json.loads(seg_out)["publishers"] == ["relay"]
+
+
+async def test_info_never_says_no_publisher_of_what_it_heard() -> None:
+    """A live service heard on the key is among its publishers, even when its health does not
+    answer (as a service just started, or one whose session `info` has not met yet): `info`
+    printed "publishers: none" beside "heard from: ingest"."""
+    config = private_config()
+    (frame,) = skeleton_frames(1)
+    header = msgspec.structs.replace(frame.header, source="ingest")
+    frame = msgspec.structs.replace(frame, header=header)
+    with Bus.open(config) as bus:
+        bus.declare_token(bus.keys.alive("ingest"))  # alive, no health queryable
+        pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
+        proc = await beyond(config, "info", bus.keys.skeleton, "--json", "--duration", "2")
+        await pub.wait_matching(timeout=60)  # info has subscribed: it hears what follows
+        for _ in range(5):
+            pub.put(frame)
+        out, err = await asyncio.wait_for(proc.communicate(), 60)
+    assert proc.returncode == 0, err.decode()
+    info = json.loads(out)
+    assert info["heard_from"] == ["ingest"] and info["publishers"] == ["ingest"]
+    assert info["no_health"] == ["ingest"]
 
 
 async def test_pub_sends_a_valid_message_and_refuses_an_invalid_one() -> None:
