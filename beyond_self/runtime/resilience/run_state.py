@@ -125,8 +125,9 @@ class RunState:
         """Forget this side's state (its services' folders and its watcher's)."""
         for folder in self.folders:
             shutil.rmtree(folder, ignore_errors=True)
-        with contextlib.suppress(OSError):
-            self.robot_folder.rmdir()  # only when no other side keeps anything there
+        for folder in (self.robot_folder, self.root):  # only when no other side keeps anything
+            with contextlib.suppress(OSError):
+                folder.rmdir()
 
     def _record(self) -> RunRecord | None:
         with contextlib.suppress(OSError, msgspec.DecodeError, msgspec.ValidationError):
