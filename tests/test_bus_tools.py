@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import jsonschema
+import msgspec
 import pytest
 from busutil_net import REPO, env_for, private_config, skeleton_frames
 
@@ -154,6 +155,28 @@ async def test_info_names_publishers_and_subscribers_from_health() -> None:
     assert json.loads(seg_out)["publishers"] == ["relay"]
 
 
+async def test_info_never_says_no_publisher_of_what_it_heard() -> None:
+    """A live service heard on the key is among its publishers, even when its health does not
+    answer (as a service just started, or one whose session `info` has not met yet): `info`
+    printed "publishers: none" beside "heard from: ingest"."""
+    config = private_config()
+    (frame,) = skeleton_frames(1)
+    header = msgspec.structs.replace(frame.header, source="ingest")
+    frame = msgspec.structs.replace(frame, header=header)
+    with Bus.open(config) as bus:
+        bus.declare_token(bus.keys.alive("ingest"))  # alive, no health queryable
+        pub = bus.publisher(bus.keys.skeleton, s.SkeletonFrame)
+        proc = await beyond(config, "info", bus.keys.skeleton, "--json", "--duration", "2")
+        await pub.wait_matching(timeout=60)  # info has subscribed: it hears what follows
+        for _ in range(5):
+            pub.put(frame)
+        out, err = await asyncio.wait_for(proc.communicate(), 60)
+    assert proc.returncode == 0, err.decode()
+    info = json.loads(out)
+    assert info["heard_from"] == ["ingest"] and info["publishers"] == ["ingest"]
+    assert info["no_health"] == ["ingest"]
+
+
 async def test_pub_sends_a_valid_message_and_refuses_an_invalid_one() -> None:
     config = private_config()
     with Bus.open(config) as bus:
@@ -172,9 +195,38 @@ async def test_pub_sends_a_valid_message_and_refuses_an_invalid_one() -> None:
     assert "confidence" in err and "<= 1.0" in err
 
 
+async def test_pub_sends_again_what_echo_json_printed() -> None:
+    """A line of `beyond echo --json` is what `beyond pub` takes, as it is: the same message
+    arrives again (header and all); the line of another key is refused."""
+    config = private_config()
+    (sent,) = skeleton_frames(1)
+    with Bus.open(config) as bus:
+        key = bus.keys.skeleton
+        echo = await beyond(config, "echo", key, "--json", "--count", "1")
+        publisher = bus.publisher(key, s.SkeletonFrame)
+        await publisher.wait_matching(timeout=60)  # echo has subscribed
+        publisher.put(sent)
+        line, err = await asyncio.wait_for(echo.communicate(), 60)
+        assert echo.returncode == 0, err.decode()
+        sub = bus.subscribe(key, s.SkeletonFrame)
+        pub = await asyncio.create_subprocess_exec(
+            *BEYOND, "pub", key, "SkeletonFrame", "-",
+            env=env_for(config), stdin=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        _, err = await asyncio.wait_for(pub.communicate(line), 60)
+        assert pub.returncode == 0, err.decode()
+        got = await sub.recv(60)
+    assert got.message == sent
+    other = f"beyond/{config.robot}/gesture/posterior"
+    rc, _, err = run_cli(config, "pub", other, "ActionPosterior", line.decode())
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert f"heard on '{key}'" in err
+
+
 @pytest.mark.parametrize(
     "args, says",
     [
+        (["echo", "beyond/r/nope"], "unknown key 'beyond/r/nope'"),
         (["hz", "beyond/r/sensors/skeletn"], "unknown key 'beyond/r/sensors/skeletn'"),
         (["bw", "nope"], "valid: beyond/"),
         (["info", "beyond/r/sensors/*"], "unknown key"),

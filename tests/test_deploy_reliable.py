@@ -103,8 +103,10 @@ def test_routers_are_added_to_the_local_group_not_replacing_it() -> None:
     robot = load_config({"BEYOND_ZENOH_CONFIG": str(REPO / "deploy/zenoh/robot.json5"), **env})
     zc = zenoh_config(robot)
     assert json.loads(zc.get_json("connect/endpoints")) == [
-        "tcp/127.0.0.1:7448", "tcp/a:7447", "tcp/b:7447",
-    ]  # fmt: skip
+        "tcp/127.0.0.1:7501",
+        "tcp/a:7447",
+        "tcp/b:7447",
+    ]  # fmt: skip  (the file names no rendezvous: BEYOND_ZENOH_PORT's)
     assert json.loads(zc.get_json("mode")) == "peer"
     ws = load_config({"BEYOND_ZENOH_CONFIG": str(REPO / "deploy/zenoh/workstation.json5"), **env})
     zc = zenoh_config(ws)

@@ -150,3 +150,20 @@ def test_a_blocking_message_gives_up_on_a_full_queue_before_the_lease_does(mode:
     lease_ms = get(zc, "transport/link/tx/lease")
     assert isinstance(wait_us, int) and isinstance(lease_ms, int)
     assert 0 < wait_us < lease_ms * 1000
+
+
+@pytest.mark.parametrize("port", [None, 17903])
+def test_the_port_holds_with_the_shipped_robot_file(port: int | None) -> None:
+    """deploy/zenoh/robot.json5 names no rendezvous of its own: its peers meet on the bus's
+    port (--port, BEYOND_ZENOH_PORT, else 7448), as they do without a file."""
+    robot = Path(__file__).resolve().parent.parent / "deploy/zenoh/robot.json5"
+    env = {"BEYOND_ZENOH_CONFIG": str(robot)}
+    if port is not None:
+        env["BEYOND_ZENOH_PORT"] = str(port)
+    zc = zenoh_config(load_config(env))
+    rendezvous = f"tcp/127.0.0.1:{port or DEFAULT_PORT}"
+    assert get(zc, "listen/endpoints") == [rendezvous, "tcp/127.0.0.1:0"]
+    assert get(zc, "connect/endpoints") == [rendezvous]
+    assert get(zc, "connect/timeout_ms") == 100  # the file's own settings stay
+    given = zenoh_config(load_config(env, listen=["tcp/127.0.0.1:17999"]))
+    assert get(given, "listen/endpoints") == ["tcp/127.0.0.1:17999"]

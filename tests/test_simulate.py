@@ -385,3 +385,19 @@ def _jpeg(img: np.ndarray) -> CompressedCameraFrame:
     msg = message_from_image(header, img, fmt="jpeg", quality=80)
     assert isinstance(msg, CompressedCameraFrame)
     return msg
+
+
+def test_check_ends_with_a_verdict_naming_every_variable(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The recordings how-to's scene with --seed 3: its touch of a small ball reads ObjVel and
+    Contact wrong from the camera (docs/how-to/recordings.md says why); `--check` exits 1 with a
+    verdict line naming each of the scene's eight variables and what differed."""
+    scene = "grasp:blue:box:big,touch:yellow:circle:small"
+    out = tmp_path / "two.mcap"
+    assert main(["simulate", scene, "-o", str(out), "--seed", "3", "--check"]) == 1
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("check FAIL: 2 of 2 item(s) found")
+    for variable in ("Action", "Color", "Shape", "Size", "ObjVel", "HandVel", "ObjHandVel"):
+        assert f" {variable} " in last
+    assert "ObjVel 1 of 2" in last and "Contact 1 of 2" in last

@@ -180,8 +180,10 @@ def _parent_problem(folder: Path) -> str | None:
 
 
 def _writable_folder(folder: Path, what: str, *, create: bool) -> None:
-    """`folder` exists and is writable, or (with `create`) is created below a writable folder:
-    so no command finds out at its very end that it cannot save its work."""
+    """`folder` exists and is writable, or (with `create`) could be created below a writable
+    folder: so no command finds out at its very end that it cannot save its work. Nothing is
+    created here: the command makes the folder when it writes into it, so one that fails
+    first (no data, bad input) leaves no empty folder behind."""
     if folder.exists() or not create:
         problem = _parent_problem(folder)
     else:
@@ -189,11 +191,6 @@ def _writable_folder(folder: Path, what: str, *, create: bool) -> None:
         while not ancestor.exists() and ancestor != ancestor.parent:
             ancestor = ancestor.parent
         problem = _parent_problem(ancestor)
-        if problem is None:
-            try:
-                folder.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                problem = f"cannot create folder {folder} ({exc.strerror})"
     if problem is not None:
         raise argparse.ArgumentTypeError(f"cannot write {what}: {problem}")
 
@@ -237,7 +234,8 @@ def output_file(text: str) -> Path:
 
 @_checked
 def output_dir(text: str) -> Path:
-    """A folder we may write into (created with its parents if needed)."""
+    """A folder we may write into: it exists, or could be made below a writable folder (the
+    command makes it, with its parents, once it has something to write)."""
     path = _path(text, "folder")
     _writable_folder(path, f"into {path}", create=True)
     return path

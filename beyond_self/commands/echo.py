@@ -1,4 +1,8 @@
-"""`beyond echo KEYEXPR`: print decoded messages as they arrive."""
+"""`beyond echo KEYEXPR`: print decoded messages as they arrive.
+
+The key is checked as `hz`, `bw` and `info` check theirs (commands.bus_keys): a key of ours or
+a pattern with `*`; anything else is one line and exit status 2 at once, not a silent wait for
+messages no stream will ever carry."""
 
 from __future__ import annotations
 
@@ -7,6 +11,7 @@ import asyncio
 import sys
 
 from beyond_self.commands import argtypes
+from beyond_self.commands.bus_keys import check_key
 from beyond_self.commands.terminal import stop_on_signals
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.bus.session import Bus
@@ -39,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
         shown = 0
         deadline = None if args.duration is None else loop.time() + args.duration
         with Bus.open(config) as bus:
+            check_key(args.keyexpr, bus.keys)
             sub = bus.subscribe_raw(args.keyexpr)
             while not stop.is_set() and (args.count is None or shown < args.count):
                 timeout = 0.2 if deadline is None else min(0.2, deadline - loop.time())

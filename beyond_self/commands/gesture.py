@@ -42,6 +42,7 @@ from beyond_self.commands.gesture_reports import evaluate_command, realism_comma
 from beyond_self.commands.hmm_options import add_training_options, training_config
 from beyond_self.commands.terminal import progress_bar
 from beyond_self.core.errors import InputError
+from beyond_self.runtime import outputs
 
 HELP = "train, run (frame by frame) and evaluate the gesture HMMs"
 
@@ -49,6 +50,7 @@ TRAIN_SEED = 0
 TRAIN_COUNT = 60  # synthetic gestures per action of the default models
 EVAL_SEED = 1  # evaluate's synthetic default: held-out gestures, never seen by `train`
 DEFAULT = "default"
+PLOTS = "gesture-evaluation"  # evaluate's and realism's folder under the outputs folder
 
 
 def _data_args(p: argparse.ArgumentParser, seed: int, count: int = 30) -> None:
@@ -135,9 +137,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     argtypes.add_output(
         ev,
-        "folder for the PNG plots (default ./gesture-evaluation)",
+        f"folder for the PNG plots (default: {PLOTS} under {outputs.DESCRIPTION})",
         folder=True,
-        default=Path("gesture-evaluation"),
         old="--out",
     )
     add_training_options(ev, mix=3, iterations=30, states="HMM states per action")
@@ -151,15 +152,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     argtypes.add_output(
         realism,
-        "folder for the PNG plot (default ./gesture-evaluation)",
+        f"folder for the PNG plot (default: {PLOTS} under {outputs.DESCRIPTION})",
         folder=True,
-        default=Path("gesture-evaluation"),
     )
     _data_args(realism, TRAIN_SEED)
 
 
 def run(args: argparse.Namespace) -> int:
     command = args.gesture_command
+    if command in ("evaluate", "realism") and args.output is None:
+        args.output = outputs.out_dir() / PLOTS  # never the current folder unless asked
     if command == "evaluate":
         return evaluate_command(args, gestures, models_from)
     if command == "realism":

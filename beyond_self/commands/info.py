@@ -39,15 +39,22 @@ def _touches(patterns: list[str], key: zenoh.KeyExpr) -> bool:
 
 
 async def gather(bus: Bus, key: str, duration: float) -> dict[str, Any]:
+    """What the bus says of `key` over `duration` s. The services are asked for their health
+    at the end of the window, not at its start: a session just opened has not met the others'
+    queryables yet (a query then finds none and answers at once, while samples of the same
+    services arrive moments later). A live service heard publishing on the key is a publisher
+    even if its health did not answer, so the lines never contradict each other."""
     cls = check_key(key, bus.keys, concrete=True)
     assert cls is not None  # concrete=True: a key of ours
     expr = zenoh.KeyExpr(key)
     sub = bus.subscribe_raw(key, maxsize=1 << 16)
     probe = bus.publisher(key, cls)
-    healths, alive = await asyncio.gather(
-        bus.query(bus.keys.health("*"), ServiceHealth, timeout=min(duration, 2.0)),
-        bus.live_tokens(bus.keys.alive("*"), timeout=min(duration, 2.0)),
-    )
+    alive_now: set[str] = set()
+
+    def token(found: str, present: bool) -> None:
+        (alive_now.add if present else alive_now.discard)(found)
+
+    unwatch = bus.watch_tokens(bus.keys.alive("*"), token)
     window = RateWindow(None)
     sources: set[str] = set()
     loop = asyncio.get_running_loop()
@@ -64,10 +71,19 @@ async def gather(bus: Bus, key: str, duration: float) -> dict[str, Any]:
         if message is not None:
             sources.add(message.header.source)
             window.add(sample.received_ns, len(sample.payload), message.header.stamp)
+    healths = await bus.query(bus.keys.health("*"), ServiceHealth, timeout=2.0, every=True)
     matching = probe.matching()
+    unwatch()
     sub.close()
     probe.close()
-    services = sorted(healths, key=lambda r: r.message.service)
+    alive = sorted(alive_now)
+    services = sorted(
+        {r.message.service: r for r in healths}.values(), key=lambda r: r.message.service
+    )
+    answered = {r.message.service for r in services}
+    live = {k.rsplit("/", 1)[-1] for k in alive}
+    declared = [r.message.service for r in services if _touches(r.message.outputs, expr)]
+    heard_live = [s for s in sorted(sources) if s in live or s in answered]
     stats = window.stats()
     return {
         "key": key,
@@ -75,7 +91,9 @@ async def gather(bus: Bus, key: str, duration: float) -> dict[str, Any]:
         "version": cls.VERSION,
         "schema": cls.schema_name(),
         "wire_encoding": wire_encoding(cls),
-        "publishers": [r.message.service for r in services if _touches(r.message.outputs, expr)],
+        "publishers": sorted({*declared, *heard_live}),
+        # alive services whose health did not answer: the lines above may miss them
+        "no_health": sorted(live - answered),
         "subscribers": [r.message.service for r in services if _touches(r.message.inputs, expr)],
         # a subscriber matching our probe publisher: a service or any other process
         "any_subscriber": matching,
@@ -107,9 +125,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"key:          {info['key']}")
     print(f"type:         {info['type']} v{info['version']} (schema {info['schema']})")
     print(f"wire:         {info['wire_encoding']}")
-    print(f"publishers:   {_names(info['publishers'])} (services, from their health)")
+    print(f"publishers:   {_names(info['publishers'])} (services: their health, or heard)")
     print(f"subscribers:  {_names(info['subscribers'])} (services, from their health)")
     print(f"any subscriber on the bus: {'yes' if info['any_subscriber'] else 'no'}")
     print(f"heard from:   {_names(info['heard_from'])} (header source, {args.duration:.1f} s)")
+    if info["no_health"]:
+        print(f"no health from: {_names(info['no_health'])} (alive, but did not answer)")
     print(f"traffic:      {info['messages']} messages, {rate} from stamps")
     return 0

@@ -1,7 +1,8 @@
 """`beyond pub KEY TYPE JSON`: publish a message typed in by hand, checked against its schema.
 
-The JSON is the message in the JSON form `beyond echo --json` prints and recordings hold (every
-stamp a Foxglove Time {"sec", "nsec"}, schemas.codec), without the parts a sender adds: `type` and
+The JSON is a line `beyond echo --json` prints (`{"key": ..., "message": {...}}`, whose key must
+be KEY), or the message alone in the JSON form that line and recordings hold (every stamp a
+Foxglove Time {"sec", "nsec"}, schemas.codec), without the parts a sender adds: `type` and
 `header` may be left out (the header is filled in: this build's schema version, source
 `beyond-pub`, a sequence number and the wall-clock stamp). Anything else is checked exactly as a
 subscriber would check it, so a message refused here would have been refused by the services
@@ -29,6 +30,7 @@ from beyond_self.schemas.codec import from_recording_object, lookup, to_recordin
 
 HELP = "publish one message (or a stream) given as JSON, validated against its schema"
 SOURCE = "beyond-pub"
+ECHO_LINE = ("key", "message")  # what `beyond echo --json` prints around a message
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("type", help="message type, e.g. Description (see `beyond schemas`)")
     parser.add_argument(
         "json",
-        help="the message as JSON, as `beyond echo --json` prints it (stamps as {sec, nsec}; "
-        "'-' reads it from stdin)",
+        help="a line `beyond echo --json` printed, or its message alone (stamps as {sec, nsec}; "
+        "type and header may be left out); '-' reads it from stdin",
     )
     parser.add_argument(
         "--rate",
@@ -64,10 +66,27 @@ def build(text: str, cls: type[Message], key: str, seq: int, stamp: int) -> Mess
         raise InputError(f"JSON for {cls.type_name()} is not valid JSON: {exc}") from None
     if not isinstance(obj, dict):
         raise InputError(f"JSON for {cls.type_name()} must be an object, got {text[:40]!r}")
+    obj = unwrap(obj, key)
     obj.setdefault("type", cls.type_name())
     now = {"sec": stamp // 1_000_000_000, "nsec": stamp % 1_000_000_000}
     obj.setdefault("header", {"version": cls.VERSION, "source": SOURCE, "seq": seq, "stamp": now})
     return from_recording_object(obj, cls, key)
+
+
+def unwrap(obj: dict[str, Any], key: str) -> dict[str, Any]:
+    """The message of a line `beyond echo --json` printed (`{"key", "message"}`), refused when
+    it was heard on another key; any other object is the message itself."""
+    if set(obj) != set(ECHO_LINE):
+        return obj
+    if obj["key"] != key:
+        raise InputError(
+            f"the JSON was heard on {obj['key']!r}, not on {key!r}; valid: the same key, or "
+            "the message alone"
+        )
+    message = obj["message"]
+    if not isinstance(message, dict):
+        raise InputError(f"'message' of the JSON must be an object, got {str(message)[:40]!r}")
+    return message
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,6 +10,7 @@ from typing import Any
 
 from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
+from beyond_self.runtime import outputs
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
 from beyond_self.schemas.keys import DEFAULT_ROBOT
 from beyond_self.schemas.ros2 import DEFAULT_CONNECT, Ros2Topics
@@ -35,8 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     bridge.add_argument(
         "--out-dir",
         type=Path,
-        default=Path("out/ros2"),
-        help="where the bridge logs the sentences it said (a restart says none again)",
+        default=None,
+        help="where the bridge logs the sentences it said (a restart says none again; default: "
+        f"ros2/ under {outputs.DESCRIPTION})",
     )
     add_bus_arguments(bridge)
 
@@ -96,7 +98,9 @@ def run(args: argparse.Namespace) -> int:
         from beyond_self.services.ros2_bridge import Ros2Bridge
 
         Ros2Bridge.main(
-            config=config_from_args(args), out_dir=str(args.out_dir), **ros2_options(args)
+            config=config_from_args(args),
+            out_dir=None if args.out_dir is None else str(args.out_dir),
+            **ros2_options(args),
         )
     from beyond_self.runtime.recording.reader import require_mcap
     from beyond_self.runtime.ros2.bag import export

@@ -36,7 +36,11 @@ from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.recording.reader import require_mcap
 from beyond_self.runtime.resilience.process import exit_process
-from beyond_self.runtime.resilience.run_state import RunState, run_state_root
+from beyond_self.runtime.resilience.run_state import (
+    RunState,
+    deployment_folder,
+    run_state_root,
+)
 from beyond_self.schemas.keys import check_name
 from beyond_self.services.deployment import Deployment, Ending
 from beyond_self.services.options import load_options
@@ -426,7 +430,7 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     timeout = args.timeout
     if timeout is None and ("ingest" in side.services or finite):
         timeout = DEFAULT_TIMEOUT
-    state = run_state(args, side)
+    state = run_state(args, side, config)
     # the processes start now, held off the bus: their interpreters and imports overlap the
     # session's opening and the look for another `up`, which refuses before any joins
     await side.prepare()
@@ -480,10 +484,13 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
     return exit_status(ending, end.damage if end is not None else "", pipeline.losses())
 
 
-def run_state(args: argparse.Namespace, side: Deployment) -> RunState:
-    """The side's state on this machine (runtime.resilience.run_state), given to its services."""
+def run_state(args: argparse.Namespace, side: Deployment, bus: BusConfig) -> RunState:
+    """The side's state on this machine (runtime.resilience.run_state), given to its services:
+    its own, keyed by its bus `bus` (as given, before a secure side's router is placed) and its
+    outputs folder, so another deployment's `--fresh` (a demo on another port) never clears it."""
     out = getattr(args, "out_dir", None)
-    root = run_state_root(out.resolve() if out is not None else None)
+    outputs_folder = out.resolve() if out is not None else outputs.out_dir()
+    root = run_state_root(outputs_folder) / deployment_folder(bus, outputs_folder)
     state = RunState(root, side.config.robot, side.watcher or "up", side.services)
     side.env.update(state.env())
     return state

@@ -17,6 +17,7 @@ from typing import Any
 
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, SKELETON
 from beyond_self.runtime.log import event
+from beyond_self.runtime.outputs import service_out_dir
 from beyond_self.runtime.ros2.convert import to_ros
 from beyond_self.runtime.ros2.node import (
     DEFAULT_CONNECT,
@@ -56,14 +57,14 @@ class Ros2Bridge(Service):
         *,
         connect: str = DEFAULT_CONNECT,
         domain_id: int | str | None = None,
-        out_dir: str = "out/ros2",
+        out_dir: str | None = None,
         topics: dict[str, str] | None = None,
         **base: Any,
     ) -> None:
         super().__init__(**base)
         self.connect = connect
         self.domain = default_domain() if domain_id is None else domain(domain_id)
-        self.out_dir = Path(out_dir)
+        self.out_dir = Path(out_dir) if out_dir is not None else service_out_dir("ros2")
         self.renamed = dict(topics or {})
         self.node: Ros2Node | None = None
         self.out: dict[str, Ros2Publisher] = {}

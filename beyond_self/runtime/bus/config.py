@@ -304,11 +304,24 @@ def zenoh_config(config: BusConfig, access_rules: Mapping[str, Any] | None = Non
             sets["listen/timeout_ms"] = 0
             sets["listen/retry"] = retry
             sets["listen/exit_on_failure"] = False
+    # A peer file that names no endpoints of its own (deploy/zenoh/robot.json5) meets its group
+    # on the port's rendezvous, as without a file: --port and BEYOND_ZENOH_PORT hold with it.
+    peer_file = (
+        config.config_file is not None
+        and config.mode == "peer"  # else the option's mode replaces the file's
+        and _mode(zc) == "peer"
+        and not config.secure
+    )
+    own = config.with_(config_file=None, routers=()).endpoints() if peer_file else ([], [])
+    if peer_file and config.listen is None and not _named(zc, "listen/endpoints"):
+        listen = own[0]
+    if config.config_file is not None and config.connect is None:
+        listed = _file_endpoints(zc, "connect/endpoints")
+        if peer_file and not _named(zc, "connect/endpoints"):
+            listed = own[1]
+        connect = listed + [r for r in config.routers if r not in listed]
     if listen or config.listen is not None:
         sets["listen/endpoints"] = listen
-    if config.config_file is not None and config.connect is None and config.routers:
-        listed = _file_endpoints(zc, "connect/endpoints")
-        connect = listed + [r for r in config.routers if r not in listed]
     if connect or config.connect is not None:
         sets["connect/endpoints"] = connect
     if config.secure is not None:
@@ -333,6 +346,25 @@ def zenoh_config(config: BusConfig, access_rules: Mapping[str, Any] | None = Non
         except Exception as exc:  # zenoh raises its own ZError
             raise InputError(f"bad Zenoh setting {key}={value!r}: {exc}") from None
     return zc
+
+
+def _mode(zc: zenoh.Config) -> str:
+    """The mode a config says (a file's own, unless an option set another)."""
+    try:
+        return str(json.loads(zc.get_json("mode")) or "peer")
+    except Exception:  # zenoh raises its own ZError
+        return "peer"
+
+
+def _named(zc: zenoh.Config, path: str) -> bool:
+    """Whether a config file sets `path` (Zenoh fills what a file leaves out with its own
+    defaults: a value equal to those is taken as not named)."""
+    import zenoh
+
+    try:
+        return bool(zc.get_json(path) != zenoh.Config().get_json(path))
+    except Exception:  # zenoh raises its own ZError for a path it does not know
+        return False
 
 
 def _file_endpoints(zc: zenoh.Config, path: str) -> list[str]:

@@ -1,7 +1,8 @@
 """What `beyond up` keeps of a run on disk, so that the same command after a kill goes on.
 
 A side of a deployment (`up`'s watcher and the services it starts) keeps its state under the
-robot's state folder (runtime.resilience.state): the run's command, and what its watcher has
+robot's state folder (runtime.resilience.state) in its deployment's own folder (its bus and its
+outputs folder: `deployment_folder`): the run's command, and what its watcher has
 printed (`printed.jsonl`, one synced line a gesture). The same command again, after a kill of
 the whole side, goes on from there: its services take their predecessors' ledgers and
 snapshots, its watcher prints only the gestures not printed yet. Another command, or
@@ -11,6 +12,8 @@ snapshots, its watcher prints only the gestures not printed yet. Another command
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import os
 import shutil
 import time
@@ -19,6 +22,7 @@ from pathlib import Path
 
 import msgspec
 
+from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.outputs import out_dir
 from beyond_self.runtime.resilience.state import STATE_DIR_VAR, state_root, write_atomically
 
@@ -30,6 +34,26 @@ def run_state_root(outputs: Path | None = None) -> Path:
     """Where `up` keeps its runs' state: $BEYOND_STATE_DIR, else `state/` under the outputs
     folder (`outputs`, else runtime.outputs')."""
     return state_root() or (outputs or out_dir()) / "state"
+
+
+def deployment_folder(bus: BusConfig, outputs: Path) -> str:
+    """The name of one deployment's state folder under the state root: its bus (mode, port,
+    endpoints, config file, keystore) and its outputs folder, as a short digest after the mode
+    and port a person recognises. Two deployments on different buses or folders (a demo on
+    another port, a robot in another checkout) never read or clear each other's state; the
+    same command again finds its own."""
+    listen, connect = bus.endpoints()
+    identity = {
+        "mode": bus.mode,
+        "port": bus.port,
+        "listen": listen,
+        "connect": connect,
+        "config": str(Path(bus.config_file).resolve()) if bus.config_file else "",
+        "secure": str(Path(bus.secure).resolve()) if bus.secure else "",
+        "outputs": str(outputs.resolve()),
+    }
+    digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:12]
+    return f"{bus.mode}-{bus.port}-{digest}"
 
 
 class RunRecord(msgspec.Struct, frozen=True):
@@ -101,8 +125,9 @@ class RunState:
         """Forget this side's state (its services' folders and its watcher's)."""
         for folder in self.folders:
             shutil.rmtree(folder, ignore_errors=True)
-        with contextlib.suppress(OSError):
-            self.robot_folder.rmdir()  # only when no other side keeps anything there
+        for folder in (self.robot_folder, self.root):  # only when no other side keeps anything
+            with contextlib.suppress(OSError):
+                folder.rmdir()
 
     def _record(self) -> RunRecord | None:
         with contextlib.suppress(OSError, msgspec.DecodeError, msgspec.ValidationError):
