@@ -95,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
     if args.ros2_command == "bridge":
         from beyond_self.services.ros2_bridge import Ros2Bridge
 
-        Ros2Bridge.main(
-            config=config_from_args(args), out_dir=str(args.out_dir), **ros2_options(args)
+        Ros2Bridge.main(  # its options parsed here: the service reads no command line
+            argv=(), config=config_from_args(args), out_dir=str(args.out_dir), **ros2_options(args)
         )
     from beyond_self.runtime.recording.reader import require_mcap
     from beyond_self.runtime.ros2.bag import export
