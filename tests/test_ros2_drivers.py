@@ -289,3 +289,48 @@ def test_a_topic_is_mapped_by_hand(tmp_path: Path) -> None:
     code, _, err = beyond("analyse", str(bag), "--topic", "camera=/depth/image_raw")
     assert code == 2 and "camera encoding 16UC1 is not a colour image" in err
     assert "ROS 2 topics not read: /rgb/image_raw (sensor_msgs/msg/Image)" in err
+
+
+@pytest.mark.slow
+def test_an_rgb_only_robots_bag_goes_through_the_pose_model(tmp_path: Path) -> None:
+    """A bag with one camera and no skeleton (usb_cam's `image_raw`, rgb8, as most robots
+    have) is a camera watching a person: read through the pose model, it is what `beyond
+    video` records of the same frames with the same stamps, skeleton for skeleton, and
+    `beyond analyse` prints the same lines."""
+    from pose_media import carphone
+
+    from beyond_self.cognition.pose.video import Video
+    from beyond_self.cognition.scene import EPOCH_NS
+
+    recorded = tmp_path / "carphone.mcap"
+    assert beyond("video", str(carphone()), "-o", str(recorded))[0] == 0
+    bag = tmp_path / "usb_cam"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        camera = writer.add_connection("/usb_cam/image_raw", r.IMAGE, typestore=STORE)
+        with Video(carphone()) as video:
+            for frame in video.frames():
+                stamp = EPOCH_NS + frame.time_ns
+                h, w = frame.rgb.shape[:2]
+                header = T["std_msgs/msg/Header"](stamp=_stamp(stamp), frame_id="camera")
+                image = T[r.IMAGE](
+                    header=header, height=h, width=w, encoding="rgb8", is_bigendian=0,
+                    step=w * 3, data=np.ascontiguousarray(frame.rgb).reshape(-1),
+                )  # fmt: skip
+                writer.write(camera, stamp, bytes(STORE.serialize_cdr(image, r.IMAGE)))
+
+    def skeletons(path: Path) -> list[SkeletonFrame]:
+        return [
+            m for m in (i.message() for i in read_recording(path)) if isinstance(m, SkeletonFrame)
+        ]
+
+    ours, theirs = skeletons(recorded), skeletons(bag)
+    assert len(theirs) == len(ours) > 100
+    for a, b in zip(ours, theirs, strict=True):
+        assert a.header.stamp == b.header.stamp and a.joints.keys() == b.joints.keys()
+        for name, joint in a.joints.items():
+            assert np.allclose(b.joints[name].position, joint.position, atol=1e-9), name
+    code, out, err = beyond("analyse", str(bag))
+    assert code == 0, err
+    assert out == beyond("analyse", str(recorded))[1]
+    code, out, err = beyond("inspect", str(bag))
+    assert code == 0 and "read as pose" in out, err
