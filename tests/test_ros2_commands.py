@@ -143,3 +143,58 @@ def test_beyond_ros2_export_writes_the_drivers_conventions(tmp_path: Path) -> No
         for name, joint in ours.joints.items():
             assert np.allclose(theirs.joints[name].position, joint.position, atol=1e-12)
             assert theirs.joints[name].confidence == pytest.approx(joint.confidence)
+
+
+@pytest.mark.timeout(120)
+async def test_an_rgb_only_robots_camera_is_a_live_person_source(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The ROS 2 live source with no skeleton topic and a raw camera (usb_cam's `image_raw`):
+    each image goes through the pose model, with its message's own stamp, as `beyond up
+    --camera` runs a camera (the cameraman, a person, is found; an empty room is not)."""
+    import asyncio
+
+    from pose_media import cameraman, read_rgb
+
+    from beyond_self.services.ros2_source import source
+
+    port = free_port()
+    for name, value in {
+        "BEYOND_ROBOT": "rgbbot", "BEYOND_ROS2_CONNECT": f"tcp/127.0.0.1:{port}",
+        "ROS_DOMAIN_ID": "4", "BEYOND_ROS2_SKELETON": "", "BEYOND_ROS2_TF": "",
+        "BEYOND_ROS2_CAMERA": "", "BEYOND_ROS2_CAMERA_RAW": "/usb_cam/image_raw",
+    }.items():  # fmt: skip
+        monkeypatch.setenv(name, value)
+    t = STORE.types
+    person = read_rgb(cameraman())
+    room = np.full_like(person, 128)
+
+    def image(rgb: np.ndarray, stamp: int) -> bytes:
+        h, w = rgb.shape[:2]
+        header = t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=stamp, nanosec=0), frame_id="camera"
+        )
+        msg = t[r.IMAGE](
+            header=header, height=h, width=w, encoding="rgb8", is_bigendian=0, step=w * 3,
+            data=np.ascontiguousarray(rgb).reshape(-1),
+        )  # fmt: skip
+        return bytes(STORE.serialize_cdr(msg, r.IMAGE))
+
+    key = f"4/usb_cam/image_raw/{r.dds_type(r.IMAGE)}/{STORE.hash_rihs01(r.IMAGE)}"
+    with plain_router(port) as router:
+        items = source()
+        first = asyncio.ensure_future(anext(items))
+        for _ in range(100):  # until the plug-in's subscription is declared
+            await asyncio.sleep(0.05)
+            tokens = [reply.ok for reply in router.liveliness().get("@ros2_lv/4/**")]
+            if any(tok is not None and "/MS/" in str(tok.key_expr) for tok in tokens):
+                break
+        router.put(key, image(person, 7))
+        got = [await asyncio.wait_for(first, 60)]
+        router.put(key, image(room, 8))
+        got.append(await asyncio.wait_for(anext(items), 60))
+        await items.aclose()
+    (kind, seen, stamp), (_, empty, stamp2) = got
+    assert (kind, stamp, stamp2) == ("person", 7 * 10**9, 8 * 10**9)
+    assert seen.pose is not None and np.array_equal(seen.rgb, person)
+    assert empty.pose is None
