@@ -110,6 +110,23 @@ def depth_image(stamp: int) -> bytes:
     return bytes(STORE.serialize_cdr(raw, r.IMAGE))
 
 
+def robot_tf(stamp: int) -> bytes:
+    """A robot's own /tf (its base, a wheel): no openni_tracker frames among them."""
+    header = T["std_msgs/msg/Header"](stamp=_stamp(stamp), frame_id="base_link")
+    transforms = [
+        T["geometry_msgs/msg/TransformStamped"](
+            header=header,
+            child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](0.1, 0.2, 0.3),
+                rotation=T["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+            ),
+        )
+        for child in ("camera_base", "wheel_1")
+    ]
+    return bytes(STORE.serialize_cdr(T[r.TF_MESSAGE](transforms=transforms), r.TF_MESSAGE))
+
+
 def write_driver_bag(
     recording: Path,
     target: Path,
@@ -136,6 +153,8 @@ def write_driver_bag(
         )
         colour = writer.add_connection(colour_topic, colour_type, typestore=STORE)
         depth = writer.add_connection(f"{namespace}/depth/image_raw", r.IMAGE, typestore=STORE)
+        tf = writer.add_connection("/tf", r.TF_MESSAGE, typestore=STORE)
+        writer.write(tf, items[0].log_time, robot_tf(items[0].message().header.stamp))
         for item in items:
             msg = item.message()
             if isinstance(msg, SkeletonFrame):
@@ -334,3 +353,45 @@ def test_an_rgb_only_robots_bag_goes_through_the_pose_model(tmp_path: Path) -> N
     assert out == beyond("analyse", str(recorded))[1]
     code, out, err = beyond("inspect", str(bag))
     assert code == 0 and "read as pose" in out, err
+
+
+IMG, C = r.IMAGE, r.COMPRESSED_IMAGE
+TF, M = r.TF_MESSAGE, r.MARKER_ARRAY
+
+
+@pytest.mark.parametrize(
+    ("topics", "roles", "routes"),
+    [
+        # the Azure Kinect driver, with a robot's /tf: the markers are the skeleton
+        ({"/k4a/body_tracking_data": M, "/k4a/rgb/image_raw": IMG, "/k4a/depth/image_raw": IMG,
+          "/tf": TF}, {},
+         {"/k4a/body_tracking_data": ("k4a", "skeleton"), "/k4a/rgb/image_raw": ("k4a", "camera")}),
+        # usb_cam on a robot: RGB-only, through the pose model; its /tf is no skeleton
+        ({"/usb_cam/image_raw": IMG, "/usb_cam/image_raw/compressed": C, "/tf": TF}, {},
+         {"/usb_cam/image_raw": ("robot", "pose")}),
+        # RealSense's colour beside its depth: the colour one, by its name
+        ({"/camera/color/image_raw": IMG, "/camera/depth/image_rect_raw": IMG}, {},
+         {"/camera/color/image_raw": ("robot", "pose")}),
+        # two colour cameras: neither is guessed
+        ({"/left/image_raw": IMG, "/right/image_raw": IMG}, {}, {}),
+        # openni_tracker beside our tabletop camera
+        ({"/tf": TF, "/robot/camera/image/compressed": C}, {},
+         {"/tf": ("robot", "tf"),
+          "/robot/camera/image/compressed": ("robot", "camera_compressed")}),
+        # mapped by hand: a TF skeleton and a camera found by its type
+        ({"/tf": TF, "/usb_cam/image_raw": IMG}, {"tf": "/tf"},
+         {"/tf": ("robot", "tf"), "/usb_cam/image_raw": ("robot", "camera")}),
+        ({"/left/image_raw": IMG, "/right/image_raw": IMG}, {"person_camera": "/left/image_raw"},
+         {"/left/image_raw": ("robot", "pose")}),
+    ],
+)  # fmt: skip
+def test_topics_are_planned_as_robots_publish_them(
+    topics: dict[str, str], roles: dict[str, str], routes: dict[str, tuple[str, str]]
+) -> None:
+    from beyond_self.runtime.ros2.topics import plan
+
+    planned = plan(topics, roles)
+    assert planned.routes == routes
+    assert set(planned.unread) == set(topics) - set(routes)
+    if planned.unread:
+        assert planned.note().startswith("ROS 2 topics not read: ")

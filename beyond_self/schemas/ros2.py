@@ -52,6 +52,7 @@ OPENNI_OF_K4ABT = {
     "hip_right": "right_hip", "knee_right": "right_knee", "foot_right": "right_foot",
 }  # fmt: skip
 K4ABT_OF_OPENNI = {ours: K4ABT_JOINTS.index(k) for k, ours in OPENNI_OF_K4ABT.items()}
+OPENNI_JOINTS = frozenset(OPENNI_OF_K4ABT.values())  # openni_tracker's 15 frames
 BODY_ID_STRIDE = 100  # marker id = body id * 100 + joint id (the driver's numbering)
 # each K4ABT joint's parent in the SDK's joint hierarchy (the pelvis is the root)
 K4ABT_PARENT = {
@@ -107,9 +108,10 @@ def joint_name(marker_id: int, text: str) -> str:
 
 
 def openni_joint(child_frame_id: str) -> tuple[str, int] | None:
-    """(joint, user) of an openni_tracker frame (`right_hand_1`), else None."""
+    """(joint, user) of an openni_tracker frame (`right_hand_1`: one of its 15 joints), else
+    None (a robot's own frames on /tf, `wheel_1`, are none of them)."""
     name, _, user = child_frame_id.lstrip("/").rpartition("_")
-    return (name, int(user)) if name and user.isdigit() else None
+    return (name, int(user)) if name in OPENNI_JOINTS and user.isdigit() else None
 
 
 @dataclass(frozen=True)

@@ -104,18 +104,13 @@ def plan(topics: Mapping[str, str], roles: Mapping[str, str] | None = None) -> P
                 out.routes[topic] = (DEFAULT_ROBOT, "tf")
             elif ros_type == r.MARKER_ARRAY and (robot := _under(topic, "body_tracking_data")):
                 out.routes[topic] = (robot, "skeleton")
-    if not {"camera", "person_camera"} & set(roles):
-        _cameras(topics, out)
+    tabletop = _cameras(topics, out) if not {"camera", "person_camera"} & set(roles) else False
     robots = {robot for robot, _ in out.routes.values()}
     robot = robots.pop() if len(robots) == 1 else DEFAULT_ROBOT  # of a topic mapped by hand
     for topic, role in mapped.items():
         stream = role if role in ("skeleton", "tf") else _image_stream(role, topics[topic])
         out.routes[topic] = (DEFAULT_ROBOT if role == "tf" else robot, stream)
-    skeletons = {robot for robot, stream in out.routes.values() if stream in ("skeleton", "tf")}
-    cameras = ("camera", "camera_compressed", "person_camera")
-    for topic, (robot, stream) in list(out.routes.items()):
-        if robot not in skeletons and stream in cameras and topic not in mapped:
-            out.routes[topic] = (robot, POSE)  # an RGB-only robot: its camera sees the person
+    _rgb_only(out, mapped, tabletop)
     for topic, ros_type in topics.items():
         ours = _under(topic, r.TOPICS["description"][0]) and ros_type == r.STRING
         if topic not in out.routes and not ours:
@@ -123,8 +118,34 @@ def plan(topics: Mapping[str, str], roles: Mapping[str, str] | None = None) -> P
     return out
 
 
-def _cameras(topics: Mapping[str, str], out: Plan) -> None:
-    """Cameras by name (ours, then the driver's), else one colour image topic by its type."""
+def _rgb_only(out: Plan, mapped: Mapping[str, str], tabletop: bool) -> None:
+    """Where body markers are read, `/tf` (which every ROS robot publishes) is not read as
+    openni_tracker's too. A robot with a camera and no body markers is an RGB-only one: its
+    camera (unless mapped by hand, or named as our tabletop camera beside a TF skeleton)
+    watches the person, and `/tf` is not read either (a TF skeleton beside a camera is mapped
+    with `--topic tf=/tf`)."""
+    markers = {robot for robot, stream in out.routes.values() if stream == "skeleton"}
+    markers |= {out.routes[topic][0] for topic, role in mapped.items() if role == "tf"}
+    tf = {robot for robot, stream in out.routes.values() if stream == "tf"}
+    if markers:  # body markers are the skeleton: a robot's /tf is not read as one too
+        for topic, (_, stream) in list(out.routes.items()):
+            if stream == "tf" and topic not in mapped:
+                del out.routes[topic]
+    cameras = ("camera", "camera_compressed", "person_camera")
+    for topic, (robot, stream) in list(out.routes.items()):
+        if robot in markers or stream not in cameras or topic in mapped:
+            continue
+        if tabletop and stream != "person_camera" and robot in tf:
+            continue  # our tabletop camera beside openni_tracker's skeleton
+        out.routes[topic] = (robot, POSE)
+        for other, (_, kind) in list(out.routes.items()):
+            if kind == "tf" and other not in mapped:
+                del out.routes[other]
+
+
+def _cameras(topics: Mapping[str, str], out: Plan) -> bool:
+    """Cameras by name (ours, then the driver's), else one colour image topic by its type;
+    True when ours named them."""
     found = False
     for topic, ros_type in topics.items():
         for stream in ("camera", "camera_compressed", "person_camera"):
@@ -133,7 +154,7 @@ def _cameras(topics: Mapping[str, str], out: Plan) -> None:
                 out.routes[topic] = (robot, stream)
                 found = True
     if found:
-        return
+        return True
     for relative, typ in DRIVER_CAMERA.items():  # the raw one first: one stream per camera
         for topic, ros_type in topics.items():
             robot = _under(topic, relative)
@@ -141,7 +162,7 @@ def _cameras(topics: Mapping[str, str], out: Plan) -> None:
                 out.routes[topic] = (robot, _image_stream("camera", typ))
                 found = True
     if found:
-        return
+        return False
     images = sorted(t for t, typ in topics.items() if typ in IMAGES)
     colour = [t for t in images if _COLOUR.search(t)] or [
         t for t in images if not _NOT_COLOUR.search(t)
@@ -151,3 +172,4 @@ def _cameras(topics: Mapping[str, str], out: Plan) -> None:
         robots = {robot for robot, _ in out.routes.values()}
         robot = robots.pop() if len(robots) == 1 else DEFAULT_ROBOT
         out.routes[raw[0]] = (robot, _image_stream("camera", topics[raw[0]]))
+    return False
