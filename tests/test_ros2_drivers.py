@@ -303,6 +303,8 @@ def test_a_topic_is_mapped_by_hand(tmp_path: Path) -> None:
     write_driver_bag(RECORDINGS / "touch-box.mcap", bag)
     code, _, err = beyond("analyse", str(bag), "--topic", "skeleton=/rgb/image_raw")
     assert code == 2 and "--topic skeleton=/rgb/image_raw: a sensor_msgs/msg/Image" in err
+    code, _, err = beyond("analyse", str(RECORDINGS / "touch-box.mcap"), "--topic", "tf=/tf")
+    assert code == 2 and "--topic maps a ROS 2 bag's topics;" in err
     code, _, err = beyond("analyse", str(bag), "--topic", "camera=/nope")
     assert code == 2 and "--topic camera=/nope: no such topic" in err
     code, _, err = beyond("analyse", str(bag), "--topic", "camera=/depth/image_raw")
@@ -395,3 +397,26 @@ def test_topics_are_planned_as_robots_publish_them(
     assert set(planned.unread) == set(topics) - set(routes)
     if planned.unread:
         assert planned.note().startswith("ROS 2 topics not read: ")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(180)
+def test_up_plays_a_drivers_bag_as_analyse_reads_it(
+    tmp_path: Path, originals: dict[str, list[str]]
+) -> None:
+    """`beyond up --recording BAG` of a driver's sqlite3 bag prints the original's lines."""
+    import subprocess
+
+    from busutil_net import env_for, private_config
+
+    from beyond_self.services.launcher import BEYOND
+
+    recording = RECORDINGS / "touch-box.mcap"
+    bag = tmp_path / "k4a"
+    write_driver_bag(recording, bag, storage=StoragePlugin.SQLITE3)
+    env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}
+    cmd = [*BEYOND, "up", "--recording", str(bag), "--rate", "0", "--no-live", "--timeout", "60"]
+    up = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=150)
+    assert up.returncode == 0, up.stderr[-3000:]
+    lines = [line for line in up.stdout.splitlines() if line.startswith("gesture ")]
+    assert lines == originals[recording.stem]

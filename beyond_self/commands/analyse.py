@@ -77,6 +77,7 @@ def _inputs(
     (runtime.ros2.topics); what the bag holds that is not read is added to `notes`."""
     tally = losses if losses is not None else Losses(str(path))
     info = scan_recording(path, roles)
+    argtypes.check_ros2_roles(roles or {}, info)
     if notes is not None:
         notes.extend(info.notes)
     source = recorded_robot(info, robot)

@@ -286,3 +286,11 @@ def ros2_roles(args: argparse.Namespace) -> dict[str, str]:
     from beyond_self.runtime.ros2.topics import parse_roles
 
     return parse_roles(getattr(args, "topic", None) or ())
+
+
+def check_ros2_roles(roles: dict[str, str], info: Any) -> None:
+    """`--topic` given for a recording with no ROS 2 topics: refused, not ignored."""
+    from beyond_self.core.errors import InputError
+
+    if roles and not info.ros2_topics:
+        raise InputError(f"--topic maps a ROS 2 bag's topics; {info.path} has none")

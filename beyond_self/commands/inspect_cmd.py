@@ -43,7 +43,9 @@ def as_json(info: RecordingInfo) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    info = inspect_recording(args.file, argtypes.ros2_roles(args))
+    roles = argtypes.ros2_roles(args)
+    info = inspect_recording(args.file, roles)
+    argtypes.check_ros2_roles(roles, info)
     for text in info.notes:
         argtypes.note(args, text)
     if args.json:
