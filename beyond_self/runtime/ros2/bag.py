@@ -1,9 +1,10 @@
-"""rosbag2 bags as recordings: a bag folder (metadata.yaml + MCAP storage) names its MCAP file,
-whose CDR channels in schemas.ros2's conventions the recording reader (runtime.recording.reader)
-turns
-into our messages as it reads (`Ros2Channels`); `export` writes any recording of ours as a bag
-`ros2 bag play` could play, with rosbags' writer. The MCAP walk, and so the damaged-file policy,
-is the one of our own recordings."""
+"""rosbag2 bags as recordings: the recording reader (runtime.recording.reader) reads a bag in
+MCAP storage in one uncompressed file with our own MCAP walk, and so with the damaged-file
+policy of our recordings, and any other (sqlite3, split over files, zstd per file or message)
+through rosbags' reader (`rosbag_records`); either way its CDR topics, planned over the whole
+bag (runtime.ros2.topics), become our messages as they are read (`Ros2Channels`). `export`
+writes any recording of ours as a bag `ros2 bag play` could play, with rosbags' writer, in the
+Azure Kinect driver's conventions (runtime.ros2.convert)."""
 
 from __future__ import annotations
 
