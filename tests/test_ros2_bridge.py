@@ -255,7 +255,12 @@ async def test_ros2_body_markers_and_camera_are_a_live_source(
         await items.aclose()
     kinds = {kind: payload for kind, payload, _ in got}
     assert {stamp for _, _, stamp in got} == {1_000_000_005}  # the messages' own stamp
-    assert kinds["skeleton"] == {"right_hand": (0.1, 0.2, 1.5, 1.0), "torso": (0.0, 0.0, 2.0, 1.0)}
+    # the driver's frame (x right, y down in the image) turned into ours (x to the person's
+    # right, the image's left; y up): a half turn about z
+    assert kinds["skeleton"] == {
+        "right_hand": (-0.1, -0.2, 1.5, 1.0),
+        "torso": (-0.0, -0.0, 2.0, 1.0),
+    }
     camera = kinds["camera"]
     assert isinstance(camera, np.ndarray) and camera.shape == (8, 12, 3)
 
@@ -272,16 +277,18 @@ def frameless(lines: list[str]) -> list[str]:
 
 def k4abt_markers(types: dict[str, Any], frame: SkeletonFrame) -> dict[str, Any]:
     """The fields of a MarkerArray as the Azure Kinect ROS driver publishes a body: a sphere
-    per joint, id body*100 + K4ABT joint id, metres, no joint name in `text`."""
+    per joint, id body*100 + K4ABT joint id, metres, no joint name in `text`, in its frame
+    `depth_camera_link`: x right and y down in the image (ours turned half about z)."""
     stamp = types["builtin_interfaces/msg/Time"](
         sec=frame.header.stamp // 10**9, nanosec=frame.header.stamp % 10**9
     )
-    header = types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame.frame_id)
+    header = types["std_msgs/msg/Header"](stamp=stamp, frame_id="depth_camera_link")
     fields = {n: zero(node) for n, node in STORE.fielddefs["visualization_msgs/msg/Marker"][1]}
     markers = []
     for name, joint in frame.joints.items():
         k4abt = next(k for k, ours in r.OPENNI_OF_K4ABT.items() if ours == name)
-        point = types["geometry_msgs/msg/Point"](*joint.position)
+        x, y, z = joint.position
+        point = types["geometry_msgs/msg/Point"](-x, -y, z)
         upright = types["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0)
         fields.update(
             header=header,

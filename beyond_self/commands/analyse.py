@@ -31,7 +31,12 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording.damage import Losses
 from beyond_self.runtime.recording.fleet import recorded_robot
 from beyond_self.runtime.recording.images import image_from_message
-from beyond_self.runtime.recording.reader import inspect_recording, read_recording, require_mcap
+from beyond_self.runtime.recording.reader import (
+    inspect_recording,
+    read_recording,
+    require_mcap,
+    scan_recording,
+)
 from beyond_self.runtime.recording.replay import Cue, looped, recorded_cues
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
 from beyond_self.schemas.keys import TABLETOP_CAMERA, split_key
@@ -53,23 +58,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the robot whose part of a fleet's recording to analyse (a recording of one robot "
         "needs none)",
     )
+    argtypes.add_ros2_topic(parser)
 
 
 def _inputs(
-    path: Path, hand: str, torso: str, losses: Losses | None = None, robot: str | None = None
+    path: Path,
+    hand: str,
+    torso: str,
+    losses: Losses | None = None,
+    robot: str | None = None,
+    roles: dict[str, str] | None = None,
+    notes: list[str] | None = None,
 ) -> Iterator[SkeletonInput | CameraInput]:
     """The skeleton and camera frames of a recording, as the ingest plays them: what does not
     decode or does not move forward in time is dropped and counted in `losses`
     (runtime.recording.damage), the same frames every command drops; of a fleet's recording,
-    robot `robot`'s (runtime.fleet.recorded_robot)."""
+    robot `robot`'s (runtime.fleet.recorded_robot). Of a ROS 2 bag, `roles` maps topics
+    (runtime.ros2.topics); what the bag holds that is not read is added to `notes`."""
     tally = losses if losses is not None else Losses(str(path))
-    source = recorded_robot(inspect_recording(path), robot)
+    info = scan_recording(path, roles)
+    argtypes.check_ros2_roles(roles or {}, info)
+    if notes is not None:
+        notes.extend(info.notes)
+    source = recorded_robot(info, robot)
 
     def ours(key: str) -> str | None:
         split = split_key(key)
         return key if split is not None and split[0] == source else None
 
-    return inputs_of(recorded_cues(read_recording(path, losses=tally), ours, tally), hand, torso)
+    cues = recorded_cues(read_recording(path, losses=tally, ros2_roles=roles), ours, tally)
+    return inputs_of(cues, hand, torso)
 
 
 def inputs_of(cues: Iterable[Cue], hand: str, torso: str) -> Iterator[SkeletonInput | CameraInput]:
@@ -151,14 +169,20 @@ def run(args: argparse.Namespace) -> int:
             args.recording, float(o["ingest"].get("scale", 0.001))
         )
     else:
-        require_mcap(args.recording)
+        roles = argtypes.ros2_roles(args)
+        require_mcap(args.recording, roles)
+        notes: list[str] = []
         inputs = _inputs(
             args.recording,
             g.get("hand_joint", "right_hand"),
             g.get("torso_joint", "torso"),
             losses,
             args.robot,
+            roles,
+            notes,
         )
+        for text in notes:
+            argtypes.note(args, text)
     models = pipeline_models(g.get("models"))
     network = load_model(Path(r["model"])) if r.get("model") else learn_network(synthetic_dataset())
     emit = None if args.json else (lambda line: print(line, flush=True))

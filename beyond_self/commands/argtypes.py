@@ -265,3 +265,30 @@ def robot_name(text: str) -> str:
         return check_name("robot", text)
     except InputError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_ros2_topic(parser: argparse.ArgumentParser) -> None:
+    """`--topic ROLE=/name`: a ROS 2 bag's topic read for a role (runtime.ros2.topics)."""
+    parser.add_argument(
+        "--topic",
+        action="append",
+        default=[],
+        metavar="ROLE=/NAME",
+        help="of a ROS 2 bag, read this topic as ROLE (skeleton, tf, camera, person_camera: "
+        "a camera watching the person, through the pose model); repeat. Default: the Azure "
+        "Kinect driver's and our topic names, and a colour camera by its type",
+    )
+
+
+def ros2_roles(args: argparse.Namespace) -> dict[str, str]:
+    from beyond_self.runtime.ros2.topics import parse_roles
+
+    return parse_roles(getattr(args, "topic", None) or ())
+
+
+def check_ros2_roles(roles: dict[str, str], info: Any) -> None:
+    """`--topic` given for a recording with no ROS 2 topics: refused, not ignored."""
+    from beyond_self.core.errors import InputError
+
+    if roles and not info.ros2_topics:
+        raise InputError(f"--topic maps a ROS 2 bag's topics; {info.path} has none")

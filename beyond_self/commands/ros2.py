@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
     if args.ros2_command == "bridge":
         from beyond_self.services.ros2_bridge import Ros2Bridge
 
-        Ros2Bridge.main(
+        Ros2Bridge.main(  # its options parsed here: the service reads no command line
+            argv=(),
             config=config_from_args(args),
             out_dir=None if args.out_dir is None else str(args.out_dir),
             **ros2_options(args),

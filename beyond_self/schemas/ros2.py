@@ -52,7 +52,44 @@ OPENNI_OF_K4ABT = {
     "hip_right": "right_hip", "knee_right": "right_knee", "foot_right": "right_foot",
 }  # fmt: skip
 K4ABT_OF_OPENNI = {ours: K4ABT_JOINTS.index(k) for k, ours in OPENNI_OF_K4ABT.items()}
+OPENNI_JOINTS = frozenset(OPENNI_OF_K4ABT.values())  # openni_tracker's 15 frames
 BODY_ID_STRIDE = 100  # marker id = body id * 100 + joint id (the driver's numbering)
+# each K4ABT joint's parent in the SDK's joint hierarchy (the pelvis is the root)
+K4ABT_PARENT = {
+    "spine_navel": "pelvis", "spine_chest": "spine_navel", "neck": "spine_chest",
+    "clavicle_left": "spine_chest", "shoulder_left": "clavicle_left",
+    "elbow_left": "shoulder_left", "wrist_left": "elbow_left", "hand_left": "wrist_left",
+    "handtip_left": "hand_left", "thumb_left": "wrist_left", "clavicle_right": "spine_chest",
+    "shoulder_right": "clavicle_right", "elbow_right": "shoulder_right",
+    "wrist_right": "elbow_right", "hand_right": "wrist_right", "handtip_right": "hand_right",
+    "thumb_right": "wrist_right", "hip_left": "pelvis", "knee_left": "hip_left",
+    "ankle_left": "knee_left", "foot_left": "ankle_left", "hip_right": "pelvis",
+    "knee_right": "hip_right", "ankle_right": "knee_right", "foot_right": "ankle_right",
+    "head": "neck", "nose": "head", "eye_left": "head", "ear_left": "head",
+    "eye_right": "head", "ear_right": "head",
+}  # fmt: skip
+
+# The Azure Kinect ROS driver (and Orbbec's K4A wrapper) stamps body markers with its depth
+# camera's frame, `depth_camera_link`, whose axes are the camera's own (K4A's depth camera
+# coordinates, as any `*_optical_frame`): x right in the image, y down, z forward, metres.
+# Ours (the OpenNI skeletons the gesture models read) have x to the person's right, which is
+# the image's left for a person facing the camera, y up, z away: a half turn about z, its own
+# inverse. Skeleton frames of ours carry one of OUR_FRAMES; any other marker frame is read in
+# the driver's axes.
+DRIVER_FRAME = "depth_camera_link"
+OUR_FRAMES = ("depth_camera", "person")
+UNTRACKED = "untracked"  # the `ns` of an exported marker standing in for a joint we lack
+
+
+def driver_axes(xyz: tuple[float, float, float]) -> tuple[float, float, float]:
+    """A point in our axes in the driver's, or back (the same half turn about z)."""
+    x, y, z = xyz
+    return (-x, -y, z)
+
+
+def in_our_axes(frame_id: str) -> bool:
+    """Whether a marker frame is one of ours (read as it is) rather than a camera's."""
+    return frame_id.lstrip("/") in OUR_FRAMES
 
 
 def joint_name(marker_id: int, text: str) -> str:
@@ -71,9 +108,10 @@ def joint_name(marker_id: int, text: str) -> str:
 
 
 def openni_joint(child_frame_id: str) -> tuple[str, int] | None:
-    """(joint, user) of an openni_tracker frame (`right_hand_1`), else None."""
+    """(joint, user) of an openni_tracker frame (`right_hand_1`: one of its 15 joints), else
+    None (a robot's own frames on /tf, `wheel_1`, are none of them)."""
     name, _, user = child_frame_id.lstrip("/").rpartition("_")
-    return (name, int(user)) if name and user.isdigit() else None
+    return (name, int(user)) if name in OPENNI_JOINTS and user.isdigit() else None
 
 
 @dataclass(frozen=True)

@@ -369,7 +369,8 @@ class SensorIngest(Service):
                     self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
                     self._sent("camera", header.stamp)
                 elif kind == "person" and isinstance(payload, PersonFrame):
-                    stamp = self.clock.now_ns()  # one stamp: image, skeleton, pose in the image
+                    # one stamp: image, skeleton, pose in the image (the sensor's own if given)
+                    stamp = int(own[0]) if own else self.clock.now_ns()
                     stamped = functools.partial(self.header, stamp=stamp)
                     for stream, msg in person_messages(stamped, payload):
                         self.person_streams[stream].put(msg)

@@ -5,7 +5,11 @@ CompressedImage) from an rmw_zenoh graph, and yields skeleton joints and RGB ima
 own stamps, which the ingest publishes as any live source's. Where and what it reads are environment
 variables (a plug-in takes no arguments): BEYOND_ROS2_CONNECT, ROS_DOMAIN_ID, and the topics
 BEYOND_ROS2_SKELETON, BEYOND_ROS2_TF, BEYOND_ROS2_CAMERA (compressed) or
-BEYOND_ROS2_CAMERA_RAW; a topic set to "" is not read."""
+BEYOND_ROS2_CAMERA_RAW, and BEYOND_ROS2_PERSON_CAMERA (Image or CompressedImage: a camera
+watching the person); a topic set to "" is not read. The person's camera goes through the pose
+model (cognition.pose, the `camera` extra) as `beyond up --camera` does; with no skeleton and no
+TF topic read (an RGB-only robot), the camera is the person's. Samples convert as a bag's do
+(runtime.ros2.convert: the Azure Kinect driver's axes turned into ours)."""
 
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ from beyond_self.runtime.recording.images import image_from_message
 from beyond_self.runtime.resilience.accounting import LogOnce
 from beyond_self.runtime.ros2.convert import FromRos
 from beyond_self.runtime.ros2.node import Ros2Node, default_domain
+from beyond_self.runtime.ros2.topics import POSE
 from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.keys import DEFAULT_ROBOT
 from beyond_self.schemas.messages import CameraFrame, CompressedCameraFrame, SkeletonFrame
@@ -33,6 +38,7 @@ INPUTS = {
     "BEYOND_ROS2_CAMERA": ("camera_compressed", r.COMPRESSED_IMAGE),
     "BEYOND_ROS2_CAMERA_RAW": ("camera", r.IMAGE),
 }
+PERSON_CAMERA = "BEYOND_ROS2_PERSON_CAMERA"  # either image type: both are subscribed
 
 
 def topics_from_env(robot: str) -> dict[str, tuple[str, str, str]]:
@@ -46,7 +52,40 @@ def topics_from_env(robot: str) -> dict[str, tuple[str, str, str]]:
         topic = os.environ.get(variable, fallback).strip()
         if topic:
             out[r.check_topic(topic)] = (variable, stream, ros_type)
+    person = os.environ.get(PERSON_CAMERA, "").strip()
+    if not any(stream in ("skeleton", "tf") for _, stream, _ in out.values()):
+        # an RGB-only robot: its camera watches the person
+        cameras = [t for t, (_, stream, _) in out.items() if stream.startswith("camera")]
+        person = person or next(iter(cameras), "")
+        for topic in cameras:
+            del out[topic]
+    if person:
+        out[r.check_topic(person)] = (PERSON_CAMERA, POSE, "")
     return out
+
+
+class PersonCamera:
+    """A ROS 2 camera watching the person: each image through the pose model (made on first
+    use, off the event loop), as services.pose_source does a camera's."""
+
+    def __init__(self) -> None:
+        self.estimator: Any = None
+        self.index = 0
+
+    async def item(self, image: tuple[int, Any]) -> tuple[str, Any, int]:
+        from beyond_self.cognition.pose.estimator import PoseEstimator
+        from beyond_self.services.pose_source import PersonFrame
+
+        stamp, rgb = image
+        if self.estimator is None:
+            self.estimator = await asyncio.to_thread(PoseEstimator, video=True)
+        pose = await asyncio.to_thread(self.estimator.estimate, rgb)
+        self.index += 1
+        return ("person", PersonFrame(self.index - 1, rgb, pose), stamp)
+
+    def close(self) -> None:
+        if self.estimator is not None:
+            self.estimator.close()
 
 
 def items_of(messages: list[Any]) -> list[tuple[str, Any, int]]:
@@ -86,14 +125,19 @@ async def source() -> AsyncIterator[tuple[str, Any, int]]:
 
         return receive
 
+    person = PersonCamera()
     try:
         for topic, (_, stream, ros_type) in topics_from_env(robot).items():
-            node.subscribe(topic, ros_type, r.SENSOR_QOS, receiver(stream, ros_type))
+            for typ in (ros_type,) if ros_type else (r.IMAGE, r.COMPRESSED_IMAGE):
+                node.subscribe(topic, typ, r.SENSOR_QOS, receiver(stream, typ))
         convert = FromRos()
         once = LogOnce()
         while True:
             stream, ros_type, cdr = await queue.get()
             try:
+                if stream == POSE:
+                    yield await person.item(convert.image(ros_type, cdr))
+                    continue
                 converted = convert.convert(stream, ros_type, cdr)
             except InputError as exc:  # one bad sample is not the end of the source
                 if once.first(stream, str(exc)):
@@ -102,4 +146,5 @@ async def source() -> AsyncIterator[tuple[str, Any, int]]:
             for item in items_of(converted):
                 yield item
     finally:
+        person.close()
         node.close()

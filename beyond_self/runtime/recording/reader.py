@@ -6,7 +6,7 @@ writer runtime.recording.writer. Damaged files are read past their damage
 from __future__ import annotations
 
 import heapq
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,7 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording.damage import Losses
 from beyond_self.runtime.recording.format import JSON, JSONSCHEMA, META_FORM, META_TYPE, META_VIEW
 from beyond_self.runtime.recording.scan import Walk, mapped
-from beyond_self.runtime.ros2.bag import Pair, Ros2Channels, bag_file
+from beyond_self.runtime.ros2.bag import Pair, Ros2Channels, bag_file, bag_size, rosbag_records
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import (
     RECORDING_JSON_FORM,
@@ -80,6 +80,9 @@ class RecordingInfo:
     library: str = ""
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     losses: Losses = field(default_factory=lambda: Losses(""))
+    ros2_topics: list[ChannelInfo] = field(default_factory=list)  # a bag's own topics, as read
+    ros2_read_as: dict[str, str] = field(default_factory=dict)  # its topic -> stream ("": none)
+    notes: list[str] = field(default_factory=list)  # what a command says after its output
 
     @property
     def duration_s(self) -> float:
@@ -99,11 +102,17 @@ class _Scanner:
     """One pass over an MCAP file, past damaged chunks (runtime.recording.scan), keeping the
     schemas and channels it meets and counting what it reads."""
 
-    def __init__(self, path: str | Path, losses: Losses | None = None) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        losses: Losses | None = None,
+        ros2_roles: Mapping[str, str] | None = None,
+    ) -> None:
         self.path = bag_file(Path(path))
-        if not self.path.is_file():
+        self.bag = self.path.is_dir()  # a bag folder rosbags reads (runtime.ros2.bag)
+        if not self.bag and not self.path.is_file():
             raise InputError(f"recording {self.path} does not exist")
-        size = self.path.stat().st_size
+        size = bag_size(self.path) if self.bag else self.path.stat().st_size
         self.info = RecordingInfo(path=str(self.path), size=size)
         if losses is not None:
             losses.path, losses.size = str(self.path), size
@@ -116,9 +125,29 @@ class _Scanner:
         self.types: dict[int, type[Message] | None] = {}
         self.forms: dict[int, int] = {}
         self.views: set[int] = set()
-        self.ros2 = Ros2Channels()  # a rosbag2 bag's channels, read as ours
+        self.ros2 = Ros2Channels(dict(ros2_roles or {}))  # a rosbag2 bag's channels, as ours
+        self.ros2_counts: dict[str, ChannelInfo] = {}  # a bag's topic -> what was read of it
 
     def messages(self) -> Iterator[tuple[Channel, McapMessage]]:
+        try:
+            if self.bag:
+                for record in rosbag_records(self.path):
+                    yield from self._handle(record)
+                yield from self._read_as_ours(self.ros2.flush())
+                self.info.complete = True
+            else:
+                yield from self._mcap_messages()
+        finally:
+            self.ros2.close()
+            self.info.ros2_topics = list(self.ros2_counts.values())
+            if self.ros2_counts:
+                note, routes = self.ros2.note(), self.ros2.plan.routes
+                self.info.notes = [note] if note else []
+                self.info.ros2_read_as = {
+                    t: routes[t][1] if t in routes else "" for t in self.ros2_counts
+                }
+
+    def _mcap_messages(self) -> Iterator[tuple[Channel, McapMessage]]:
         info = self.info
         with mapped(self.path) as data:
             walk = Walk(data, info.losses)
@@ -148,6 +177,7 @@ class _Scanner:
                 )
                 return
             if record.channel_id in self.ros2.routes:  # a rosbag2 bag's, read as ours
+                self._count_ros2(record)
                 try:
                     yield from self._read_as_ours(self.ros2.convert(record))
                 except InputError as exc:  # dropped and counted as any undecodable message
@@ -162,14 +192,25 @@ class _Scanner:
             self.schemas[record.id] = record
         elif isinstance(record, Channel) and record.id not in self.channels:
             schema = self.schemas.get(record.schema_id)
-            if self.ros2.route(record, schema) is None:  # ours, or not ROS 2's
-                self._handle_channel(record, schema)
-            else:
+            if self.ros2.route(record, schema):
                 self.channels[record.id] = record
+                self.ros2_counts.setdefault(record.topic, ChannelInfo(
+                    record.topic, record.message_encoding, schema.name if schema else "",
+                    schema.encoding if schema else ""))  # fmt: skip
+            else:  # ours, or not ROS 2's
+                self._handle_channel(record, schema)
         elif isinstance(record, McapHeader):
             info.library = record.library
-        elif isinstance(record, Metadata):
+        elif isinstance(record, Metadata) and record.name != ROSBAG2_METADATA:
             info.metadata[record.name] = dict(record.metadata)
+
+    def _count_ros2(self, record: McapMessage) -> None:
+        """Count a sample of a bag's own topic (`inspect` lists them)."""
+        counts = self.ros2_counts[self.ros2.routes[record.channel_id][0]]
+        counts.count += 1
+        t = record.log_time
+        counts.first_stamp = t if counts.first_stamp is None else min(counts.first_stamp, t)
+        counts.last_stamp = t if counts.last_stamp is None else max(counts.last_stamp, t)
 
     def _handle_channel(self, record: Channel, schema: Schema | None) -> None:
         info = self.info
@@ -226,7 +267,7 @@ def require_magic(path: Path, head: bytes | Any) -> None:
         raise InputError(f"{path} is not an MCAP recording (it does not start with the MCAP magic)")
 
 
-def require_mcap(path: str | Path) -> Path:
+def require_mcap(path: str | Path, ros2_roles: Mapping[str, str] | None = None) -> Path:
     """`path` is an MCAP file with a readable message (or undamaged and empty), else an
     InputError.
 
@@ -237,6 +278,10 @@ def require_mcap(path: str | Path) -> Path:
     p = Path(path)
     try:
         p = bag_file(p)
+        if p.is_dir():  # a bag rosbags reads: its first message, or its one line
+            for _ in _Scanner(p, ros2_roles=ros2_roles).messages():
+                break
+            return p
         with open(p, "rb") as f:
             head = f.read(len(MCAP0_MAGIC))
     except FileNotFoundError:
@@ -246,7 +291,7 @@ def require_mcap(path: str | Path) -> Path:
     except OSError as exc:
         raise InputError(f"cannot read recording {p}: {exc.strerror}") from None
     require_magic(p, head)
-    scanner = _Scanner(p)
+    scanner = _Scanner(p, ros2_roles=ros2_roles)
     for _ in scanner.messages():  # stops at the first message: a chunk or two read at most
         return p
     if scanner.info.losses.any:
@@ -254,22 +299,25 @@ def require_mcap(path: str | Path) -> Path:
     return p
 
 
-def inspect_recording(path: str | Path) -> RecordingInfo:
+def inspect_recording(
+    path: str | Path, ros2_roles: Mapping[str, str] | None = None
+) -> RecordingInfo:
     """Channels, schemas, counts and time range, and what is lost (`.losses`): every message
     is read and decoded, so a message that would be dropped when played is counted here too.
-    Never raises for damage (see `.error`); InputError for a file that is no recording."""
-    scanner = _Scanner(path)
+    Never raises for damage (see `.error`); InputError for a file that is no recording.
+    `ros2_roles`: a bag's topics mapped by hand (runtime.ros2.topics.parse_roles)."""
+    scanner = _Scanner(path, ros2_roles=ros2_roles)
     for _ in decoded(_sorted(scanner, views=True), scanner.info.losses):
         pass
     return scanner.info
 
 
-def scan_recording(path: str | Path) -> RecordingInfo:
+def scan_recording(path: str | Path, ros2_roles: Mapping[str, str] | None = None) -> RecordingInfo:
     """Channels, counts, time range and metadata, as `inspect_recording` finds them, from one
     pass over the file's records that decodes no message: what a player needs before it plays
     (it decodes each message as it sends it, and counts what it drops then). `.losses` holds
     only the file's own damage. InputError for a file that is no recording."""
-    scanner = _Scanner(path)
+    scanner = _Scanner(path, ros2_roles=ros2_roles)
     for _ in scanner.messages():
         pass
     return scanner.info
@@ -292,6 +340,7 @@ def _matcher(patterns: Iterable[str] | None) -> Callable[[str], bool]:
     return match
 
 
+ROSBAG2_METADATA = "rosbag2"  # a bag's metadata.yaml, copied into its MCAP file: shown as topics
 NOT_AFTER = "stamp not after the previous one on its key"
 UNDECODABLE = "does not decode, or a value out of range"
 
@@ -374,14 +423,16 @@ def read_recording(
     reorder_window: float = 2.0,
     on_damage: Callable[[RecordingInfo], None] | None = None,
     losses: Losses | None = None,
+    ros2_roles: Mapping[str, str] | None = None,
 ) -> Iterator[RecordedMessage]:
     """Messages in stamp (publish_time) order. `topics`: key expressions to keep; `start`/`end`:
     seconds from the first stamp of the recording. Files are read in one sequential pass;
     out-of-order stamps are sorted within `reorder_window` s of log time. A damaged file yields
     everything readable (runtime.recording.scan), then calls `on_damage(info)` (default: raise
     InputError with the one line). With `losses`, what was lost is tallied there instead and
-    left to the caller to report (after `decoded` has added what it drops)."""
-    scanner = _Scanner(path, losses)
+    left to the caller to report (after `decoded` has added what it drops). `ros2_roles`: a
+    bag's topics mapped by hand (runtime.ros2.topics.parse_roles)."""
+    scanner = _Scanner(path, losses, ros2_roles)
     keep = _matcher(topics)
     t0: int | None = None
 

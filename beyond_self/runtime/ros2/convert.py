@@ -98,35 +98,77 @@ def deserialize(ros_type: str, data: bytes | memoryview) -> Any:
 
 
 # ---------------------------------------------------------------- ours -> ROS 2
+def _stand_ins(tracked: set[str]) -> dict[str, str]:
+    """For each K4ABT joint no joint of ours gives, the nearest one that does along the SDK's
+    joint hierarchy (ties: the first in K4ABT order), where its untracked marker goes."""
+    neighbours: dict[str, list[str]] = {name: [] for name in r.K4ABT_JOINTS}
+    for child, parent in r.K4ABT_PARENT.items():
+        neighbours[child].append(parent)
+        neighbours[parent].append(child)
+    out: dict[str, str] = {}
+    for name in r.K4ABT_JOINTS:
+        if name in tracked:
+            continue
+        seen, frontier = {name}, [name]
+        while frontier and name not in out:
+            frontier = sorted(
+                {n for f in frontier for n in neighbours[f] if n not in seen},
+                key=r.K4ABT_JOINTS.index,
+            )
+            seen.update(frontier)
+            hit = [n for n in frontier if n in tracked]
+            if hit:
+                out[name] = hit[0]
+    return out
+
+
 def skeleton_markers(frame: SkeletonFrame) -> Any:
-    """A skeleton frame as the Azure Kinect driver's body markers: a sphere per joint, id
-    user*100 + K4ABT joint, metres, our joint name in `text` and its confidence as alpha."""
+    """A skeleton frame as the Azure Kinect driver publishes a body: one sphere marker for each
+    of the 32 K4ABT joints, id user*100 + joint, metres, in `depth_camera_link` and its axes
+    (schemas.ros2.driver_axes). A joint of ours is its marker with its confidence as alpha; a
+    K4ABT joint we have no joint for stands at the nearest one we have, invisible (alpha 0) and
+    in namespace `untracked`, which readers of ours skip; a joint of ours with no K4ABT id
+    follows the 32, named in `text`."""
     ts = store()
-    markers = []
-    extra = len(r.K4ABT_JOINTS)
     t = ts.types
-    header = _header(frame.header.stamp, frame.frame_id)
+    header = _header(frame.header.stamp, r.DRIVER_FRAME)
     base = _defaults("visualization_msgs/msg/Marker")
     scale = t["geometry_msgs/msg/Vector3"](0.05, 0.05, 0.05)
     lifetime = t["builtin_interfaces/msg/Duration"](0, 250_000_000)
     upright = t["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0)
-    for name, joint in frame.joints.items():
-        index = r.K4ABT_OF_OPENNI.get(name)
-        if index is None:
-            index, extra = extra, extra + 1
-        pose = t["geometry_msgs/msg/Pose"](t["geometry_msgs/msg/Point"](*joint.position), upright)
+
+    def marker(index: int, joint: Joint, ns: str = "", text: str = "", alpha: float = 1.0) -> Any:
+        point = t["geometry_msgs/msg/Point"](*r.driver_axes(joint.position))
         fields = {
             **base,
             "header": header,
+            "ns": ns,
             "id": frame.user * r.BODY_ID_STRIDE + index,
             "type": 2,  # SPHERE
-            "pose": pose,
+            "pose": t["geometry_msgs/msg/Pose"](point, upright),
             "scale": scale,
-            "color": t["std_msgs/msg/ColorRGBA"](0.0, 0.6, 1.0, joint.confidence),
+            "color": t["std_msgs/msg/ColorRGBA"](0.0, 0.6, 1.0, alpha),
             "lifetime": lifetime,
-            "text": name,
+            "text": text,
         }
-        markers.append(t["visualization_msgs/msg/Marker"](**fields))
+        return t["visualization_msgs/msg/Marker"](**fields)
+
+    by_k4abt = {
+        k: frame.joints[ours] for k, ours in r.OPENNI_OF_K4ABT.items() if ours in frame.joints
+    }
+    stand_ins = _stand_ins(set(by_k4abt))
+    markers = []
+    for index, name in enumerate(r.K4ABT_JOINTS):
+        joint = by_k4abt.get(name)
+        if joint is not None:
+            markers.append(marker(index, joint, alpha=joint.confidence))
+        elif name in stand_ins:
+            markers.append(marker(index, by_k4abt[stand_ins[name]], r.UNTRACKED, alpha=0.0))
+    extra = len(r.K4ABT_JOINTS)
+    for name, joint in frame.joints.items():
+        if name not in r.K4ABT_OF_OPENNI:
+            markers.append(marker(extra, joint, text=name, alpha=joint.confidence))
+            extra += 1
     return ts.types[r.MARKER_ARRAY](markers=markers)
 
 
@@ -191,26 +233,41 @@ class FromRos:
             raise InputError(f"a {ros_type} on the {stream} stream is not read here")
         return handler(self, stream, deserialize(ros_type, data))
 
+    def image(self, ros_type: str, data: bytes | memoryview) -> tuple[int, np.ndarray]:
+        """(stamp, RGB pixels) of one Image or CompressedImage sample (for the pose model)."""
+        from beyond_self.runtime.recording.images import image_from_message
+
+        read = FromRos._image if ros_type == r.IMAGE else FromRos._compressed
+        (message,) = read(self, "pose", deserialize(ros_type, data))
+        assert isinstance(message, CameraFrame | CompressedCameraFrame)
+        return message.header.stamp, image_from_message(message)
+
     def _markers(self, stream: str, msg: Any) -> list[Message]:
-        if not msg.markers:
+        """A body-tracking MarkerArray: the first body's joints (id // 100 the body, id % 100
+        the K4ABT joint unless `text` names it), in our axes (schemas.ros2.in_our_axes: the
+        driver's frame is turned; ours is read as it is); our export's untracked stand-ins are
+        skipped."""
+        markers = [m for m in msg.markers if m.ns != r.UNTRACKED]
+        if not markers:
             return []
-        body = min(int(m.id) // r.BODY_ID_STRIDE for m in msg.markers)  # the first body
+        body = min(int(m.id) // r.BODY_ID_STRIDE for m in markers)  # the first body
+        first = markers[0].header
+        ours = r.in_our_axes(first.frame_id)
         joints: dict[str, Joint] = {}
-        for m in msg.markers:
+        for m in markers:
             if int(m.id) // r.BODY_ID_STRIDE != body:
                 continue
             p = m.pose.position
+            xyz = (float(p.x), float(p.y), float(p.z))
             confidence = min(max(float(m.color.a), 0.0), 1.0)
             joints[r.joint_name(int(m.id), m.text)] = Joint(
-                (float(p.x), float(p.y), float(p.z)), confidence
+                xyz if ours else r.driver_axes(xyz), confidence
             )
-        first = msg.markers[0].header
         frame = self._next(stream)
         header = SkeletonFrame.original_header(SOURCE, frame, _ns(first), chain=stream)
+        frame_id = first.frame_id if ours else r.OUR_FRAMES[0]  # our depth sensor's frame
         return [
-            SkeletonFrame(
-                header=header, frame=frame, joints=joints, user=body, frame_id=first.frame_id
-            )
+            SkeletonFrame(header=header, frame=frame, joints=joints, user=body, frame_id=frame_id)
         ]
 
     def _compressed(self, stream: str, msg: Any) -> list[Message]:
