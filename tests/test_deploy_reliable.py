@@ -1,5 +1,5 @@
 """The pieces a two-machine deployment stands on, checked fast on one machine: publisher caches
-and recovering subscriptions (runtime.bus.delivery, runtime.resilience.recovery), routers joined in
+and recovering subscriptions (runtime.bus.delivery, runtime.bus.recovery), routers joined in
 addition to
 the local group (runtime.bus.config), and how `beyond up` hands that to the processes it starts."""
 

@@ -156,7 +156,7 @@ def test_bad_logs_are_one_line_and_exit_2(
 
 def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
     """Exit status and stderr of a command: `up` in its own process (it leaves the process
-    when it is done, runtime.resilience.process.exit_process), the others in this one."""
+    when it is done, runtime.process.exit_process), the others in this one."""
     if argv[0] != "up":
         return main(argv), capsys.readouterr().err
     env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}

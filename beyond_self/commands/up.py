@@ -34,8 +34,8 @@ from beyond_self.runtime import outputs
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.process import exit_process
 from beyond_self.runtime.recording.reader import require_mcap
-from beyond_self.runtime.resilience.process import exit_process
 from beyond_self.runtime.resilience.run_state import RunState, run_state_root
 from beyond_self.schemas.keys import check_name
 from beyond_self.services.deployment import Deployment, Ending

@@ -72,7 +72,7 @@ def stop_counts(service: Service, health: ServiceHealth) -> dict[str, Any]:
 
 
 def recovery_of(subscriptions: list[Any]) -> tuple[int, int]:
-    """(recovered, missed) over `subscriptions` (runtime.resilience.recovery)."""
+    """(recovered, missed) over `subscriptions` (runtime.bus.recovery)."""
     return sum(s.recovered for s in subscriptions), sum(s.missed for s in subscriptions)
 
 

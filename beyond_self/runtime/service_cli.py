@@ -14,8 +14,8 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from beyond_self.core.errors import InputError
+from beyond_self.runtime import process
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.resilience import process
 
 if TYPE_CHECKING:
     from beyond_self.runtime.service import Service
