@@ -18,7 +18,9 @@ from beyond_self.cognition.episodes.offline import OfflineRun, analyse_stream
 from beyond_self.cognition.gestures.datasets import load_gestures, synthetic_gestures
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.cognition.gestures.evaluation import cross_validate
-from beyond_self.cognition.gestures.hmm import GestureModels, TrainingConfig, save_models
+from beyond_self.cognition.gestures.hmm import GestureModels
+from beyond_self.cognition.gestures.model_files import save_models
+from beyond_self.cognition.gestures.training import TrainingConfig
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.commands.analyse import log_inputs
 from beyond_self.services.launcher import BEYOND

@@ -30,8 +30,9 @@ from beyond_self.cognition.descriptions import (
     plot_nbest,
 )
 from beyond_self.cognition.fusion import ACTION, fuse, fuse_words
-from beyond_self.cognition.gestures.hmm import GestureModels, load_models
+from beyond_self.cognition.gestures.hmm import GestureModels
 from beyond_self.cognition.gestures.log_evidence import recognize_log
+from beyond_self.cognition.gestures.model_files import load_models
 from beyond_self.cognition.paths import SOURCES
 from beyond_self.cognition.published import (
     FIG4,

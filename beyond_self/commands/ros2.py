@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
             config=config_from_args(args), out_dir=str(args.out_dir), **ros2_options(args)
         )
     from beyond_self.runtime.recording.reader import require_mcap
-    from beyond_self.runtime.ros2.bag import export
+    from beyond_self.runtime.ros2.bag_export import export
 
     if args.ros2_command == "export":
         require_mcap(args.recording)
