@@ -390,7 +390,7 @@ def test_tracker_cancels_a_gesture_the_source_cut_short() -> None:
 def test_a_long_run_keeps_a_bounded_record_of_the_gestures_it_told() -> None:
     """The lines of a soak's thousands of gestures: each printed once, the record of old ones
     forgotten (issue 21: resident memory flat)."""
-    from beyond_self.cognition.episodes.fusion import Recent
+    from beyond_self.cognition.episodes.join import Recent
     from beyond_self.cognition.episodes.report import KEPT
 
     report = GestureReport()
