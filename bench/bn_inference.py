@@ -69,9 +69,9 @@ def inference(model: BayesNet, tag: str) -> dict[str, dict[str, float]]:
     """Measurements 1 and 2 on one model, each beside pgmpy on the same model."""
     from pgmpy.inference import VariableElimination
 
-    from beyond_self.cognition.bn.pgmpy_bridge import reference_query
+    from beyond_self.cognition.bn.pgmpy_bridge import reference_query, to_pgmpy
 
-    network = model.to_pgmpy()
+    network = to_pgmpy(model)
     ve = VariableElimination(network)
     words = [v.name for v in model.definition.words]
     pgmpy_kind = type(network).__name__

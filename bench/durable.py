@@ -259,7 +259,7 @@ async def whole_resume_time() -> dict[str, float]:
         await asyncio.sleep(max(0.0, began + 11.0 - loop.time()))  # gesture 2 is under way
         up.kill()
         await up.wait()
-        await asyncio.sleep(2.0)  # its services die with it (runtime.resilience.lifeline)
+        await asyncio.sleep(2.0)  # its services die with it (runtime.process.lifeline)
         sub, began = progress(), loop.time()
         again = await asyncio.create_subprocess_exec(*command, env=env, stdout=quiet, stderr=quiet)
         resumed = await asyncio.wait_for(first_output(sub, began), 60)

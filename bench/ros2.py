@@ -32,7 +32,7 @@ import zenoh
 
 from beyond_self.cognition.paths import DEMO_RECORDING
 from beyond_self.runtime.recording.reader import read_recording
-from beyond_self.runtime.ros2.bag import export
+from beyond_self.runtime.ros2.bag_export import export
 from beyond_self.runtime.ros2.convert import store, to_ros
 from beyond_self.runtime.ros2.node import Ros2Node
 from beyond_self.schemas import ros2 as r

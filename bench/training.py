@@ -1,5 +1,5 @@
 """HMM training time: ours (one pass of mixture densities per sequence and EM iteration,
-cognition/gestures/hmm.py) against hmmlearn's own GMMHMM EM started from the same point, in the
+cognition/gestures/training.py) against hmmlearn's own GMMHMM EM started from the same point, in the
 same run, on the same synthetic gestures; and how far apart the trained parameters are.
 
     .venv/bin/python bench/training.py [--repeat N]
@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from beyond_self.cognition.gestures import hmm
+from beyond_self.cognition.gestures import training
 from beyond_self.cognition.gestures.datasets import synthetic_gestures
 
 
@@ -43,16 +43,16 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3, help="trainings of each (default 3)")
     args = parser.parse_args()
     seqs = [g.features for g in synthetic_gestures(60, seed=0) if g.action == "grasp"]
-    config = hmm.TrainingConfig(n_iter=10)
-    hmm.train_hmm(seqs[:5], hmm.TrainingConfig(n_iter=1))  # imports, outside the timing
+    config = training.TrainingConfig(n_iter=10)
+    training.train_hmm(seqs[:5], training.TrainingConfig(n_iter=1))  # imports, outside the timing
     ours_s, ref_s = [], []
     for _ in range(args.repeat):
         t0 = time.process_time()
-        ours = hmm.train_hmm(seqs, config)
+        ours = training.train_hmm(seqs, config)
         ours_s.append(time.process_time() - t0)
-        with mock.patch.object(hmm, "_preinitialised_gmmhmm", hmmlearn_em):
+        with mock.patch.object(training, "_preinitialised_gmmhmm", hmmlearn_em):
             t0 = time.process_time()
-            ref = hmm.train_hmm(seqs, config)
+            ref = training.train_hmm(seqs, config)
             ref_s.append(time.process_time() - t0)
     diff = max(
         float(np.max(np.abs(getattr(ours, f) - getattr(ref, f))))

@@ -95,16 +95,15 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 def entry() -> int:
     """The `beyond` program: `main`, then, if the command opened a Zenoh session, leave without
     the interpreter's teardown, which can abort a process that finished cleanly once Zenoh's
-    native threads are up (runtime.resilience.process.exit_process). A process a supervisor started
-    is
-    bound to it first (runtime.resilience.lifeline): it dies with it."""
-    from beyond_self.runtime.resilience import lifeline
+    native threads are up (runtime.process.exit_process). A process a supervisor started is
+    bound to it first (runtime.process.lifeline): it dies with it."""
+    from beyond_self.runtime.process import lifeline
 
     lifeline.bind()
     code = main()
     bus = sys.modules.get("beyond_self.runtime.bus.session")
     if bus is not None and bus.sessions_opened:
-        from beyond_self.runtime.resilience.process import exit_process
+        from beyond_self.runtime.process import exit_process
 
         exit_process(code)
     return code

@@ -422,21 +422,10 @@ def _sentences(items: list[list[Any]]) -> list[str]:
 
 def reproduce_tables() -> str:
     """Tables of the committed `beyond reproduce` results, appended to science/reproduce.md."""
-    from beyond_self.cognition.reproduction import UNSEEN_COMPARED, check_cell, needs_cell
+    from beyond_self.cognition.reproduction import figures_table
 
     r = json.loads((FIGURES / "results.json").read_text(encoding="utf-8"))
-    first, second = UNSEEN_COMPARED
-    lines = [
-        "",
-        f"| figure | `{first}` (default) | `{second}` (toolbox) | needs |",
-        "|---|---|---|---|",
-    ]
-    for name, figure in r["published"].items():
-        checks = figure["checks"]
-        lines.append(
-            f"| {name} | {check_cell(checks.get(first))} | {check_cell(checks.get(second))} | "
-            f"{needs_cell(figure)} |"
-        )
+    lines = ["", *figures_table(r["published"])]
     lines += ["", "## The N-best lists of experiment 5", ""]
     for key, title in (
         ("exp5_gesture", "Yellow big fast sphere, action from the recorded gesture"),

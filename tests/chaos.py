@@ -143,7 +143,7 @@ async def run(seed: int, out: Path, extra_env: dict[str, str] | None = None) -> 
         for task in chaos:
             task.cancel()
         if up.returncode is None:
-            up.kill()  # its services die with it (runtime.resilience.lifeline)
+            up.kill()  # its services die with it (runtime.process.lifeline)
             await up.wait()
         await asyncio.gather(*readers, return_exceptions=True)
     said = out / "speech" / "speech.log"

@@ -122,7 +122,9 @@ def synthetic_model() -> BayesNet:
 
 @pytest.fixture(scope="module")
 def pgmpy_network(synthetic_model: BayesNet) -> Any:
-    return synthetic_model.to_pgmpy()
+    from beyond_self.cognition.bn.pgmpy_bridge import to_pgmpy
+
+    return to_pgmpy(synthetic_model)
 
 
 def _queries(
@@ -212,8 +214,10 @@ _NETWORKS: dict[int, Any] = {}
 
 
 def _real_network(model: BayesNet) -> Any:
+    from beyond_self.cognition.bn.pgmpy_bridge import to_pgmpy
+
     if id(model) not in _NETWORKS:
-        _NETWORKS[id(model)] = model.to_pgmpy()
+        _NETWORKS[id(model)] = to_pgmpy(model)
     return _NETWORKS[id(model)]
 
 
@@ -234,7 +238,7 @@ def test_word_probabilities_agree_with_pgmpy(real_model: BayesNet) -> None:
 
 def test_parent_order_in_the_file_does_not_matter() -> None:
     """CPTs whose parents are listed against node order are laid out correctly (vs pgmpy)."""
-    from beyond_self.cognition.bn.pgmpy_bridge import reference_query
+    from beyond_self.cognition.bn.pgmpy_bridge import reference_query, to_pgmpy
 
     rng = np.random.default_rng(3)
     definition = NetworkDefinition(
@@ -253,7 +257,7 @@ def test_parent_order_in_the_file_does_not_matter() -> None:
     parents = {"A": (), "B": (), "C": ("B", "A"), "w": ("C", "A")}
     cpts = {"A": table(2), "B": table(3), "C": table(3, 2, 4), "w": table(4, 2, 2)}
     model = BayesNet(definition, parents, cpts)
-    network = model.to_pgmpy()
+    network = to_pgmpy(model)
     cases: list[tuple[list[str], dict[str, str]]] = [
         (["C"], {"A": "a1", "B": "b2"}),
         (["A", "B"], {"w": "w"}),

@@ -145,7 +145,7 @@ def test_queries_equal_brute_force_enumeration_of_the_joint(data: st.DataObject)
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_pgmpy_markov_network_represents_zero_columns(data: st.DataObject) -> None:
-    from beyond_self.cognition.bn.pgmpy_bridge import reference_query
+    from beyond_self.cognition.bn.pgmpy_bridge import reference_query, to_pgmpy
 
     model = data.draw(small_networks())
     query, evidence, soft = data.draw(queries(model))
@@ -153,7 +153,7 @@ def test_pgmpy_markov_network_represents_zero_columns(data: st.DataObject) -> No
         ours = model.query(query, evidence, soft).table
     except InputError:
         return  # zero-probability evidence: the enumeration test covers it
-    theirs = reference_query(model.to_pgmpy(), model, query, evidence, soft).table
+    theirs = reference_query(to_pgmpy(model), model, query, evidence, soft).table
     assert np.max(np.abs(ours - theirs)) < 1e-12
 
 

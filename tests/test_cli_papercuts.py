@@ -152,7 +152,7 @@ def test_outputs_go_under_a_state_folder_never_the_current_one(
 
 def test_up_out_dir_is_handed_to_the_services(tmp_path: Path) -> None:
 
-    from beyond_self.commands.up import add_out_dir, out_dir_env
+    from beyond_self.commands.up_options import add_out_dir, out_dir_env
 
     parser = argparse.ArgumentParser()
     add_out_dir(parser)

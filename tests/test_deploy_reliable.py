@@ -1,5 +1,5 @@
 """The pieces a two-machine deployment stands on, checked fast on one machine: publisher caches
-and recovering subscriptions (runtime.bus.delivery, runtime.resilience.recovery), routers joined in
+and recovering subscriptions (runtime.bus.delivery, runtime.bus.recovery), routers joined in
 addition to
 the local group (runtime.bus.config), and how `beyond up` hands that to the processes it starts."""
 
@@ -14,7 +14,8 @@ import pytest
 from busutil_net import private_config, skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.commands.up import local_group, monitor_name, wait_list
+from beyond_self.commands.up_services import wait_list
+from beyond_self.commands.up_side import local_group, monitor_name
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.config import BusConfig, load_config, zenoh_config
 from beyond_self.runtime.bus.delivery import FRAMES, Delivery

@@ -32,7 +32,7 @@ from beyond_self.cognition.development.learning import (
 )
 from beyond_self.cognition.development.report import write_outputs
 from beyond_self.cognition.fusion import fuse
-from beyond_self.cognition.gestures.hmm import TrainingConfig
+from beyond_self.cognition.gestures.training import TrainingConfig
 from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
 from beyond_self.cognition.variables import ACTIONS, EFFECTS
 from beyond_self.cognition.world import simulate_effects

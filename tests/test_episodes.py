@@ -360,7 +360,7 @@ def test_a_gesture_waits_for_its_beliefs_whatever_overtakes_them() -> None:
 def test_a_trackers_frame_buffer_stays_out_of_the_garbage_collector() -> None:
     """A fleet's gesture streamer keeps a tracker per robot, each with up to 1,800 frames: as
     tracked objects they made every full collection walk them (bench/fleet.py,
-    runtime.resilience.heap)."""
+    runtime.process.heap)."""
     hand = [i for i in _inputs(RECORDING, "right_hand", "torso") if isinstance(i, SkeletonInput)]
     tracker: GestureTracker[Header] = GestureTracker(default_models())
     for item in hand:
@@ -390,7 +390,7 @@ def test_tracker_cancels_a_gesture_the_source_cut_short() -> None:
 def test_a_long_run_keeps_a_bounded_record_of_the_gestures_it_told() -> None:
     """The lines of a soak's thousands of gestures: each printed once, the record of old ones
     forgotten (issue 21: resident memory flat)."""
-    from beyond_self.cognition.episodes.fusion import Recent
+    from beyond_self.cognition.episodes.join import Recent
     from beyond_self.cognition.episodes.report import KEPT
 
     report = GestureReport()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from beyond_self.cli import main
-from beyond_self.cognition.gestures.hmm import load_models
+from beyond_self.cognition.gestures.model_files import load_models
 
 
 def test_stream_json_on_the_article_tap(

@@ -179,14 +179,14 @@ def test_malformed_matlab_files_are_input_errors(tmp_path: Path) -> None:
 
 
 def test_training_equals_hmmlearns_own_em() -> None:
-    """Training computes every state's mixture densities in one pass (hmm._Densities) instead
+    """Training computes every state's mixture densities in one pass (training._Densities) instead
     of hmmlearn's per-state Cholesky factorisations: the same EM, so the same parameters as
     hmmlearn's GMMHMM started from the same point, to rounding."""
     from unittest import mock
 
     from hmmlearn.hmm import GMMHMM
 
-    from beyond_self.cognition.gestures import hmm
+    from beyond_self.cognition.gestures import training
 
     def hmmlearn_em() -> type:
         class Plain(GMMHMM):  # type: ignore[misc]  # hmmlearn has no type hints
@@ -204,14 +204,14 @@ def test_training_equals_hmmlearns_own_em() -> None:
     ]
     config = TrainingConfig(n_states=4, n_mix=2, n_iter=8)
     ours = train_hmm(seqs, config)
-    with mock.patch.object(hmm, "_preinitialised_gmmhmm", hmmlearn_em):
+    with mock.patch.object(training, "_preinitialised_gmmhmm", hmmlearn_em):
         reference = train_hmm(seqs, config)
     for name in ("transmat", "weights", "means", "covars"):
         np.testing.assert_allclose(
             getattr(ours, name), getattr(reference, name), rtol=1e-9, atol=1e-12, err_msg=name
         )
     # and the densities themselves, component by component, against hmmlearn's
-    model = hmm._preinitialised_gmmhmm()(n_components=4, n_mix=2, covariance_type="full")
+    model = training._preinitialised_gmmhmm()(n_components=4, n_mix=2, covariance_type="full")
     model.weights_, model.means_, model.covars_ = ours.weights, ours.means, ours.covars
     x = seqs[0]
     for state in range(4):

@@ -18,7 +18,9 @@ from beyond_self.cognition.episodes.offline import OfflineRun, analyse_stream
 from beyond_self.cognition.gestures.datasets import load_gestures, synthetic_gestures
 from beyond_self.cognition.gestures.default_models import default_models
 from beyond_self.cognition.gestures.evaluation import cross_validate
-from beyond_self.cognition.gestures.hmm import GestureModels, TrainingConfig, save_models
+from beyond_self.cognition.gestures.hmm import GestureModels
+from beyond_self.cognition.gestures.model_files import save_models
+from beyond_self.cognition.gestures.training import TrainingConfig
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.commands.analyse import log_inputs
 from beyond_self.services.launcher import BEYOND
@@ -156,7 +158,7 @@ def test_bad_logs_are_one_line_and_exit_2(
 
 def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
     """Exit status and stderr of a command: `up` in its own process (it leaves the process
-    when it is done, runtime.resilience.process.exit_process), the others in this one."""
+    when it is done, runtime.process.exit_process), the others in this one."""
     if argv[0] != "up":
         return main(argv), capsys.readouterr().err
     env = {**env_for(private_config()), "BEYOND_LOG_FORMAT": "text"}

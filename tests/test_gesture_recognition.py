@@ -15,7 +15,7 @@ from beyond_self.cognition.gestures.evaluation import (
     evaluate,
     plot_report,
 )
-from beyond_self.cognition.gestures.hmm import TrainingConfig
+from beyond_self.cognition.gestures.training import TrainingConfig
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""runtime.resilience.heap: a service process settles its heap after set-up, once per burst, and
+"""runtime.process.heap: a service process settles its heap after set-up, once per burst, and
 hands it
 back when a run ends; a process that is not a service's own keeps the collector as it was."""
 
@@ -11,7 +11,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from beyond_self.runtime.resilience import heap
+from beyond_self.runtime.process import heap
 
 
 class _Node:

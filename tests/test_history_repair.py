@@ -10,7 +10,7 @@ reply, older, is then discarded as a duplicate, with no miss reported. On a load
 window is a few tens of ms wide, enough for a per-frame stream (the CI failure of
 test_deploy_netns.py::test_the_robot_may_start_first). Here a second queryable on the
 publisher's side delays the end of per-publisher queries, which widens the window at will;
-runtime.resilience.history_repair must still get the history back."""
+runtime.bus.history_repair must still get the history back."""
 
 from __future__ import annotations
 

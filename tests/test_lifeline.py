@@ -1,4 +1,4 @@
-"""A child dies with its supervisor, whatever killed the supervisor (runtime.resilience.lifeline,
+"""A child dies with its supervisor, whatever killed the supervisor (runtime.process.lifeline,
 issue 39)."""
 
 from __future__ import annotations
@@ -11,12 +11,12 @@ import textwrap
 import time
 from pathlib import Path
 
-from beyond_self.runtime.resilience import lifeline
+from beyond_self.runtime.process import lifeline
 
 REPO = Path(__file__).resolve().parent.parent
 CHILD = """
 import sys, time
-from beyond_self.runtime.resilience import lifeline
+from beyond_self.runtime.process import lifeline
 lifeline.bind()
 print("bound", flush=True)
 for line in sys.stdin:  # answers each ping, so the supervisor knows it is alive
@@ -25,7 +25,7 @@ time.sleep(600)
 """
 SUPERVISOR = """
 import os, subprocess, sys, threading
-from beyond_self.runtime.resilience import lifeline
+from beyond_self.runtime.process import lifeline
 CHILD = {child!r}
 
 def start():

@@ -16,7 +16,7 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from beyond_self.cli import main
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording.reader import inspect_recording, read_recording
-from beyond_self.runtime.ros2.bag import export
+from beyond_self.runtime.ros2.bag_export import export
 from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.messages import CompressedCameraFrame, SkeletonFrame
 

@@ -10,7 +10,7 @@ import pytest
 from busutil_net import skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.runtime.resilience.accounting import REASON_MAX, ErrorAccount
+from beyond_self.runtime.error_account import REASON_MAX, ErrorAccount
 from beyond_self.schemas.messages import IMAGE_BYTES_MAX, JOINTS_MAX, NAME_MAX, OBJECTS_MAX
 
 HEADER = s.Header(version=1, source="test", seq=0, stamp=1_700_000_000_000_000_000)

@@ -11,7 +11,7 @@ import pytest
 from busutil_net import private_config
 from rich.console import Console
 
-from beyond_self.commands import up
+from beyond_self.commands import up, up_services, up_watch
 from beyond_self.core.errors import InputError
 from beyond_self.live_view import render
 from beyond_self.schemas import Header, ServiceHealth
@@ -53,19 +53,19 @@ def parsed(*argv: str) -> argparse.Namespace:
 
 
 def test_skip_means_elsewhere_and_without_means_none() -> None:
-    lines = up.EventLines()
-    side, _ = up.deployment(parsed("--skip", "speech"), private_config(), lines)
+    lines = up_watch.EventLines()
+    side, _ = up_services.deployment(parsed("--skip", "speech"), private_config(), lines)
     assert "speech" not in side.services
     assert "speech" in side.options["ingest"]["wait_for"]  # the others still expect it
     assert "objects" not in side.options["reasoner"]
-    side, _ = up.deployment(parsed("--without", "objects,speech"), private_config(), lines)
+    side, _ = up_services.deployment(parsed("--without", "objects,speech"), private_config(), lines)
     assert "objects" not in side.services and "speech" not in side.services
     assert "objects" not in side.options["ingest"]["wait_for"]
     assert side.options["reasoner"]["objects"] is False  # told: no object evidence
-    side, _ = up.deployment(parsed("--skip", "objects"), private_config(), lines)
+    side, _ = up_services.deployment(parsed("--skip", "objects"), private_config(), lines)
     assert "objects" not in side.options["reasoner"]  # runs elsewhere: still waited for
     with pytest.raises(InputError, match="unknown service 'spech'"):
-        up.deployment(parsed("--without", "spech"), private_config(), lines)
+        up_services.deployment(parsed("--without", "spech"), private_config(), lines)
 
 
 def test_the_live_view_shows_restarts() -> None:
@@ -98,13 +98,13 @@ async def test_up_says_which_skipped_service_it_waits_for_until_it_comes() -> No
     from beyond_self.runtime.bus.session import Bus
 
     args = parsed("--skip", "speech,objects", "--wait-for", "reasoner")
-    awaited = up.awaited_elsewhere(args)
+    awaited = up_services.awaited_elsewhere(args)
     assert awaited == {"reasoner": "--wait-for", "speech": "--skip", "objects": "--skip"}
     config = private_config()
     said: list[str] = []
     with Bus.open(config) as bus, Bus.open(config) as elsewhere:
         hints = asyncio.create_task(
-            up.say_what_is_awaited(bus, {"speech": "--skip"}, period=0.05, say=said.append)
+            up_watch.say_what_is_awaited(bus, {"speech": "--skip"}, period=0.05, say=said.append)
         )
         loop = asyncio.get_running_loop()
         deadline = loop.time() + 20

@@ -32,6 +32,7 @@ from beyond_self.cognition.vision.tabletop import (
     Experiment,
     ObjectSpec,
     make_table,
+    min_jerk,
     render_frame,
     simulate_experiment,
 )
@@ -216,11 +217,6 @@ def _stamps(n: int, fps: float) -> np.ndarray:
 
 def _child_seeds(seed: int, n: int) -> list[int]:
     return [int(s) for s in np.random.SeedSequence([seed, 5]).generate_state(n)]
-
-
-def _min_jerk(tau: np.ndarray) -> np.ndarray:
-    t = np.clip(tau, 0.0, 1.0)
-    return cast(np.ndarray, t**3 * (10.0 - 15.0 * t + 6.0 * t**2))
 
 
 def _resample(track: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray:
@@ -408,7 +404,7 @@ def _withdrawal(exp: Experiment, j_first: int, fps: float) -> Callable[[int], np
             return cast(np.ndarray, end + velocity * m)
         if m - linger > steps:
             return np.full(3, np.nan)
-        s = float(_min_jerk(np.asarray((m - linger) / steps)))
+        s = float(min_jerk(np.asarray((m - linger) / steps)))
         return cast(np.ndarray, leave + (target - leave) * s)
 
     return at

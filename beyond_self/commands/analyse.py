@@ -29,7 +29,6 @@ from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording.damage import Losses
-from beyond_self.runtime.recording.fleet import recorded_robot
 from beyond_self.runtime.recording.images import image_from_message
 from beyond_self.runtime.recording.reader import (
     inspect_recording,
@@ -38,6 +37,7 @@ from beyond_self.runtime.recording.reader import (
     scan_recording,
 )
 from beyond_self.runtime.recording.replay import Cue, looped, recorded_cues
+from beyond_self.runtime.recording.robots import recorded_robot
 from beyond_self.schemas import CameraFrame, CompressedCameraFrame, SkeletonFrame
 from beyond_self.schemas.keys import TABLETOP_CAMERA, split_key
 from beyond_self.services.options import check_options, load_options

@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--top", type=argtypes.count(1, 10_000), default=8, help="with --network: words to list"
     )
     parser.add_argument("--no-live", action="store_true", help="event lines only, no live view")
-    from beyond_self.commands.up import add_out_dir
+    from beyond_self.commands.up_options import add_out_dir
 
     add_out_dir(parser)
 

@@ -110,8 +110,8 @@ def resolve_evidence(args: argparse.Namespace, model: BayesNet) -> Resolved:
                 "give gesture evidence one way: --gesture ACTION=p,... or --gesture-log "
                 "MODELS LOG, not both"
             )
-        from beyond_self.cognition.gestures.hmm import load_models
         from beyond_self.cognition.gestures.log_evidence import recognize_log
+        from beyond_self.cognition.gestures.model_files import load_models
 
         models_path, log_path = args.gesture_log
         result, first = recognize_log(load_models(models_path), log_path, args.frames, args.scale)

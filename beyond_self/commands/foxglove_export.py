@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from beyond_self.cognition.bn import learn_network, synthetic_dataset
-from beyond_self.cognition.episodes.fusion import Anticipation, Outcome
+from beyond_self.cognition.episodes.join import Anticipation, Outcome
 from beyond_self.cognition.episodes.offline import CameraInput, SkeletonInput, analyse_stream
 from beyond_self.cognition.episodes.tracker import Belief
 from beyond_self.cognition.gestures.default_models import default_models

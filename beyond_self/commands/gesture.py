@@ -34,8 +34,10 @@ from beyond_self.cognition.gestures.features import (
     extract_features,
     gesture_features,
 )
-from beyond_self.cognition.gestures.hmm import GestureModels, load_models, save_models, train_models
+from beyond_self.cognition.gestures.hmm import GestureModels
 from beyond_self.cognition.gestures.logs import check_positions, parse_frames, read_hand_log
+from beyond_self.cognition.gestures.model_files import load_models, save_models
+from beyond_self.cognition.gestures.training import train_models
 from beyond_self.cognition.paths import data_set
 from beyond_self.commands import argtypes
 from beyond_self.commands.gesture_reports import evaluate_command, realism_command

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from beyond_self.commands import argtypes
 
 if TYPE_CHECKING:
-    from beyond_self.cognition.gestures.hmm import TrainingConfig
+    from beyond_self.cognition.gestures.training import TrainingConfig
 
 
 def add_training_options(
@@ -29,6 +29,6 @@ def add_training_options(
 
 def training_config(args: argparse.Namespace, seed: int = 0) -> TrainingConfig:
     """The options `add_training_options` added, as the trainer's config."""
-    from beyond_self.cognition.gestures.hmm import TrainingConfig
+    from beyond_self.cognition.gestures.training import TrainingConfig
 
     return TrainingConfig(n_states=args.states, n_mix=args.mix, n_iter=args.iter, seed=seed)

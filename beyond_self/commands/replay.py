@@ -21,10 +21,10 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.log import setup_logging
-from beyond_self.runtime.recording.fleet import recorded_robots
 from beyond_self.runtime.recording.reader import RecordedMessage, inspect_recording, require_mcap
 from beyond_self.runtime.recording.replay import replay
 from beyond_self.runtime.recording.replay_control import ReplayControl, rate_option, remapper
+from beyond_self.runtime.recording.robots import recorded_robots
 from beyond_self.schemas.keys import check_name
 
 HELP = "publish an MCAP recording on the bus in stamp order"
@@ -197,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
                 start=args.start,
                 end=args.end,
                 # $BEYOND_ROBOT too, as recordings/README.md says; a fleet's recording plays
-                # every robot's keys as recorded (runtime.recording.fleet)
+                # every robot's keys as recorded (runtime.recording.robots)
                 robot=config.robot
                 if len(recorded_robots(inspect_recording(args.file))) <= 1
                 else None,

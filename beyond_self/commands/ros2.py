@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
             **ros2_options(args),
         )
     from beyond_self.runtime.recording.reader import require_mcap
-    from beyond_self.runtime.ros2.bag import export
+    from beyond_self.runtime.ros2.bag_export import export
 
     if args.ros2_command == "export":
         require_mcap(args.recording)

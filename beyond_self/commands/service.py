@@ -15,7 +15,7 @@ from typing import Any
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.resilience.process import configure, exit_process
+from beyond_self.runtime.process import configure, exit_process
 from beyond_self.services.launcher import wait_for_release
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import SERVICES, service_class
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     if not cls.fleet:  # a robot's source or voice
         raise InputError(f"service {args.name!r} serves one robot (its --robot), not a fleet")
     from beyond_self.runtime.fleet import Fleet, takeover_latest_s
-    from beyond_self.runtime.resilience.process import run_to_completion
+    from beyond_self.runtime.process import run_to_completion
     from beyond_self.services.registry import fleet_consumers, stages_after
 
     latest = takeover_latest_s(stages_after(args.name))

@@ -21,10 +21,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from beyond_self.core.errors import InputError
+from beyond_self.runtime import process
 from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.log import event
-from beyond_self.runtime.resilience import process
 from beyond_self.runtime.self_report import health_header, restarts
 from beyond_self.schemas.keys import Keys, for_robots, robot_matches, split_key
 from beyond_self.schemas.messages import ServiceHealth

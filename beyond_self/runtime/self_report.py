@@ -1,22 +1,64 @@
 """What a service says about itself: its health (answered and published every second) and the
-counts it logs when it stops. Kept apart from runtime.service, which runs the service."""
+counts it logs when it stops. Kept apart from runtime.service, which runs the service: what is
+read of a service here is `Reporting`, which the Service base is, so neither imports the other."""
 
 from __future__ import annotations
 
 import logging
 import os
 import time
-from typing import TYPE_CHECKING, Any
+from collections.abc import Collection, Sequence
+from typing import TYPE_CHECKING, Any, Protocol
 
 from beyond_self.runtime.log import event
 from beyond_self.schemas.base import Header
 from beyond_self.schemas.messages import ServiceHealth
 
 if TYPE_CHECKING:
-    from beyond_self.runtime.service import Service
+    from beyond_self.runtime.bus.publisher import Publisher
+    from beyond_self.runtime.bus.session import Bus
+    from beyond_self.runtime.bus.subscription import Subscription
+    from beyond_self.runtime.clock import Clock
+    from beyond_self.runtime.error_account import ErrorAccount
+    from beyond_self.runtime.event_time import SourceTimes
 
 RESTARTS_ENV = "BEYOND_RESTARTS"  # set by a supervisor (services.supervision) on a restart
 _STOP_COUNTS = ("messages_in", "messages_out", "malformed", "dropped", "errors", "restarts")
+
+
+class Duplicates(Protocol):
+    """Where a service counts the messages it skipped as handled already (its ledgers)."""
+
+    @property
+    def duplicates(self) -> int: ...
+
+
+class Reporting(Protocol):
+    """What a report reads of a running service (runtime.service.Service)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def bus(self) -> Bus: ...
+    @property
+    def clock(self) -> Clock: ...
+    @property
+    def log(self) -> logging.Logger: ...
+    @property
+    def started_at(self) -> float: ...
+    @property
+    def subscriptions(self) -> Sequence[Subscription[Any]]: ...
+    @property
+    def publishers(self) -> Sequence[Publisher[Any]]: ...
+    @property
+    def paced_keys(self) -> Collection[str]: ...
+    @property
+    def account(self) -> ErrorAccount: ...
+    @property
+    def times(self) -> SourceTimes: ...
+    @property
+    def ledgers(self) -> Duplicates: ...
+    def recovery(self) -> tuple[int, int]: ...
 
 
 def restarts() -> int:
@@ -30,7 +72,7 @@ def health_header(name: str, seq: int, stamp: int) -> Header:
     return ServiceHealth.original_header(name, seq, stamp, chain="health")
 
 
-def health_of(service: Service, seq: int) -> ServiceHealth:
+def health_of(service: Reporting, seq: int) -> ServiceHealth:
     subs, publishers = service.subscriptions, service.publishers
     keys = service.bus.keys
     return ServiceHealth(
@@ -55,7 +97,7 @@ def health_of(service: Service, seq: int) -> ServiceHealth:
     )
 
 
-def stop_counts(service: Service, health: ServiceHealth) -> dict[str, Any]:
+def stop_counts(service: Reporting, health: ServiceHealth) -> dict[str, Any]:
     """What a stopping service logs: its counts, what caches gave back, what it skipped."""
     recovered, missed = service.recovery()
     counts: dict[str, Any] = {"service": service.name}
@@ -72,11 +114,11 @@ def stop_counts(service: Service, health: ServiceHealth) -> dict[str, Any]:
 
 
 def recovery_of(subscriptions: list[Any]) -> tuple[int, int]:
-    """(recovered, missed) over `subscriptions` (runtime.resilience.recovery)."""
+    """(recovered, missed) over `subscriptions` (runtime.bus.recovery)."""
     return sum(s.recovered for s in subscriptions), sum(s.missed for s in subscriptions)
 
 
-def log_recovery(service: Service, reported: tuple[int, int]) -> tuple[int, int]:
+def log_recovery(service: Reporting, reported: tuple[int, int]) -> tuple[int, int]:
     """Log what publisher caches gave back since `reported`; the new figures."""
     now = service.recovery()
     if now != reported:

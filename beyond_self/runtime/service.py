@@ -22,6 +22,7 @@ from typing import Any, NoReturn, TypeVar, overload
 
 from beyond_self.core.errors import InputError
 from beyond_self.core.restorable import Restorable
+from beyond_self.runtime import process
 from beyond_self.runtime.bus.config import BusConfig, load_config
 from beyond_self.runtime.bus.delivery import RELIABLE, STATUS, Delivery
 from beyond_self.runtime.bus.publisher import Publisher
@@ -29,11 +30,11 @@ from beyond_self.runtime.bus.queries import PlainQueryHandler, QueryHandler
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.bus.subscription import Handler, Received, Subscription, consume
 from beyond_self.runtime.clock import Clock
+from beyond_self.runtime.error_account import ErrorAccount
 from beyond_self.runtime.event_time import SourceTimes, Verdict
 from beyond_self.runtime.log import event
+from beyond_self.runtime.process import heap
 from beyond_self.runtime.progress import ProgressReport
-from beyond_self.runtime.resilience import heap, process
-from beyond_self.runtime.resilience.accounting import ErrorAccount
 from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.runtime.resilience.resume import InputGate, gated
 from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore

@@ -11,18 +11,27 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from beyond_self.core.errors import InputError
+from beyond_self.runtime import process
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
-from beyond_self.runtime.resilience import process
 
-if TYPE_CHECKING:
-    from beyond_self.runtime.service import Service
+
+class ScriptService(Protocol):
+    """What a command line is made from: a service (runtime.service.Service), its class's
+    docstring or its module's, its name, its own options and what it needs outside Python."""
+
+    name: str
+
+    @classmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None: ...
+    @classmethod
+    def check_requirements(cls) -> None: ...
 
 
 def options_from_command_line(
-    cls: type[Service], argv: Sequence[str] | None, given: Mapping[str, Any]
+    cls: type[ScriptService], argv: Sequence[str] | None, given: Mapping[str, Any]
 ) -> dict[str, Any]:
     """The constructor's keyword arguments: `given`, then the command line's own options (the
     bus configuration from the bus options unless `given` holds a config or a bus). `--help`,

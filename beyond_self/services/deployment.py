@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 from beyond_self.core.errors import InputError, unknown
+from beyond_self.runtime import process
 from beyond_self.runtime.bus.config import BusConfig
-from beyond_self.runtime.resilience import process
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.launcher import (
     HealthWatch,

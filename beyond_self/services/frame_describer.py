@@ -20,7 +20,7 @@ import numpy as np
 
 from beyond_self.cognition.vision.clusters import ClusterModel
 from beyond_self.cognition.vision.pipeline import DetectedObject, describe_frame
-from beyond_self.runtime.resilience import lifeline
+from beyond_self.runtime.process import lifeline
 
 _clusters: ClusterModel | None = None  # the worker's own copy, loaded once
 

@@ -25,15 +25,15 @@ from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, SKELETON, STATUS
 from beyond_self.runtime.bus.publisher import Publisher
 from beyond_self.runtime.clock import Clock, ClockTicks
+from beyond_self.runtime.error_account import bounded
 from beyond_self.runtime.log import event
 from beyond_self.runtime.recording.damage import Losses
-from beyond_self.runtime.recording.fleet import recorded_robot
 from beyond_self.runtime.recording.images import message_from_image
 from beyond_self.runtime.recording.pacing import DEFAULT_WINDOW_S, Pacer
 from beyond_self.runtime.recording.reader import read_recording, require_mcap, scan_recording
 from beyond_self.runtime.recording.replay import Cue, Player, looped, recorded_cues
 from beyond_self.runtime.recording.replay_control import rate_option
-from beyond_self.runtime.resilience.accounting import bounded
+from beyond_self.runtime.recording.robots import recorded_robot
 from beyond_self.runtime.resilience.source_log import DEFAULT_MAX_MB, SourceLog
 from beyond_self.runtime.resilience.state import state_dir
 from beyond_self.runtime.service import Service

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from beyond_self.runtime.bus.config import ENV_VARS, BusConfig
-from beyond_self.runtime.resilience import lifeline
+from beyond_self.runtime.process import lifeline
 
 if TYPE_CHECKING:
     from beyond_self.runtime.bus.session import Bus

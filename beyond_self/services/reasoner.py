@@ -16,7 +16,7 @@ from typing import Any
 from beyond_self.cognition.bn import BayesNet
 from beyond_self.cognition.bn.evidence import Evidence, build_evidence
 from beyond_self.cognition.episodes import Anticipation, FusionJoin, Lost, Outcome
-from beyond_self.cognition.episodes.fusion import Prediction
+from beyond_self.cognition.episodes.join import Prediction
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import EVENTS, FRAMES
 from beyond_self.runtime.service import Service

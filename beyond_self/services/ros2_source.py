@@ -20,8 +20,8 @@ from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 from beyond_self.core.errors import InputError
+from beyond_self.runtime.error_account import LogOnce
 from beyond_self.runtime.recording.images import image_from_message
-from beyond_self.runtime.resilience.accounting import LogOnce
 from beyond_self.runtime.ros2.convert import FromRos
 from beyond_self.runtime.ros2.node import Ros2Node, default_domain
 from beyond_self.runtime.ros2.topics import POSE

@@ -160,12 +160,6 @@ class BayesNet:
         """P(word present | evidence) for every word, keyed by the word."""
         return self.compiled.word_probabilities(evidence, soft)
 
-    def to_pgmpy(self) -> Any:
-        """The same network as a pgmpy DiscreteBayesianNetwork (imports pgmpy)."""
-        from beyond_self.cognition.bn.pgmpy_bridge import to_pgmpy
-
-        return to_pgmpy(self)
-
     # -- file format ----------------------------------------------------------------------------
 
     def to_json(self) -> dict[str, Any]:

@@ -34,8 +34,9 @@ from beyond_self.cognition.development.demonstrations import (
     synthesize_demonstrations,
 )
 from beyond_self.cognition.fusion import ACTION, action_vector
-from beyond_self.cognition.gestures.hmm import GestureModels, TrainingConfig, train_models
+from beyond_self.cognition.gestures.hmm import GestureModels
 from beyond_self.cognition.gestures.streaming import CompiledModels, recognize_sequence
+from beyond_self.cognition.gestures.training import TrainingConfig, train_models
 from beyond_self.core.errors import InputError
 
 FloatArray = NDArray[np.float64]

@@ -15,7 +15,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Lost, Outcome
+    from beyond_self.cognition.episodes.join import Anticipation, FusionJoin, Lost, Outcome
     from beyond_self.cognition.episodes.objects import (
         FrameObjects,
         GestureEffects,
@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 # image and clustering modules (about a CPU-second per process), which the gesture streamer
 # and the reasoner never use
 _HOMES = {
-    **dict.fromkeys(("Anticipation", "FusionJoin", "Lost", "Outcome"), "fusion"),
+    **dict.fromkeys(("Anticipation", "FusionJoin", "Lost", "Outcome"), "join"),
     **dict.fromkeys(
         ("FrameObjects", "GestureEffects", "ObjectAtStart", "ObjectWatch", "WatchSnapshot"),
         "objects",

@@ -16,7 +16,7 @@ import numpy as np
 
 from beyond_self.cognition.bn.model import BayesNet
 from beyond_self.cognition.descriptions import nbest_exact
-from beyond_self.cognition.episodes.fusion import Anticipation, FusionJoin, Lost, Outcome, Output
+from beyond_self.cognition.episodes.join import Anticipation, FusionJoin, Lost, Outcome, Output
 from beyond_self.cognition.episodes.objects import GestureEffects, ObjectAtStart, ObjectWatch
 from beyond_self.cognition.episodes.report import GestureReport
 from beyond_self.cognition.episodes.tracker import (

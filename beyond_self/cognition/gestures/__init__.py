@@ -26,17 +26,10 @@ from beyond_self.cognition.gestures.features import (
     features_from_joints,
     gesture_features,
 )
-from beyond_self.cognition.gestures.hmm import (
-    GestureHMM,
-    GestureModels,
-    TrainingConfig,
-    load_models,
-    save_models,
-    train_hmm,
-    train_models,
-)
+from beyond_self.cognition.gestures.hmm import GestureHMM, GestureModels
 from beyond_self.cognition.gestures.logs import HandLog, read_hand_log
 from beyond_self.cognition.gestures.matlab import load_matlab_models
+from beyond_self.cognition.gestures.model_files import load_models, save_models
 from beyond_self.cognition.gestures.segmentation import (
     Discarded,
     GestureSegmenter,
@@ -60,6 +53,7 @@ from beyond_self.cognition.gestures.synthetic import (
     synthesize_dataset,
     synthesize_gesture,
 )
+from beyond_self.cognition.gestures.training import TrainingConfig, train_hmm, train_models
 
 __all__ = [
     "LOG_SCALE",

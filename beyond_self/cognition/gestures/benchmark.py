@@ -24,7 +24,8 @@ from beyond_self.cognition.gestures.evaluation import (
     cross_validate,
     evaluate,
 )
-from beyond_self.cognition.gestures.hmm import GestureModels, TrainingConfig
+from beyond_self.cognition.gestures.hmm import GestureModels
+from beyond_self.cognition.gestures.training import TrainingConfig
 
 ARTICLE_MODELS = "HMM_M3_Q6_mixsplit.mat"
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 from functools import cache
 from pathlib import Path
 
-from beyond_self.cognition.gestures.hmm import GestureModels, load_models
+from beyond_self.cognition.gestures.hmm import GestureModels
+from beyond_self.cognition.gestures.model_files import load_models
 from beyond_self.cognition.variables import ACTIONS
 from beyond_self.core.errors import InputError
 

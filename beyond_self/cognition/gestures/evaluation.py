@@ -18,17 +18,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from beyond_self.cognition import plotting
 from beyond_self.cognition.gestures.features import MOTION, POSITION
-from beyond_self.cognition.gestures.hmm import (
-    GestureHMM,
-    GestureModels,
-    TrainingConfig,
-    train_hmm,
-)
+from beyond_self.cognition.gestures.hmm import GestureHMM, GestureModels
 from beyond_self.cognition.gestures.streaming import (
     CompiledModels,
     SequenceResult,
     recognize_sequence,
 )
+from beyond_self.cognition.gestures.training import TrainingConfig, train_hmm
 from beyond_self.cognition.variables import ACTIONS
 from beyond_self.core.errors import InputError
 

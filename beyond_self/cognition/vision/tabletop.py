@@ -387,7 +387,9 @@ class Experiment:
         return 0
 
 
-def _min_jerk(tau: np.ndarray) -> np.ndarray:
+def min_jerk(tau: np.ndarray) -> np.ndarray:
+    """The minimum-jerk profile: how far along (0 to 1) a reach is at time fraction `tau` (clipped
+    to 0..1), starting and ending at rest (Flash and Hogan, 1985)."""
     t = np.clip(tau, 0.0, 1.0)
     return cast(np.ndarray, 10 * t**3 - 15 * t**4 + 6 * t**5)
 
@@ -417,7 +419,7 @@ def _trajectories(
         start = contact_palm - u3 * dist
         start[2] = HAND_HEIGHT_M
         n_full = max(round(duration * fps), 4)
-        s = _min_jerk(np.arange(1, n_full + 1) / n_full) * aim
+        s = min_jerk(np.arange(1, n_full + 1) / n_full) * aim
         s = s[s < dist]
         hand_app = np.vstack([start + u3 * s[:, None], contact_palm[None]])
         hand_pre = np.repeat(start[None], _PRE_FRAMES, axis=0)

@@ -1,7 +1,7 @@
 """Publishing messages of one type on one key, as a `Delivery` says (runtime.bus.delivery).
 
 With `delivery.cache`, the publisher is a zenoh-ext advanced publisher that keeps its last `cache`
-samples for subscribers that recover (runtime.resilience.recovery), numbers them (sample miss
+samples for subscribers that recover (runtime.bus.recovery), numbers them (sample miss
 detection), sends a periodic heartbeat with the last number, and declares itself with a liveliness
 token (publisher detection). Without, it is a plain Zenoh publisher.
 
@@ -23,7 +23,7 @@ from zenoh import ext
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import RELIABLE, Delivery
 from beyond_self.runtime.bus.inbox import Inbox, direct_callback, undeclare
-from beyond_self.runtime.resilience.recovery import HEARTBEAT_S
+from beyond_self.runtime.bus.recovery import HEARTBEAT_S
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import encode, encode_into, wire_encoding
 

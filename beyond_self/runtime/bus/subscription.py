@@ -4,10 +4,9 @@ A subscription receives through a Zenoh FIFO channel, not a Python callback, so 
 thread never takes the GIL (a callback there makes a Python thread state per sample: 3x fewer
 samples per second). One drain thread per subscription blocks in `recv()` with the GIL released
 and hands each burst to the inbox (runtime.bus.inbox); a recovering delivery uses a zenoh-ext
-advanced
-subscriber instead (runtime.resilience.recovery). Decoding happens on the event loop when the
-consumer takes
-the sample, so no Zenoh thread runs user code. bench/bus.py measures it against raw zenoh-python.
+advanced subscriber instead (runtime.bus.recovery). Decoding happens on the event loop when the
+consumer takes the sample, so no Zenoh thread runs user code. bench/bus.py measures it against
+raw zenoh-python.
 """
 
 from __future__ import annotations
@@ -24,7 +23,7 @@ import zenoh
 
 from beyond_self.runtime.bus.delivery import RELIABLE, Delivery
 from beyond_self.runtime.bus.inbox import Inbox, undeclare
-from beyond_self.runtime.resilience.recovery import RecoveringSource
+from beyond_self.runtime.bus.recovery import RecoveringSource
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import SchemaError, decode, type_from_encoding
 from beyond_self.schemas.keys import type_for_key

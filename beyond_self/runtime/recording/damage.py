@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from beyond_self.runtime.resilience.accounting import bounded
+from beyond_self.runtime.error_account import bounded
 
 _SHOWN = 3  # damaged chunks described one by one in the line; the others are counted
 

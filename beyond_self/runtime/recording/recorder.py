@@ -8,9 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.error_account import LogOnce
 from beyond_self.runtime.log import event
 from beyond_self.runtime.recording.writer import DEFAULT_CHUNK_SIZE, RecordingWriter
-from beyond_self.runtime.resilience.accounting import LogOnce
 from beyond_self.schemas.codec import SchemaError
 
 log = logging.getLogger("beyond.record")

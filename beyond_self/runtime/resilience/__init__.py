@@ -1,2 +1,2 @@
-"""What makes a service survive crashes: exactly-once ledgers, snapshots, the source log,
-recovery from caches, processes bound to their supervisor, error accounting."""
+"""What makes a service survive crashes: exactly-once ledgers, snapshots, where a restored
+service resumes, the state folder and a run's state, the source log."""

@@ -1,4 +1,7 @@
-"""A service as a process: signals, the exit status, and leaving at once when done."""
+"""A service as a process: signals, the exit status, and leaving at once when done.
+
+The submodules hold the rest of what a process is: its heap settled after set-up (`heap`) and
+its bond to the supervisor that started it (`lifeline`)."""
 
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ from typing import Any, NoReturn
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.log import setup_logging
-from beyond_self.runtime.resilience import heap
+from beyond_self.runtime.process import heap
 
 
 def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
@@ -41,7 +44,7 @@ SWITCH_INTERVAL_S = 0.02
 def configure() -> None:
     """Set this process up as a service's own: logging, BLAS on one thread, the GIL's switch
     interval for one busy loop (`SWITCH_INTERVAL_S`) and the heap settled after set-up
-    (runtime.resilience.heap). Once; `run_to_completion` does it, a process started held
+    (runtime.process.heap). Once; `run_to_completion` does it, a process started held
     (services.launcher) before it waits."""
     import numpy  # noqa: F401  (loads OpenBLAS, so the limit reaches it)
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]

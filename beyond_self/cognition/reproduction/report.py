@@ -1,366 +1,19 @@
-"""The article's experiments (SPEC.md, 1–6) on the real data, as plain functions.
-
-Each `expN_*` function computes one experiment's numbers from a network and, where needed, the
-reference gesture models; `run_all` runs them in order and `write_report` turns the results into
-`report.md`, one PNG per figure and `results.json`. Everything here is deterministic.
-
-The experiments run on the default network (unseen word columns: P(absent) = 1). `published`
-re-runs every figure the article prints numbers for under each rule for unseen word columns
-(`UNSEEN_COMPARED`) and checks it against the article (cognition.published), so the report says
-which rule each figure needs: the article's Table II exists only under "zero", the toolbox's.
-"""
+"""The report of a reproduction: `report.md`, one PNG per figure and `results.json`
+(`write_report`), from what `run_all` returned."""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from beyond_self.cognition.bn.bag import load_bag
-from beyond_self.cognition.bn.definition import load_definition
-from beyond_self.cognition.bn.model import BayesNet, learn_network
-from beyond_self.cognition.descriptions import (
-    ScoredSentence,
-    nbest_exact,
-    nbest_from_file,
-    plot_nbest,
-)
-from beyond_self.cognition.fusion import ACTION, fuse, fuse_words
-from beyond_self.cognition.gestures.hmm import GestureModels, load_models
-from beyond_self.cognition.gestures.log_evidence import recognize_log
-from beyond_self.cognition.paths import SOURCES
-from beyond_self.cognition.published import (
-    FIG4,
-    FIG7_BARS,
-    FIG7A,
-    FIG7B,
-    FIG8,
-    TABLE_II,
-    Check,
-    Rows,
-    check_sentences,
-    check_table,
-    check_values,
-    check_word_bars,
-)
-from beyond_self.core.errors import InputError
-
-EXP1_OBSERVED = {"Size": "small", "Shape": "circle", "ObjVel": "slow"}
-EXP2_MIXES = ((1.0, 0.0), (0.75, 0.25), (0.5, 0.5), (0.25, 0.75), (0.0, 1.0))  # touch : tap
-EXP3_RECORDING = "tap_notable_seated_1"
-EXP3_FRAMES = (121, 214)
-EXP3_EVERY = 5
-EXP4_OBSERVED = {"Color": "yellow", "Size": "big", "Shape": "circle", "ObjVel": "fast"}
-EXP5_GRASP = {
-    "and": {"Action": "grasp", "ObjVel": "medium"},
-    "but": {"Action": "grasp", "ObjVel": "slow"},
-}
-EXP6_OBJECTS = (("green1", "box"), ("green2", "circle"))
-UNSEEN_COMPARED = ("absent", "zero")  # the default and the reference toolbox's semantics
-COLOUR_WORD = r"\b(green|yellow|blue)\b"
-
-REQUIRED_FILES = (
-    "salvi2012/networkDefinition.txt",
-    "salvi2012/sent-1-5_lab_aff_bag.txt",
-    "saponaro2019/human_data/HMM_M3_Q6_mixsplit.mat",
-    f"saponaro2019/human_data/{EXP3_RECORDING}/data.log",
-    "saponaro2019/sentence_10000samples_uniq.txt",
-)
-
-
-@dataclass(frozen=True)
-class Inputs:
-    """What the experiments run on: the network learned from the real data (`model`, default
-    rule for unseen word columns; `networks`, the same data under each of UNSEEN_COMPARED), the
-    reference gesture models, and the paths of the recording and sentence list."""
-
-    model: BayesNet
-    networks: Mapping[str, BayesNet]
-    gestures: GestureModels
-    recording: Path
-    sentences: Path
-
-
-def load_inputs(data: Path) -> Inputs:
-    missing = [f for f in REQUIRED_FILES if not (data / f).is_file()]
-    if missing:
-        raise InputError(
-            f"data folder {data} lacks {', '.join(missing)}; these files come from {SOURCES}"
-        )
-    definition = load_definition(data / "salvi2012/networkDefinition.txt")
-    dataset = load_bag(data / "salvi2012/sent-1-5_lab_aff_bag.txt", definition)
-    networks = {rule: learn_network(dataset, unseen=rule) for rule in UNSEEN_COMPARED}
-    gestures = load_models(data / "saponaro2019/human_data/HMM_M3_Q6_mixsplit.mat")
-    return Inputs(
-        model=networks["absent"],
-        networks=networks,
-        gestures=gestures,
-        recording=data / "saponaro2019/human_data" / EXP3_RECORDING,
-        sentences=data / "saponaro2019/sentence_10000samples_uniq.txt",
-    )
-
-
-def mix_label(vector: Sequence[float]) -> str:
-    """`[0, 0.25, 0.75]`: a P_HMM vector in grasp, tap, touch order, as the results keys it."""
-    return "[" + ", ".join(f"{x:g}" for x in vector) + "]"
-
-
-def _tap_vector(model: BayesNet, p_tap: float, other: str | None = None) -> list[float]:
-    """P_HMM with p_tap on tap and the rest shared equally (or all on `other`)."""
-    actions = model.values[ACTION]
-    rest = [a for a in actions if a != "tap"]
-    out = {"tap": p_tap}
-    for a in rest:
-        if other is None:
-            out[a] = (1.0 - p_tap) / len(rest)
-        else:
-            out[a] = (1.0 - p_tap) if a == other else 0.0
-    return [out[a] for a in actions]
-
-
-# -- experiment 1 ------------------------------------------------------------------------------
-
-
-def exp1(model: BayesNet) -> dict[str, Any]:
-    """Conflicting evidence: the network favours touch; where does tap gesture evidence win?
-
-    With P_HMM = (x on tap, (1-x)/2 on each other action), P_comb(a) ∝ P_BN(a) P_HMM(a), so tap is
-    the most probable exactly when x·P_BN(tap) > (1-x)/2·P_BN(o) for every other action o:
-    x > P_BN(o) / (2 P_BN(tap) + P_BN(o)). The threshold is the largest of those.
-    """
-    actions = model.values[ACTION]
-    p_bn = model.query(ACTION, EXP1_OBSERVED).table
-    tap = actions.index("tap")
-    bounds = [p_bn[i] / (2 * p_bn[tap] + p_bn[i]) for i in range(len(actions)) if i != tap]
-    threshold = float(max(bounds))
-    sweep = np.linspace(1 / 3, 1.0, 201)
-    curves = np.array(
-        [fuse(model, ACTION, EXP1_OBSERVED, _tap_vector(model, x)).table for x in sweep]
-    )
-    return {
-        "observed": EXP1_OBSERVED,
-        "actions": list(actions),
-        "pbn_action": p_bn.tolist(),
-        "tap_threshold": threshold,
-        "sweep": sweep.tolist(),
-        "pcomb": curves.tolist(),
-    }
-
-
-# -- experiment 2 ------------------------------------------------------------------------------
-
-
-def exp2(model: BayesNet) -> dict[str, dict[str, list[float]]]:
-    """P_comb(ObjVel | Shape, G) for touch/tap mixes of gesture evidence, and the network alone."""
-    actions = model.values[ACTION]
-    out: dict[str, dict[str, list[float]]] = {}
-    for shape in ("circle", "box"):
-        rows = {"none": model.query("ObjVel", {"Shape": shape}).table.tolist()}
-        for touch, tap in EXP2_MIXES:
-            vec = [{"touch": touch, "tap": tap}.get(a, 0.0) for a in actions]
-            rows[mix_label(vec)] = fuse(model, "ObjVel", {"Shape": shape}, vec).table.tolist()
-        out[shape] = rows
-    return out
-
-
-# -- experiment 3 ------------------------------------------------------------------------------
-
-
-def exp3(inputs: Inputs) -> dict[str, Any]:
-    """Effect anticipation on a recorded human tap, fused every EXP3_EVERY frames."""
-    model = inputs.model
-    first, last = EXP3_FRAMES
-    result, _ = recognize_log(inputs.gestures, inputs.recording, f"{first}:{last}")
-    actions = list(result.actions)
-    posterior = result.posterior
-    argmax = posterior.argmax(axis=1)
-    tap = actions.index("tap")
-    stays = len(argmax)
-    while stays > 0 and argmax[stays - 1] == tap:
-        stays -= 1
-    steps = [*range(EXP3_EVERY, len(result) + 1, EXP3_EVERY)]
-    if steps[-1] != len(result):
-        steps.append(len(result))
-    anticipation = anticipate(model, actions, posterior, steps)
-    final = _by_name(actions, posterior[-1])
-    words = fuse_words(model, {"Shape": "circle", "Size": "small"}, final)
-    return {
-        "frames": [first, last],
-        "actions": actions,
-        "loglik": result.loglik.tolist(),
-        "normalized": result.normalized.tolist(),
-        "posterior": posterior.tolist(),
-        "final_loglik": result.loglik[-1].tolist(),
-        "final_posterior": posterior[-1].tolist(),
-        # 1-based frame of the recording from which tap stays the most probable action
-        "tap_stays_argmax_from_frame": first + stays if stays < len(argmax) else None,
-        "tap_stays_argmax_from_gesture_frame": stays + 1 if stays < len(argmax) else None,
-        "steps": steps,
-        "anticipation": anticipation,
-        "description": [(s.sentence, s.score) for s in nbest_exact(words, 3)],
-    }
-
-
-def anticipate(
-    model: BayesNet, actions: Sequence[str], posterior: np.ndarray, steps: Sequence[int]
-) -> dict[str, list[list[float]]]:
-    """P_comb(ObjVel | Shape, Size=small, G_1^t) at the given gesture frames t, by shape."""
-    out: dict[str, list[list[float]]] = {}
-    for shape in ("circle", "box"):
-        observed = {"Shape": shape, "Size": "small"}
-        out[shape] = [
-            fuse(model, "ObjVel", observed, _by_name(actions, posterior[t - 1])).table.tolist()
-            for t in steps
-        ]
-    return out
-
-
-def _by_name(actions: Sequence[str], probs: Sequence[float]) -> dict[str, float]:
-    return {a: float(p) for a, p in zip(actions, probs, strict=True)}
-
-
-# -- experiments 4 to 6 ------------------------------------------------------------------------
-
-
-def exp4(model: BayesNet) -> dict[str, float]:
-    """ΔP(w) = P(w | X_obs, Action=tap) − P(w | X_obs)."""
-    with_tap = model.word_probabilities({**EXP4_OBSERVED, ACTION: "tap"})
-    without = model.word_probabilities(EXP4_OBSERVED)
-    return {w: with_tap[w] - without[w] for w in without}
-
-
-def exp5(inputs: Inputs, gesture: Mapping[str, float]) -> dict[str, Any]:
-    """N-best lists: the yellow ball with the recorded gesture; grasp with 'and' and with 'but'."""
-    model, sentences = inputs.model, inputs.sentences
-    gesture_words = fuse_words(model, EXP4_OBSERVED, gesture)
-    out: dict[str, Any] = {
-        "gesture": {
-            "file": nbest_from_file(sentences, gesture_words, 10, legacy_offset=True),
-            "exact": nbest_exact(gesture_words, 10),
-        }
-    }
-    for conj, observed in EXP5_GRASP.items():
-        words = model.word_probabilities(observed)
-        out[conj] = {
-            "file": nbest_from_file(sentences, words, 10, legacy_offset=True),
-            "exact": nbest_exact(words, 10),
-            "p_and": words["and"],
-            "p_but": words["but"],
-        }
-    return out
-
-
-def exp6(inputs: Inputs) -> dict[str, dict[str, str]]:
-    """The best sentence naming a colour, for grasp/touch on a green1 box and a green2 sphere."""
-    out: dict[str, dict[str, str]] = {}
-    for colour, shape in EXP6_OBJECTS:
-        for action in ("grasp", "touch"):
-            words = inputs.model.word_probabilities(
-                {ACTION: action, "Color": colour, "Shape": shape}
-            )
-            from_file = nbest_from_file(
-                inputs.sentences, words, 1, legacy_offset=True, require=COLOUR_WORD
-            )
-            exact = nbest_exact(words, 1, require=COLOUR_WORD)
-            out[f"{action} {colour} {shape}"] = {
-                "file": from_file[0].sentence if from_file else "",
-                "exact": exact[0].sentence if exact else "",
-            }
-    return out
-
-
-# -- the published figures under each rule for unseen word columns --------------------------
-
-
-def table2(model: BayesNet, sentences: Path) -> list[ScoredSentence]:
-    """Table II: the 10-best of the article's list for EXP4_OBSERVED, no action evidence."""
-    return nbest_from_file(
-        sentences, model.word_probabilities(EXP4_OBSERVED), 10, legacy_offset=True
-    )
-
-
-def published(inputs: Inputs, r3: Mapping[str, Any]) -> dict[str, Any]:
-    """Every figure the article prints numbers for, re-run under each rule in UNSEEN_COMPARED and
-    checked against the article; the two figures it only plots (3, 5) by how much the rules
-    change them. `r3` is experiment 3's result (its gesture posterior is reused)."""
-    gesture = (r3["actions"], np.array(r3["posterior"]), r3["steps"])
-    ours: dict[str, dict[str, Any]] = {}
-    for rule, model in inputs.networks.items():
-        rerun = replace(inputs, model=model)
-        e5 = exp5(rerun, _by_name(r3["actions"], r3["final_posterior"]))
-        ours[rule] = {
-            "table2": table2(model, inputs.sentences),
-            "fig7": {conj: e5[conj]["file"] for conj in EXP5_GRASP},
-            "fig7_bars": {conj: (e5[conj]["p_and"], e5[conj]["p_but"]) for conj in EXP5_GRASP},
-            "fig4": {
-                f"{shape} {k}": v for shape, rows in exp2(model).items() for k, v in rows.items()
-            },
-            "fig6": exp4(model),
-            "fig8": {k: v["file"] for k, v in exp6(rerun).items()},
-            "fig3": np.array(exp1(model)["pcomb"]),
-            "fig5": np.array([*anticipate(model, *gesture).values()]),
-        }
-    fig4 = {f"{shape} {k}": v for shape, rows in FIG4.items() for k, v in rows.items()}
-    checks: dict[str, Callable[[Mapping[str, Any]], Check]] = {
-        "Table II": lambda o: check_table(TABLE_II, o["table2"]),
-        "Fig. 7a (list)": lambda o: check_table(FIG7A, o["fig7"]["and"]),
-        "Fig. 7b (list)": lambda o: check_table(FIG7B, o["fig7"]["but"]),
-        "Fig. 7a/7b (bars)": lambda o: check_values(FIG7_BARS, o["fig7_bars"]),
-        "Fig. 4": lambda o: check_values(fig4, o["fig4"]),
-        "Fig. 6": lambda o: check_word_bars(o["fig6"]),
-        "Fig. 8": lambda o: check_sentences(FIG8, o["fig8"]),
-    }
-    figures: dict[str, dict[str, Any]] = {}
-    for name, check in checks.items():
-        by_rule = {rule: check(o) for rule, o in ours.items()}
-        figures[name] = {
-            "checks": {rule: c.as_dict() for rule, c in by_rule.items()},
-            "needs": [rule for rule, c in by_rule.items() if c.reproduced],
-        }
-    a, z = (ours[rule] for rule in UNSEEN_COMPARED)
-    for name, key in (("Fig. 3", "fig3"), ("Fig. 5", "fig5")):
-        figures[name] = {
-            "checks": {},
-            "rules_differ_by": float(np.max(np.abs(a[key] - z[key]))),
-        }
-    return {"figures": figures, "lists": {rule: _lists(o) for rule, o in ours.items()}}
-
-
-def _lists(o: Mapping[str, Any]) -> dict[str, list[ScoredSentence]]:
-    return {"Table II": o["table2"], "Fig. 7a": o["fig7"]["and"], "Fig. 7b": o["fig7"]["but"]}
-
-
-def run_all(data: Path, progress: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
-    progress("learning the network and loading the gesture models")
-    inputs = load_inputs(data)
-    progress("experiment 1: conflicting evidence")
-    r1 = exp1(inputs.model)
-    progress("experiment 2: effect prediction")
-    r2 = exp2(inputs.model)
-    progress("experiment 3: effect anticipation on a recorded tap")
-    r3 = exp3(inputs)
-    progress("experiment 4: word prediction")
-    r4 = exp4(inputs.model)
-    progress("experiment 5: N-best descriptions")
-    r5 = exp5(inputs, _by_name(r3["actions"], r3["final_posterior"]))
-    progress("experiment 6: object words")
-    r6 = exp6(inputs)
-    progress("the published figures under each rule for unseen word columns")
-    rp = published(inputs, r3)
-    return {
-        "data": str(data),
-        "exp1": r1,
-        "exp2": r2,
-        "exp3": r3,
-        "exp4": r4,
-        "exp5": r5,
-        "exp6": r6,
-        "published": rp,
-    }
+from beyond_self.cognition.descriptions import ScoredSentence, plot_nbest
+from beyond_self.cognition.published import FIG7A, FIG7B, TABLE_II, Rows
+from beyond_self.cognition.reproduction.exp3_anticipation import EXP3_EVERY
+from beyond_self.cognition.reproduction.inputs import EXP3_RECORDING, UNSEEN_COMPARED
 
 
 def _pairs(items: Sequence[ScoredSentence]) -> list[list[Any]]:
@@ -397,9 +50,6 @@ def results_json(r: Mapping[str, Any]) -> dict[str, Any]:
             for rule, lists in r["published"]["lists"].items()
         },
     }
-
-
-# -- the report ---------------------------------------------------------------------------------
 
 
 def _plots(r: Mapping[str, Any], out: Path) -> dict[str, str]:
@@ -545,6 +195,23 @@ def check_cell(check: Mapping[str, Any] | None) -> str:
     return f"{mark} ({what}max abs diff {check['max_abs_diff']:.1e})"
 
 
+def figures_table(figures: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """Each published figure's check under each rule and the rules it needs, as a Markdown
+    table: in the report, and on the docs' reproduce page from the committed results."""
+    first, second = UNSEEN_COMPARED
+    lines = [
+        f"| figure | `{first}` (default) | `{second}` (toolbox) | needs |",
+        "|---|---|---|---|",
+    ]
+    for name, figure in figures.items():
+        checks = figure["checks"]
+        lines.append(
+            f"| {name} | {check_cell(checks.get(first))} | {check_cell(checks.get(second))} | "
+            f"{needs_cell(figure)} |"
+        )
+    return lines
+
+
 def needs_cell(figure: Mapping[str, Any]) -> str:
     """Which unseen-column rule a published figure needs, as a table cell."""
     if "rules_differ_by" not in figure:
@@ -568,15 +235,8 @@ def _published_section(rp: Mapping[str, Any], plots: Mapping[str, str]) -> list[
         "same sentences in the same order with scores within 1e-5 (printed to 5 digits); bars, "
         "read from the article's own figure files, within 2e-5 (`cognition/published.py`).",
         "",
-        f"| figure | `{UNSEEN_COMPARED[0]}` (default) | `{UNSEEN_COMPARED[1]}` (toolbox) | needs |",
-        "|---|---|---|---|",
+        *figures_table(rp["figures"]),
     ]
-    for name, figure in rp["figures"].items():
-        checks = figure["checks"]
-        md.append(
-            f"| {name} | {check_cell(checks.get(UNSEEN_COMPARED[0]))} | "
-            f"{check_cell(checks.get(UNSEEN_COMPARED[1]))} | {needs_cell(figure)} |"
-        )
     md += [
         "",
         "Fig. 3 and Fig. 5 are plots without printed numbers; Fig. 5 is moreover a partial "

@@ -6,7 +6,7 @@ event means a gesture never described. So derived streams' publishers keep a cac
 gaps from it: delivered in order per publisher, each once, what no cache holds counted as
 `missed`. A plain subscriber beside it witnesses the live samples, so a delivered one it never
 saw is counted as `recovered`; it reads a ring channel, not a callback, to spare Zenoh's thread
-the GIL (docs/decisions.md). runtime.resilience.history_repair covers a zenoh-ext 1.10 history bug.
+the GIL (docs/decisions.md). runtime.bus.history_repair covers a zenoh-ext 1.10 history bug.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import zenoh
 from zenoh import ext
 
 from beyond_self.runtime.bus.delivery import Delivery
+from beyond_self.runtime.bus.history_repair import HistoryRepair
 from beyond_self.runtime.bus.inbox import Inbox, direct_callback, undeclare
-from beyond_self.runtime.resilience.history_repair import HistoryRepair
 
 log = logging.getLogger("beyond.recovery")
 

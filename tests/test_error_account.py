@@ -7,7 +7,7 @@ import logging
 import pytest
 
 from beyond_self.core.errors import InputError
-from beyond_self.runtime.resilience.accounting import ErrorAccount, shape
+from beyond_self.runtime.error_account import ErrorAccount, shape
 
 
 def test_one_problem_repeated_over_many_frames_is_logged_once(

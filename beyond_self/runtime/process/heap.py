@@ -22,8 +22,7 @@ _scheduled: weakref.WeakSet[asyncio.AbstractEventLoop] = weakref.WeakSet()
 
 
 def manage() -> None:
-    """This process is a service's own (runtime.resilience.process): settles take effect from now
-    on.
+    """This process is a service's own (runtime.process): settles take effect from now on.
 
     Only then: a process that hosts services among other work (a test run, a notebook) keeps
     the collector as it was, where a full collection at every service start would cost far more
