@@ -11,6 +11,9 @@ import pytest
 from beyond_self.cli import main
 from beyond_self.cognition.published import FIG7A, FIG7B, TABLE_II
 
+# these figures are computed again under a second OpenBLAS kernel (Makefile: numeric)
+pytestmark = pytest.mark.numeric
+
 
 @pytest.fixture(scope="module")
 def results(shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
