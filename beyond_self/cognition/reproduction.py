@@ -1,4 +1,4 @@
-"""The article's experiments (SPEC.md, 1–6) on the real data, as plain functions.
+"""The article's experiments 1–6 (docs/science/reproduce.md) on the real data, as plain functions.
 
 Each `expN_*` function computes one experiment's numbers from a network and, where needed, the
 reference gesture models; `run_all` runs them in order and `write_report` turns the results into
@@ -60,6 +60,12 @@ EXP5_GRASP = {
     "but": {"Action": "grasp", "ObjVel": "slow"},
 }
 EXP6_OBJECTS = (("green1", "box"), ("green2", "circle"))
+ARTICLE = (
+    "Saponaro, Jamone, Bernardino and Salvi, *Beyond the Self: Using Grounded Affordances to "
+    "Interpret and Describe Others' Actions*, IEEE Transactions on Cognitive and Developmental "
+    "Systems, 2019"
+)
+DOCS_PAGE = "the documentation's page *What `beyond reproduce` re-runs* (docs/science/reproduce.md)"
 UNSEEN_COMPARED = ("absent", "zero")  # the default and the reference toolbox's semantics
 COLOUR_WORD = r"\b(green|yellow|blue)\b"
 
@@ -89,7 +95,8 @@ def load_inputs(data: Path) -> Inputs:
     missing = [f for f in REQUIRED_FILES if not (data / f).is_file()]
     if missing:
         raise InputError(
-            f"data folder {data} lacks {', '.join(missing)}; these files come from {SOURCES}"
+            f"data folder {data} lacks {', '.join(missing)}; these files come from {SOURCES}; "
+            "give --data (or BEYOND_DATA) the folder that holds them"
         )
     definition = load_definition(data / "salvi2012/networkDefinition.txt")
     dataset = load_bag(data / "salvi2012/sent-1-5_lab_aff_bag.txt", definition)
@@ -627,12 +634,16 @@ def write_report(r: Mapping[str, Any], out: Path) -> Path:
     md = [
         "# Beyond the Self: the article's experiments, re-run",
         "",
+        f"The article: {ARTICLE}. What each section re-runs and how it compares with the "
+        f"article: {DOCS_PAGE}.",
+        "",
         f"Data: `{r['data']}`. Network learned from `salvi2012/sent-1-5_lab_aff_bag.txt` "
         "(K2/BIC; BDeu for affordance nodes, maximum likelihood for words, unseen parent "
         "configurations = word absent; section 7 re-runs the published figures with the "
         "reference toolbox's zero columns as well); gesture models: the article's "
         "`HMM_M3_Q6_mixsplit.mat` (3 Gaussians, 6 states; push used as touch). Fusion enters "
-        "P_HMM(A | G) as soft evidence on Action (equal to SPEC.md's formulas to 1e-12). "
+        "P_HMM(A | G) as soft evidence on Action (equal to the article's P_comb "
+        "formulas to 1e-12; the docs' science/fusion-and-grammar.md). "
         "N-best lists marked *article's list* re-score `sentence_10000samples_uniq.txt` with "
         "the reference code's (1 + Σ log P)/L offset; *exact* lists search all 9,331,200 "
         "sentences with the plain (1/L) Σ log P.",
