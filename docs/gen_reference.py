@@ -8,7 +8,9 @@ reference follows the parsers, `schemas/` and `bench/results/*.json` with no edi
 from __future__ import annotations
 
 import argparse
+import html
 import json
+import re
 import string
 import sys
 import tempfile
@@ -31,8 +33,18 @@ from beyond_self.schemas.base import Message  # noqa: E402
 # ---------------------------------------------------------------------------- command line
 
 
+_CODE_SPAN = re.compile(r"(`[^`]*`)")
+
+
+def _text(text: str) -> str:
+    """Markdown prose from a docstring or help text: `<`, `>` and `&` outside code spans are
+    characters, not HTML (`beyond/<robot>/...` would lose its `<robot>` as an unknown tag)."""
+    parts = _CODE_SPAN.split(text)
+    return "".join(p if i % 2 else html.escape(p, quote=False) for i, p in enumerate(parts))
+
+
 def _cell(text: str) -> str:
-    return " ".join(text.split()).replace("|", "\\|")
+    return _text(" ".join(text.split())).replace("|", "\\|")
 
 
 def _flags(action: argparse.Action) -> str:
@@ -229,12 +241,14 @@ def key_rows() -> list[tuple[str, str]]:
         for suffix, cls in keys.STREAMS.values()
     ]
     rows += [
-        (f"beyond/<robot>/{keys.ASK}", "query: `AffordanceQuery` in, `AffordanceAnswer` out"),
-        (f"beyond/<robot>/{keys.HEALTH}/<service>", "`ServiceHealth`, published and queryable"),
-        (f"beyond/<robot>/{keys.ALIVE}/<service>", "liveliness token of a running service"),
-        (f"beyond/<robot>/{keys.PROGRESS}/<service>", "`Progress`: sensor input handled"),
-        (f"beyond/<robot>/{keys.LEDGER}/<service>", "`Ledger`: identities handled (queryable)"),
+        (f"beyond/<robot>/{key}", f"query: `{ask.type_name()}` in, `{reply.type_name()}` out")
+        for key, (ask, reply) in keys.QUERIES.items()
     ]
+    rows += [
+        (f"beyond/<robot>/{chunk}/<service>", f"[`{cls.type_name()}`](#{cls.type_name().lower()})")
+        for chunk, cls in keys.PER_SERVICE.items()
+    ]
+    rows.append((f"beyond/<robot>/{keys.ALIVE}/<service>", "liveliness token of a service"))
     return rows
 
 
@@ -261,7 +275,9 @@ def messages_reference() -> str:
     types = message_types()
     for cls in types:
         name = cls.type_name()
-        where = _cell(schemas_cmd.where(cls))
+        found = schemas_cmd.keys_of(cls)
+        queries = ", ".join(f"`{k}`" for k in schemas_cmd.queries_of(cls))
+        where = ", ".join(f"`{k}`" for k in found) if found else f"(query/reply: {queries})"
         lines.append(
             f"| [`{name}`](#{name.lower()}) | {cls.VERSION} | "
             f"`{codec.wire_encoding(cls)}` | {where} |"
@@ -273,7 +289,7 @@ def messages_reference() -> str:
         doc = " ".join((cls.__doc__ or "").split())
         lines += [f"### `{name}` {{#{name.lower()}}}", ""]
         if doc:
-            lines += [doc, ""]
+            lines += [_text(doc), ""]
         stamps = ", ".join(f"`{p}`" for p in codec.stamp_paths(cls))
         lines += [
             f"Version {cls.VERSION}, wire encoding `{codec.wire_encoding(cls)}`, "
@@ -288,7 +304,7 @@ def messages_reference() -> str:
         doc = " ".join((cls.__doc__ or "").split())
         lines += [f"### `{name}` {{#{name.lower()}}}", ""]
         if doc and not doc.startswith(f"{name}("):
-            lines += [doc, ""]
+            lines += [_text(doc), ""]
         lines += _fields_table(cls)
     return "\n".join(lines) + "\n"
 

@@ -159,6 +159,7 @@ LONG_FILES = (
     "test_up_owns_children.py",
     "test_stray_messages.py",
     "test_docs_blocks.py",
+    "test_site_browser.py",
     "test_pipeline_up.py",
     "test_ros2_bridge.py",
     "test_damaged_recordings.py",

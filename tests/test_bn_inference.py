@@ -20,6 +20,9 @@ from beyond_self.cognition.bn import (
 from beyond_self.cognition.bn.definition import NetworkDefinition, Variable
 from beyond_self.core.errors import InputError
 
+# these figures are computed again under a second OpenBLAS kernel (Makefile: numeric)
+pytestmark = pytest.mark.numeric
+
 
 def tiny() -> BayesNet:
     """A -> B -> w, A -> v: small enough to enumerate by hand."""

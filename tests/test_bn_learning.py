@@ -16,6 +16,9 @@ from beyond_self.cognition.bn.reference import ReferenceNetwork, load_reference
 from beyond_self.cognition.bn.structure import CountingScorer, PgmpyScorer, k2_search
 from beyond_self.core.errors import InputError
 
+# these figures are computed again under a second OpenBLAS kernel (Makefile: numeric)
+pytestmark = pytest.mark.numeric
+
 
 @pytest.fixture(scope="module")
 def real(shared_data: Path) -> Dataset:

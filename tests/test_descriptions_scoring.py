@@ -20,6 +20,9 @@ from beyond_self.cognition.descriptions import (
 from beyond_self.cognition.grammar import DEFAULT_GRAMMAR
 from beyond_self.core.errors import InputError
 
+# these figures are computed again under a second OpenBLAS kernel (Makefile: numeric)
+pytestmark = pytest.mark.numeric
+
 
 def _probs(seed: int) -> dict[str, float]:
     rng = np.random.default_rng(seed)

@@ -1,17 +1,21 @@
-"""Every shell and Python block of the README and the docs runs as written, or says why not.
+"""Every shell and Python block of the README and the docs runs as a reader types it, or says why
+not.
 
-Each page's blocks run in order in a fresh temporary folder holding only links to the checkout's
-`recordings/` and `deploy/` (what a clone has beside the commands), with the installed `beyond`
-first on PATH and a bus port of the test's own. A block preceded by `<!-- not run: REASON -->` is
-skipped for that reason; `<!-- file: NAME -->` writes the block to NAME for the next blocks. A
-`text` block right after a block that runs is its output: each of its lines must be printed, in
-that order. What a block leaves running is stopped when it ends.
+A reader's shell: the environment of a fresh login (no .venv on PATH, no variable of ours, a
+home of its own) that ran the README's set-up block (`<!-- set-up: ... -->`, activating .venv),
+in a fresh copy of the clone (its tracked files, with the .venv `make` made), a new shell for
+each block. A block starts from a fresh copy unless marked `<!-- needs: WHAT -->`: then it runs
+after the blocks before it, in their copy. `<!-- not run: REASON -->` skips a block;
+`<!-- file: NAME -->` writes it to NAME. A `text` block right after a block that runs is its
+output: each of its lines must be printed, in that order. What a block leaves running is
+stopped when it ends. The one variable a reader lacks is the bus port of the test's own.
 """
 
 from __future__ import annotations
 
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -25,7 +29,7 @@ REPO = Path(__file__).resolve().parent.parent
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
 RUNNABLE = {"sh", "bash", "python"}
 FENCE = re.compile(r"^(\s*)```(\S*)\s*$")
-MARKER = re.compile(r"^\s*<!--\s*(not run|file):\s*(.*?)\s*-->\s*$")
+MARKER = re.compile(r"^\s*<!--\s*(not run|file|needs|set-up):\s*(.*?)\s*-->\s*$")
 BLOCK_TIMEOUT_S = 150
 
 
@@ -34,8 +38,8 @@ class Block:
     lang: str
     code: str
     line: int
-    marker: str = ""  # "", "not run" or "file"
-    argument: str = ""  # the reason, or the file's name
+    marker: str = ""  # "", "not run", "file", "needs" or "set-up"
+    argument: str = ""  # the reason, the file's name, or what it needs
     output: str | None = None  # the text block that follows, if any
 
 
@@ -120,6 +124,7 @@ def test_the_block_reader_finds_markers_outputs_and_indented_blocks() -> None:
         "<!-- not run: needs a robot -->\n```sh\nbeyond up\n```\n\n"
         "1. a step\n\n    ```sh\n    echo hi\n    ```\n\n    ```text\n    hi\n    ```\n\n"
         "<!-- file: a.py -->\n```python\nprint(1)\n```\n\nprose\n\n```text\nnot an output\n```\n"
+        "<!-- needs: a.py -->\n```sh\npython a.py\n```\n"
     )
     got = blocks(page)
     assert [(b.lang, b.marker, b.argument, b.output) for b in got] == [
@@ -127,27 +132,74 @@ def test_the_block_reader_finds_markers_outputs_and_indented_blocks() -> None:
         ("sh", "", "", "hi\n"),
         ("python", "file", "a.py", None),
         ("text", "", "", None),
+        ("sh", "needs", "a.py", None),
     ]
     assert got[1].code == "echo hi\n"
 
 
-def _environment() -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("BEYOND_")}
-    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+def set_up() -> str:
+    """The README's set-up blocks: what a reader's shell ran before any block of the docs."""
+    readme = blocks((REPO / "README.md").read_text(encoding="utf-8"))
+    return "".join(b.code for b in readme if b.marker == "set-up")
+
+
+def _reader_path() -> str:
+    """The machine's PATH without the test's virtual environment or anything in the checkout."""
+    ours = (Path(sys.prefix).resolve(), REPO)
+    kept = [
+        entry
+        for entry in os.environ.get("PATH", os.defpath).split(os.pathsep)
+        if entry and not any(Path(entry).resolve().is_relative_to(root) for root in ours)
+    ]
+    return os.pathsep.join(kept)
+
+
+def _environment(home: Path) -> dict[str, str]:
+    """A fresh login's environment; the bus port is the test's own (tests run side by side)."""
+    env = {"PATH": _reader_path(), "HOME": str(home), "SHELL": "/bin/bash"}
+    for name in ("LANG", "LC_ALL", "USER", "LOGNAME", "TZ"):
+        if name in os.environ:
+            env[name] = os.environ[name]
     env["BEYOND_ZENOH_PORT"] = str(free_port())
-    env.pop("PYTHONPATH", None)
     return env
+
+
+def _clone(folder: Path) -> Path:
+    """A fresh copy of the clone after its set-up: the checkout's files git knows of (tracked,
+    or new and not ignored), and `.venv`, the environment these tests run in."""
+    venv = Path(sys.prefix)
+    if not (venv / "bin" / "activate").is_file():
+        pytest.skip(f"the tests run in {venv}, not a virtual environment with bin/activate")
+    if shutil.which("git") is None or not (REPO / ".git").exists():
+        pytest.skip("git or the checkout's .git is absent: the clone's files are not known")
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        cwd=REPO,
+        capture_output=True,
+        check=True,
+    ).stdout.decode()
+    for rel in filter(None, listed.split("\0")):
+        src, dst = REPO / rel, folder / rel
+        if not src.is_symlink() and not src.is_file():
+            continue  # deleted in the working tree, or a submodule
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        if src.is_symlink():
+            dst.symlink_to(os.readlink(src))
+        else:
+            shutil.copy2(src, dst)
+    (folder / ".venv").symlink_to(venv, target_is_directory=True)
+    return folder
 
 
 def _run(
     block: Block, folder: Path, env: dict[str, str], n: int
 ) -> subprocess.CompletedProcess[str]:
+    code = block.code
     if block.lang == "python":
         script = folder / f"_block_{n}.py"
         script.write_text(block.code, encoding="utf-8")
-        command = [sys.executable, script.name]
-    else:
-        command = ["bash", "-euo", "pipefail", "-c", block.code]
+        code = f"python {script.name}\n"
+    command = ["bash", "-euo", "pipefail", "-c", set_up() + code]
     proc = subprocess.Popen(
         command,
         cwd=folder,
@@ -167,6 +219,33 @@ def _run(
                 break
         proc.wait()
     return subprocess.CompletedProcess(command, proc.returncode, out, err)
+
+
+def test_a_readers_shell_has_no_beyond_until_it_runs_the_set_up(tmp_path: Path) -> None:
+    """The shell the blocks run in finds `beyond` only through the README's set-up."""
+    folder = _clone(tmp_path / "clone")
+    env = _environment(tmp_path / "home")
+    bare = subprocess.run(
+        ["bash", "-c", "command -v beyond python || true"],
+        cwd=folder,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=30,
+    )
+    assert not any(line.startswith(sys.prefix) for line in bare.stdout.splitlines()), bare.stdout
+    assert set_up(), "README.md has no <!-- set-up: ... --> block"
+    found = _run(Block("sh", "command -v beyond\nbeyond --version\n", 0), folder, env, 0)
+    assert found.returncode == 0, found.stderr
+    where = Path(found.stdout.splitlines()[0]).parent.resolve()
+    assert where == (folder / ".venv" / "bin").resolve(), found.stdout  # .venv's own beyond
+
+
+def test_the_tutorial_sets_up_the_shell_as_the_readme_does() -> None:
+    tutorial = blocks((REPO / "docs" / "tutorial.md").read_text(encoding="utf-8"))
+    install = next(b for b in tutorial if "make demo" in b.code)
+    assert set_up() and set_up() in install.code
 
 
 def _printed_in_order(expected: str, printed: str) -> str | None:
@@ -198,18 +277,20 @@ RUN_PAGES = [
 @pytest.mark.slow
 @pytest.mark.parametrize("page", RUN_PAGES, ids=page_id)
 def test_the_blocks_run_as_written(page: Path, tmp_path: Path) -> None:
-    for name in ("recordings", "deploy"):
-        (tmp_path / name).symlink_to(REPO / name, target_is_directory=True)
-    env = _environment()
+    env = _environment(tmp_path / "home")
+    folder: Path | None = None
     ran = 0
     for n, block in enumerate(blocks(page.read_text(encoding="utf-8"))):
-        if block.lang not in RUNNABLE or block.marker == "not run":
+        if block.lang not in RUNNABLE or block.marker in ("not run", "set-up"):
             continue
-        if block.marker == "file":
-            (tmp_path / block.argument).write_text(block.code, encoding="utf-8")
-            continue
-        result = _run(block, tmp_path, env, n)
         where = f"{page_id(page)}:{block.line}"
+        if block.marker != "needs":
+            folder = _clone(tmp_path / f"clone-{n}")
+        assert folder is not None, f"{where}: needs {block.argument}, but no block ran before it"
+        if block.marker == "file":
+            (folder / block.argument).write_text(block.code, encoding="utf-8")
+            continue
+        result = _run(block, folder, env, n)
         assert result.returncode == 0, (
             f"{where} exited {result.returncode}\n{block.code}\nstdout:\n{result.stdout[-2000:]}"
             f"\nstderr:\n{result.stderr[-3000:]}"

@@ -20,6 +20,9 @@ from beyond_self.cognition.bn import (
 from beyond_self.cognition.fusion import fuse, fuse_marginals, fuse_words
 from beyond_self.core.errors import InputError
 
+# these figures are computed again under a second OpenBLAS kernel (Makefile: numeric)
+pytestmark = pytest.mark.numeric
+
 AFFORDANCE = ("Color", "Shape", "Size", "ObjVel", "ObjHandVel", "HandVel", "Contact")
 
 

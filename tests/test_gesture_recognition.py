@@ -17,6 +17,9 @@ from beyond_self.cognition.gestures.evaluation import (
 )
 from beyond_self.cognition.gestures.training import TrainingConfig
 
+# these figures are computed again under a second OpenBLAS kernel (Makefile: numeric)
+pytestmark = pytest.mark.numeric
+
 
 @pytest.fixture(scope="module")
 def held_out_report() -> EvaluationReport:

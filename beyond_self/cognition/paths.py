@@ -25,6 +25,9 @@ SOURCES = (
 )
 
 
+POINT_AT_IT = "set BEYOND_DATA to the folder that holds salvi2012/ and saponaro2019/"
+
+
 def shared_data_dir() -> Path | None:
     """The article's data folder if present: $BEYOND_DATA, else ../shared/data beside the repo."""
     env = os.environ.get("BEYOND_DATA")
@@ -42,11 +45,14 @@ def require_shared_data(relative: str = "") -> Path:
     if root is None:
         raise InputError(
             "the article's data folder was not found (looked in $BEYOND_DATA and "
-            f"{BESIDE_CHECKOUT}); get it from {SOURCES}"
+            f"{BESIDE_CHECKOUT}); get it from {SOURCES} and {POINT_AT_IT}"
         )
     path = root / relative
     if not path.exists():
-        raise InputError(f"missing data file {path}; it comes from {SOURCES}")
+        raise InputError(
+            f"missing data file {path}; it comes from {SOURCES} ($BEYOND_DATA or "
+            f"{BESIDE_CHECKOUT} is the folder that holds it)"
+        )
     return path
 
 

@@ -51,11 +51,14 @@ def run(args: argparse.Namespace) -> int:
     data = args.data or shared_data_dir()
     if data is None:
         raise InputError(
-            "no data folder: give --data DIR or put the article's data in ../shared/data; "
-            f"it comes from {SOURCES}"
+            "no data folder: give --data DIR, set BEYOND_DATA=DIR, or put the article's data "
+            f"in ../shared/data beside the project; it comes from {SOURCES}"
         )
     if not data.is_dir():
-        raise InputError(f"data folder {data} does not exist; it comes from {SOURCES}")
+        raise InputError(
+            f"data folder {data} does not exist; give --data (or BEYOND_DATA) the folder that "
+            f"holds salvi2012/ and saponaro2019/, which come from {SOURCES}"
+        )
     console = Console(stderr=True)
     start = time.perf_counter()
     with progress_bar(console) as progress:

@@ -16,7 +16,7 @@ import msgspec
 from beyond_self.core.errors import InputError
 from beyond_self.schemas import codec
 from beyond_self.schemas.base import Message
-from beyond_self.schemas.keys import HEALTH, PROGRESS, STREAMS
+from beyond_self.schemas.keys import PER_SERVICE, QUERIES, STREAMS
 
 HELP = "list the message types, or export their JSON Schemas and a page on the wire encoding"
 
@@ -29,28 +29,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def keys_of(cls: type[Message]) -> list[str]:
+    """The keys `cls` is published on or answered on (schemas.keys: STREAMS, PER_SERVICE)."""
     keys = [f"beyond/<robot>/{suffix}" for suffix, c in STREAMS.values() if c is cls]
-    if cls.type_name() == "ServiceHealth":
-        keys.append(f"beyond/<robot>/{HEALTH}/<service>")
-    if (
-        cls.type_name() == "Progress"
-    ):  # published, and answered by players (runtime.recording.pacing)
-        keys.append(f"beyond/<robot>/{PROGRESS}/<service>")
+    keys += [f"beyond/<robot>/{chunk}/<service>" for chunk, c in PER_SERVICE.items() if c is cls]
     return keys
 
 
+def queries_of(cls: type[Message]) -> list[str]:
+    """The query keys `cls` is the request or the reply of (schemas.keys.QUERIES)."""
+    return [f"beyond/<robot>/{key}" for key, pair in QUERIES.items() if cls in pair]
+
+
 def where(cls: type[Message]) -> str:
-    """The keys a type travels on, or the exchange it belongs to."""
+    """The keys a type travels on, or the query it is the request or the reply of."""
     keys = keys_of(cls)
     if keys:
         return ", ".join(keys)
-    return "(query/reply: beyond/<robot>/affordance/ask)"
+    return f"(query/reply: {', '.join(queries_of(cls))})"
+
+
+def _queries_cell(cls: type[Message]) -> str:
+    return f"(query/reply: {', '.join(f'`{k}`' for k in queries_of(cls))})"
 
 
 def _page(types: list[type[Message]]) -> str:
     rows = "\n".join(
         f"| `{c.type_name()}` | {c.VERSION} | `{codec.wire_encoding(c)}` | "
-        f"{', '.join(f'`{k}`' for k in keys_of(c)) or where(c)} | "
+        f"{', '.join(f'`{k}`' for k in keys_of(c)) or _queries_cell(c)} | "
         f"`{c.schema_name()}.json` |"
         for c in types
     )

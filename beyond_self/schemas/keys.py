@@ -46,6 +46,16 @@ HEALTH = "health"  # beyond/<robot>/health/<service>: ServiceHealth (published a
 ALIVE = "alive"  # beyond/<robot>/alive/<service>: liveliness tokens
 PROGRESS = "progress"  # beyond/<robot>/progress/<service>: Progress (sensor inputs handled)
 LEDGER = "ledger"  # beyond/<robot>/ledger/<service>: Ledger (identities handled; queryable)
+# one key per service, beyond/<robot>/<chunk>/<service>: the type each carries
+PER_SERVICE: dict[str, type[Message]] = {
+    HEALTH: m.ServiceHealth,
+    PROGRESS: m.Progress,
+    LEDGER: m.Ledger,
+}
+# queries, beyond/<robot>/<suffix>: (the request's type, the reply's type)
+QUERIES: dict[str, tuple[type[Message], type[Message]]] = {
+    ASK: (m.AffordanceQuery, m.AffordanceAnswer),
+}
 
 
 def check_name(kind: str, name: str) -> str:
@@ -241,12 +251,9 @@ def type_for_key(key: str) -> type[Message] | None:
     for stream_suffix, cls in STREAMS.values():
         if suffix == stream_suffix:
             return cls
-    if suffix.startswith(f"{HEALTH}/") and suffix.count("/") == 1:
-        return m.ServiceHealth
-    if suffix.startswith(f"{PROGRESS}/") and suffix.count("/") == 1:
-        return m.Progress
-    if suffix.startswith(f"{LEDGER}/") and suffix.count("/") == 1:
-        return m.Ledger
+    chunk, _, service = suffix.partition("/")
+    if service and "/" not in service:
+        return PER_SERVICE.get(chunk)
     return None
 
 

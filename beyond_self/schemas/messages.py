@@ -1,8 +1,8 @@
 """Every message type on the bus, one Struct each.
 
-Field names follow the article's variables (SPEC.md): effect variables ObjVel, HandVel, ObjHandVel,
-Contact; object features Color, Size, Shape with their cluster labels. Distributions are
-`dict[value, probability]` so a reader needs no side table to know what each number means.
+Field names follow the article's variables (docs/science/index.md): effect variables ObjVel,
+HandVel, ObjHandVel, Contact; object features Color, Size, Shape with their cluster labels.
+Distributions are `dict[value, probability]`: a reader needs no side table for the numbers.
 The two camera types are field-for-field Foxglove's well-known `foxglove.RawImage` and
 `foxglove.CompressedImage` (plus our header), so recordings display in Foxglove as they are.
 """

@@ -156,7 +156,7 @@ def build_evidence(model: BayesNet, evidence: Evidence) -> NetworkEvidence:
     """Evidence by name → hard values and soft vectors in `model`'s definition order.
 
     Gesture evidence becomes soft evidence on the action (`cognition.fusion.action_vector`,
-    SPEC.md's P_comb), so with it the action may be neither observed nor soft evidence."""
+    the article's P_comb), so with it the action may be neither observed nor soft evidence."""
     observed: dict[str, str] = {}
     for name, value in evidence.hard.items():
         model.definition[name].index(value)  # unknown variable or value: InputError

@@ -108,7 +108,8 @@ class PgmpyScorer:
 
 
 def candidate_parents(dataset: Dataset, roots: Sequence[str]) -> dict[int, tuple[int, ...]]:
-    """Which nodes each node may choose parents from (the K2 order restricted as SPEC.md says)."""
+    """Which nodes each node may choose parents from (the K2 order restricted as the article
+    does, docs/science/network.md)."""
     definition = dataset.definition
     root_set = set(roots)
     for name in roots:

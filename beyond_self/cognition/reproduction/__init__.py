@@ -1,4 +1,4 @@
-"""The article's experiments (SPEC.md, 1–6) on the real data, as plain functions.
+"""The article's experiments 1–6 (docs/science/reproduce.md) on the real data, as plain functions.
 
 One module per experiment (`exp1_conflict` ... `exp6_colours`), each computing its numbers from
 the network and, where needed, the reference gesture models (`inputs`); `run_all` (`run`) runs

@@ -1,5 +1,5 @@
 """Experiment 1, conflicting evidence: the network favours touch; from how much gesture
-evidence on tap does tap win (SPEC.md)?"""
+evidence on tap does tap win (docs/science/reproduce.md)?"""
 
 from __future__ import annotations
 

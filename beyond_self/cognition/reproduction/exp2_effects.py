@@ -1,5 +1,5 @@
 """Experiment 2, effect prediction: P_comb(ObjVel | Shape, G) for mixes of touch and tap
-evidence, and the network alone (SPEC.md)."""
+evidence, and the network alone (docs/science/reproduce.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Experiment 3, effect anticipation: a recorded human tap recognised frame by frame, and the
-effects anticipated from it as the gesture unfolds (SPEC.md)."""
+effects anticipated from it as the gesture unfolds (docs/science/reproduce.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Experiment 4, word prediction: how much each word's probability moves when the action is
-known to be a tap (SPEC.md)."""
+known to be a tap (docs/science/reproduce.md)."""
 
 from __future__ import annotations
 

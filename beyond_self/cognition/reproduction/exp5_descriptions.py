@@ -1,5 +1,5 @@
 """Experiment 5, N-best descriptions: of the yellow ball with the recorded gesture, and of a
-grasp said with 'and' or with 'but' (SPEC.md)."""
+grasp said with 'and' or with 'but' (docs/science/reproduce.md)."""
 
 from __future__ import annotations
 

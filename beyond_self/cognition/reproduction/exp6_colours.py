@@ -1,5 +1,5 @@
 """Experiment 6, object words: the best sentence naming a colour, for grasp and touch on two
-green objects (SPEC.md)."""
+green objects (docs/science/reproduce.md)."""
 
 from __future__ import annotations
 

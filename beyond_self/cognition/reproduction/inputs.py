@@ -46,7 +46,8 @@ def load_inputs(data: Path) -> Inputs:
     missing = [f for f in REQUIRED_FILES if not (data / f).is_file()]
     if missing:
         raise InputError(
-            f"data folder {data} lacks {', '.join(missing)}; these files come from {SOURCES}"
+            f"data folder {data} lacks {', '.join(missing)}; these files come from {SOURCES}; "
+            "give --data (or BEYOND_DATA) the folder that holds them"
         )
     definition = load_definition(data / "salvi2012/networkDefinition.txt")
     dataset = load_bag(data / "salvi2012/sent-1-5_lab_aff_bag.txt", definition)

@@ -15,6 +15,13 @@ from beyond_self.cognition.published import FIG7A, FIG7B, TABLE_II, Rows
 from beyond_self.cognition.reproduction.exp3_anticipation import EXP3_EVERY
 from beyond_self.cognition.reproduction.inputs import EXP3_RECORDING, UNSEEN_COMPARED
 
+ARTICLE = (
+    "Saponaro, Jamone, Bernardino and Salvi, *Beyond the Self: Using Grounded Affordances to "
+    "Interpret and Describe Others' Actions*, IEEE Transactions on Cognitive and Developmental "
+    "Systems, 2019"
+)
+DOCS_PAGE = "the documentation's page *What `beyond reproduce` re-runs* (docs/science/reproduce.md)"
+
 
 def _pairs(items: Sequence[ScoredSentence]) -> list[list[Any]]:
     return [[s.sentence, round(s.score, 5)] for s in items]
@@ -287,12 +294,16 @@ def write_report(r: Mapping[str, Any], out: Path) -> Path:
     md = [
         "# Beyond the Self: the article's experiments, re-run",
         "",
+        f"The article: {ARTICLE}. What each section re-runs and how it compares with the "
+        f"article: {DOCS_PAGE}.",
+        "",
         f"Data: `{r['data']}`. Network learned from `salvi2012/sent-1-5_lab_aff_bag.txt` "
         "(K2/BIC; BDeu for affordance nodes, maximum likelihood for words, unseen parent "
         "configurations = word absent; section 7 re-runs the published figures with the "
         "reference toolbox's zero columns as well); gesture models: the article's "
         "`HMM_M3_Q6_mixsplit.mat` (3 Gaussians, 6 states; push used as touch). Fusion enters "
-        "P_HMM(A | G) as soft evidence on Action (equal to SPEC.md's formulas to 1e-12). "
+        "P_HMM(A | G) as soft evidence on Action (equal to the article's P_comb "
+        "formulas to 1e-12; the docs' science/fusion-and-grammar.md). "
         "N-best lists marked *article's list* re-score `sentence_10000samples_uniq.txt` with "
         "the reference code's (1 + Σ log P)/L offset; *exact* lists search all 9,331,200 "
         "sentences with the plain (1/L) Σ log P.",

@@ -1,0 +1,59 @@
+"""`make test` runs the numeric tests on a second OpenBLAS kernel, before its main run
+(tests/other_kernel.py): the kernel it picks is really another one, and the step is there."""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import pytest
+from other_kernel import Choice, choose, kernel
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def test_the_second_run_uses_another_kernel_than_the_main_run() -> None:
+    env = dict(os.environ)
+    choice = choose(env)
+    if isinstance(choice, str):
+        pytest.skip(choice)  # off x86-64, or no OpenBLAS: nothing to choose from
+    assert isinstance(choice, Choice)
+    assert choice.kernel != choice.current
+    assert kernel(choice.env) == choice.kernel  # what the pytest it starts runs under
+    assert choice.env["OPENBLAS_CORETYPE"] == choice.coretype
+
+
+def test_a_set_coretype_is_the_main_runs_and_is_not_picked_again() -> None:
+    choice = choose({**os.environ, "OPENBLAS_CORETYPE": "Prescott"})
+    if isinstance(choice, str):
+        pytest.skip(choice)
+    assert choice.coretype != "Prescott" and choice.kernel != choice.current
+
+
+def test_make_test_runs_the_numeric_tests_on_it_before_its_last_step() -> None:
+    makefile = (REPO / "Makefile").read_text(encoding="utf-8")
+    steps = re.search(r"^test: (.*)$", makefile, re.M)
+    assert steps is not None
+    order = steps[1].split()
+    assert order[-1] == "pytest"  # its summary line ends the output CI reads
+    assert "numeric-other-kernel" in order
+    recipe = re.search(r"^numeric-other-kernel:.*\n\t(.*)$", makefile, re.M)
+    assert recipe is not None and "tests/other_kernel.py" in recipe[1]
+
+
+def test_the_numeric_tests_are_the_sciences_figures() -> None:
+    marked = {
+        p.name
+        for p in (REPO / "tests").glob("test_*.py")
+        if "pytest.mark.numeric" in p.read_text(encoding="utf-8")
+    }
+    assert {
+        "test_reproduction.py",  # the article's experiments
+        "test_docs_reference.py",  # the committed figures
+        "test_bn_zero_columns.py",  # Table II
+        "test_bn_learning.py",
+        "test_bn_inference.py",
+        "test_gesture_models.py",  # the HMMs' training
+        "test_gesture_streaming.py",
+    } <= marked
