@@ -5,7 +5,7 @@ Measured on one core (the process pinned, BLAS on one thread), on a real video o
 video (tracking) mode as `beyond video` and `up --video/--camera` run it:
 
 - ours: a frame through `cognition.pose` (MediaPipe's BlazePose, full model) and into the
-  messages the ingest publishes for it (services.pose_source.person_messages: the image as
+  messages the ingest publishes for it (runtime.recording.person.person_messages: the image as
   JPEG, the skeleton, the pose in the image), encoded for the bus;
 - reference, same run, same frames: the bare model (`Pose.process`, nothing around it);
 - the budget: 30 frames per second, a camera's rate;
@@ -40,9 +40,9 @@ from beyond_self.cognition.pose.video import Video  # noqa: E402
 from beyond_self.runtime.bus.config import BusConfig  # noqa: E402
 from beyond_self.runtime.bus.delivery import Delivery  # noqa: E402
 from beyond_self.runtime.bus.session import Bus  # noqa: E402
+from beyond_self.runtime.recording.person import PersonFrame, person_messages  # noqa: E402
 from beyond_self.schemas import Header, Message, SkeletonFrame  # noqa: E402
 from beyond_self.schemas.codec import encode  # noqa: E402
-from beyond_self.services.pose_source import PersonFrame, person_messages  # noqa: E402
 
 # protobuf 4.25 deprecates a call MediaPipe 0.10.14 makes for every result (the bare model too)
 warnings.filterwarnings("ignore", message="SymbolDatabase.GetPrototype")

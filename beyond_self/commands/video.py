@@ -24,10 +24,10 @@ from beyond_self.cognition.pose.video import Video
 from beyond_self.cognition.scene import EPOCH_NS
 from beyond_self.commands import argtypes
 from beyond_self.commands.terminal import progress_bar
+from beyond_self.runtime.recording.person import PersonFrame, person_messages
 from beyond_self.runtime.recording.writer import RecordingWriter
 from beyond_self.schemas import Header, Message
 from beyond_self.schemas.keys import DEFAULT_ROBOT, Keys
-from beyond_self.services.pose_source import PersonFrame, person_messages
 
 HELP = "turn a video of a person into a recording (skeleton from a pose model + the images)"
 

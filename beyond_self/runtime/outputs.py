@@ -1,15 +1,12 @@
-"""Where a run leaves what it writes (the speech service's WAVs and its `speech.log`, the ROS 2
+"""Where a run leaves what it writes (the speech service's WAVs and `speech.log`, the ROS 2
 bridge's `said.log`, the run state of `beyond up`, gesture evaluation plots by default).
 
 The rule of every command: nothing goes into the current folder unless a path given says so
-(`-o`, `--out-dir`); what is written without one goes under this folder; and a folder given is
-made when the command has something to write into it, so one that fails first leaves none.
-
-The folder: a state folder of the user's, never the current folder, which may be anyone's (a
-checkout, a home, a folder a wheel's demo was started from): `$BEYOND_OUT_DIR` when set (what
-`beyond up --out-dir DIR` sets for the services it starts), else `$XDG_STATE_HOME/beyond`, else
-`~/.local/state/beyond` (the XDG base directory default). Each service writes into a folder of
-its own name below it (`speech/`); a service's own option (`out_dir`) still wins.
+(`-o`, `--out-dir`); what is written without one goes under this folder, a state folder of the
+user's: `$BEYOND_OUT_DIR` when set (what `beyond up --out-dir DIR` sets for its services), else
+`$XDG_STATE_HOME/beyond`, else `~/.local/state/beyond`. A folder given is made when the command
+has something to write into it, so one that fails first leaves none. Each service writes into a
+folder of its own name below it (`speech/`); a service's own option (`out_dir`) still wins.
 """
 
 from __future__ import annotations

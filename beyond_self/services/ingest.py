@@ -30,6 +30,7 @@ from beyond_self.runtime.log import event
 from beyond_self.runtime.recording.damage import Losses
 from beyond_self.runtime.recording.images import message_from_image
 from beyond_self.runtime.recording.pacing import DEFAULT_WINDOW_S, Pacer
+from beyond_self.runtime.recording.person import PersonFrame, person_messages
 from beyond_self.runtime.recording.reader import read_recording, require_mcap, scan_recording
 from beyond_self.runtime.recording.replay import Cue, Player, looped, recorded_cues
 from beyond_self.runtime.recording.replay_control import rate_option
@@ -50,7 +51,7 @@ from beyond_self.schemas import (
 )
 from beyond_self.schemas.keys import split_key, with_robot
 from beyond_self.services.plugins import joints_of, load_plugin
-from beyond_self.services.pose_source import PersonFrame, PoseCounts, person_messages
+from beyond_self.services.pose_source import PoseCounts
 
 
 class SensorIngest(Service):

@@ -1,15 +1,13 @@
 """A ROS 2 body tracker and camera as the pipeline's live source: the ingest's plug-in
 (`beyond up --live-source beyond_self.services.ros2_source:source`) reads body markers (the
 Azure Kinect driver's MarkerArray), openni_tracker's TF frames and a camera (Image or
-CompressedImage) from an rmw_zenoh graph, and yields skeleton joints and RGB images with their
-own stamps, which the ingest publishes as any live source's. Where and what it reads are environment
-variables (a plug-in takes no arguments): BEYOND_ROS2_CONNECT, ROS_DOMAIN_ID, and the topics
-BEYOND_ROS2_SKELETON, BEYOND_ROS2_TF, BEYOND_ROS2_CAMERA (compressed) or
-BEYOND_ROS2_CAMERA_RAW, and BEYOND_ROS2_PERSON_CAMERA (Image or CompressedImage: a camera
-watching the person); a topic set to "" is not read. The person's camera goes through the pose
-model (cognition.pose, the `camera` extra) as `beyond up --camera` does; with no skeleton and no
-TF topic read (an RGB-only robot), the camera is the person's. Samples convert as a bag's do
-(runtime.ros2.convert: the Azure Kinect driver's axes turned into ours)."""
+CompressedImage) and yields skeleton joints and RGB images with their own stamps. Where and what
+it reads are environment variables (a plug-in takes no arguments): BEYOND_ROS2_CONNECT,
+ROS_DOMAIN_ID, BEYOND_ROS2_SKELETON, BEYOND_ROS2_TF, BEYOND_ROS2_CAMERA (compressed),
+BEYOND_ROS2_CAMERA_RAW and BEYOND_ROS2_PERSON_CAMERA (a camera watching the person, through the
+pose model as `beyond up --camera`; with no skeleton and no TF topic read, the camera is the
+person's); a topic set to "" is not read. Samples convert as a bag's do (runtime.ros2.convert).
+"""
 
 from __future__ import annotations
 
@@ -74,7 +72,7 @@ class PersonCamera:
 
     async def item(self, image: tuple[int, Any]) -> tuple[str, Any, int]:
         from beyond_self.cognition.pose.estimator import PoseEstimator
-        from beyond_self.services.pose_source import PersonFrame
+        from beyond_self.runtime.recording.person import PersonFrame
 
         stamp, rgb = image
         if self.estimator is None:

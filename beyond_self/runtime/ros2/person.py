@@ -25,7 +25,7 @@ class PersonCamera:
         self.seqs: dict[type[Message], int] = {}
 
     def messages(self, image: tuple[int, np.ndarray]) -> list[tuple[str, Message]]:
-        from beyond_self.services.pose_source import PersonFrame, person_messages
+        from beyond_self.runtime.recording.person import PersonFrame, person_messages
 
         stamp, rgb = image
 
