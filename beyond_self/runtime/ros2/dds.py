@@ -1,0 +1,176 @@
+"""A ROS 2 node on DDS, ROS 2's default middleware, with no ROS installed: one Cyclone DDS
+participant whose topics are named and typed as rmw names them (`rt/<topic>`,
+`<pkg>::msg::dds_::<Type>_`), with each topic's ROS 2 QoS, the type hash in each endpoint's
+user data (`typehash=RIHS01_...;`) and the node and its endpoints' GIDs on
+`ros_discovery_info`, as rmw does since Iron. Samples are rosbags' CDR bytes, written and
+taken as they are (runtime.ros2.idl gives the topic types)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from cyclonedds._clayer import ddspy_take, ddspy_write_ts
+from cyclonedds.core import DDSException, InstanceState, Listener, SampleState, ViewState
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from beyond_self.runtime.ros2.convert import serialize, store, type_hash
+from beyond_self.runtime.ros2.idl import idl_type
+from beyond_self.schemas import ros2 as r
+
+DISCOVERY_TOPIC = "ros_discovery_info"
+PARTICIPANT_INFO = "rmw_dds_common/msg/ParticipantEntitiesInfo"
+ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+TAKE = 64  # samples taken per call
+LINGER = duration(seconds=2)  # the longest close waits for acknowledgements
+
+
+def topic_name(topic: str) -> str:
+    """rmw's DDS topic of a ROS 2 topic: `/robot/description` -> `rt/robot/description`."""
+    return "rt/" + r.check_topic(topic).strip("/")
+
+
+def dds_qos(qos: r.Qos, ros_type: str | None) -> Qos:
+    """A ROS 2 QoS profile as rmw sets it on a DDS endpoint: reliability, durability, keep-last
+    depth, XCDR1 (ROS 2's CDR), and the type hash in the endpoint's user data."""
+    policies: list[Any] = [
+        Policy.Reliability.Reliable(duration(milliseconds=100))
+        if qos.reliable
+        else Policy.Reliability.BestEffort,
+        Policy.Durability.TransientLocal if qos.transient_local else Policy.Durability.Volatile,
+        Policy.History.KeepLast(qos.depth),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+    ]
+    if ros_type is not None:
+        policies.append(Policy.Userdata(f"typehash={type_hash(ros_type)};".encode()))
+    return Qos(*policies)
+
+
+def padded(cdr: bytes) -> bytes:
+    """CDR padded to 4 bytes, the padding counted in the encapsulation options (XTypes 7.6.3)."""
+    pad = -len(cdr) % 4
+    if not pad:
+        return cdr
+    return cdr[:3] + bytes([cdr[3] | pad]) + cdr[4:] + b"\0" * pad
+
+
+def unpadded(cdr: bytes) -> bytes:
+    """CDR without the padding its encapsulation options count."""
+    pad = cdr[3] & 3 if len(cdr) >= 4 else 0
+    return cdr[: len(cdr) - pad] if pad else cdr
+
+
+@dataclass
+class DdsPublisher:
+    """One ROS 2 publisher: CDR in, one DDS sample out, its source timestamp the stamp."""
+
+    writer: DataWriter[Any]
+    gid: bytes
+
+    def put(self, cdr: bytes, stamp: int) -> None:
+        status = ddspy_write_ts(self.writer._ref, padded(cdr), stamp)
+        if status < 0:
+            raise DDSException(status, f"writing a sample on {self.writer.topic.name}")
+
+
+class DdsNode:
+    """A node `name` in namespace `namespace` of ROS 2 domain `domain` over DDS; `config` is
+    Cyclone's configuration (runtime.ros2.rmw.cyclone_config), None for Cyclone's own."""
+
+    def __init__(self, name: str, namespace: str, *, domain: int, config: str | None) -> None:
+        self.name, self.namespace, self.domain = r.ros_name(name), namespace, domain
+        self._domain = Domain(domain, config) if config is not None else None
+        self.participant = DomainParticipant(domain, qos=Qos(Policy.Userdata(b"enclave=/;")))
+        self._topics: dict[str, Topic[Any]] = {}
+        self._readers: list[DataReader[Any]] = []
+        self._listeners: list[Listener] = []  # kept alive as long as their readers
+        self._writers: list[DataWriter[Any]] = []
+        self._gids: dict[str, list[bytes]] = {"reader": [], "writer": []}
+        self._lock = threading.Lock()
+        info = Topic(self.participant, DISCOVERY_TOPIC, idl_type(PARTICIPANT_INFO))
+        discovery = r.Qos(reliable=True, transient_local=True, depth=1)
+        self._info = DataWriter(self.participant, info, dds_qos(discovery, None))
+        self._announce()
+
+    def _topic(self, topic: str, ros_type: str) -> Topic[Any]:
+        name = topic_name(topic)
+        found = self._topics.get(name)
+        if found is None:
+            found = self._topics[name] = Topic(self.participant, name, idl_type(ros_type))
+        return found
+
+    def _announce(self) -> None:
+        """This participant's nodes and their endpoints' GIDs on ros_discovery_info."""
+        t = store().types
+
+        def gid(raw: bytes) -> Any:
+            return t["rmw_dds_common/msg/Gid"](data=np.frombuffer(raw, np.uint8))
+
+        node = t["rmw_dds_common/msg/NodeEntitiesInfo"](
+            node_namespace=self.namespace, node_name=self.name,
+            reader_gid_seq=[gid(g) for g in self._gids["reader"]],
+            writer_gid_seq=[gid(g) for g in self._gids["writer"]],
+        )  # fmt: skip
+        info = t[PARTICIPANT_INFO](
+            gid=gid(self.participant.guid.bytes), node_entities_info_seq=[node]
+        )
+        self._write(self._info, serialize(PARTICIPANT_INFO, info))
+
+    @staticmethod
+    def _write(writer: DataWriter[Any], cdr: bytes) -> None:
+        from time import time_ns
+
+        ddspy_write_ts(writer._ref, padded(cdr), time_ns())
+
+    def publisher(self, topic: str, ros_type: str, qos: r.Qos) -> DdsPublisher:
+        writer = DataWriter(self.participant, self._topic(topic, ros_type), dds_qos(qos, ros_type))
+        self._writers.append(writer)
+        gid = writer.guid.bytes
+        self._gids["writer"].append(gid)
+        self._announce()
+        return DdsPublisher(writer, gid)
+
+    def subscribe(
+        self, topic: str, ros_type: str, qos: r.Qos, handler: Callable[[bytes], None]
+    ) -> None:
+        """`handler(cdr)` for every sample on the topic (on Cyclone's thread)."""
+
+        def on_data_available(reader: DataReader[Any]) -> None:
+            with self._lock:
+                taken = ddspy_take(reader._ref, ANY, TAKE)
+            if isinstance(taken, int):
+                return
+            for data, info in taken:
+                if info.valid_data:
+                    handler(unpadded(bytes(data)))
+
+        listener = Listener(on_data_available=on_data_available)  # type: ignore[no-untyped-call]
+        reader = DataReader(
+            self.participant, self._topic(topic, ros_type), dds_qos(qos, ros_type),
+            listener=listener,
+        )  # fmt: skip
+        self._readers.append(reader)
+        self._listeners.append(listener)
+        self._gids["reader"].append(reader.guid.bytes)
+        self._announce()
+
+    def close(self) -> None:
+        """Leave the graph once every matched reliable reader has acknowledged what was
+        written (a sentence said just before the end still arrives), at most LINGER."""
+        for writer in self._writers:
+            writer.wait_for_acks(LINGER)
+        self._readers.clear()
+        self._listeners.clear()
+        self._writers.clear()
+        self._topics.clear()
+        self.participant.__del__()
+        if self._domain is not None:
+            self._domain.__del__()
