@@ -3,10 +3,12 @@ participant whose topics are named and typed as rmw names them (`rt/<topic>`,
 `<pkg>::msg::dds_::<Type>_`), with each topic's ROS 2 QoS, the type hash in each endpoint's
 user data (`typehash=RIHS01_...;`) and the node and its endpoints' GIDs on
 `ros_discovery_info`, as rmw does since Iron. Samples are rosbags' CDR bytes, written and
-taken as they are (runtime.ros2.idl gives the topic types)."""
+taken as they are (runtime.ros2.idl makes the topic types)."""
 
 from __future__ import annotations
 
+import ctypes as ct
+import logging
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -16,20 +18,24 @@ import numpy as np
 from cyclonedds._clayer import ddspy_take, ddspy_write_ts
 from cyclonedds.core import DDSException, InstanceState, Listener, SampleState, ViewState
 from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.internal import load_cyclonedds
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
+from beyond_self.runtime.log import event
 from beyond_self.runtime.ros2.convert import serialize, store, type_hash
-from beyond_self.runtime.ros2.idl import idl_type
+from beyond_self.runtime.ros2.idl import topic_type
 from beyond_self.schemas import ros2 as r
 
+log = logging.getLogger("beyond.ros2")
 DISCOVERY_TOPIC = "ros_discovery_info"
 PARTICIPANT_INFO = "rmw_dds_common/msg/ParticipantEntitiesInfo"
 ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 TAKE = 64  # samples taken per call
+SERTYPE_WORDS = 64  # how far into the binding's sertype its Python type is looked for
 LINGER = duration(seconds=2)  # the longest close waits for acknowledgements
 
 
@@ -68,6 +74,33 @@ def unpadded(cdr: bytes) -> bytes:
     return cdr[: len(cdr) - pad] if pad else cdr
 
 
+def matched_by_name(topic: Topic[Any], cls: type[Any]) -> bool:
+    """Make the endpoints created on `topic` from now on announce no XTypes type information,
+    so that they match by type name, as rmw_cyclonedds's and rmw_fastrtps's own do with each
+    other. Cyclone rejects the type objects Fast DDS announces for types with a sequence (an
+    element identifier it reads as invalid), and then never matches them; the binding insists
+    on type information for a topic. Done on the binding's sertype in memory, after checking
+    that it is laid out as expected (cyclonedds-python 11: the Python type, four flags, then the
+    serialized type information and its size); False when it is not, and nothing changed."""
+    sertype = ct.c_void_p()
+    get = load_cyclonedds().dds_get_entity_sertype
+    get.argtypes, get.restype = [ct.c_int32, ct.POINTER(ct.c_void_p)], ct.c_int32
+    if get(topic._ref, ct.byref(sertype)) != 0 or not sertype.value:
+        return False
+    info = cls.__idl__._xt_bytedata[0]
+    words = (ct.c_uint64 * SERTYPE_WORDS).from_address(sertype.value)
+    try:
+        offset = 8 * next(i for i in range(SERTYPE_WORDS) if words[i] == id(cls))
+    except StopIteration:
+        return False
+    data = ct.c_void_p.from_address(sertype.value + offset + 16)
+    size = ct.c_uint32.from_address(sertype.value + offset + 24)
+    if size.value != len(info) or not data.value or ct.string_at(data.value, size.value) != info:
+        return False
+    size.value = 0  # the binding's type_info/type_id now find none; the buffer is freed as ever
+    return True
+
+
 @dataclass
 class DdsPublisher:
     """One ROS 2 publisher: CDR in, one DDS sample out, its source timestamp the stamp."""
@@ -95,16 +128,21 @@ class DdsNode:
         self._writers: list[DataWriter[Any]] = []
         self._gids: dict[str, list[bytes]] = {"reader": [], "writer": []}
         self._lock = threading.Lock()
-        info = Topic(self.participant, DISCOVERY_TOPIC, idl_type(PARTICIPANT_INFO))
+        info = self._typed_topic(DISCOVERY_TOPIC, PARTICIPANT_INFO)
         discovery = r.Qos(reliable=True, transient_local=True, depth=1)
         self._info = DataWriter(self.participant, info, dds_qos(discovery, None))
         self._announce()
 
     def _topic(self, topic: str, ros_type: str) -> Topic[Any]:
-        name = topic_name(topic)
+        return self._typed_topic(topic_name(topic), ros_type)
+
+    def _typed_topic(self, name: str, ros_type: str) -> Topic[Any]:
         found = self._topics.get(name)
         if found is None:
-            found = self._topics[name] = Topic(self.participant, name, idl_type(ros_type))
+            cls = topic_type(ros_type)
+            found = self._topics[name] = Topic(self.participant, name, cls)
+            if not matched_by_name(found, cls):
+                event(log, logging.WARNING, "DDS type information left on", topic=name)
         return found
 
     def _announce(self) -> None:
@@ -152,7 +190,13 @@ class DdsNode:
                 if info.valid_data:
                     handler(unpadded(bytes(data)))
 
-        listener = Listener(on_data_available=on_data_available)  # type: ignore[no-untyped-call]
+        def on_subscription_matched(reader: DataReader[Any], status: Any) -> None:
+            event(log, logging.INFO, "ROS 2 publishers matched", topic=topic,
+                  publishers=int(status.current_count))  # fmt: skip
+
+        listener = Listener(  # type: ignore[no-untyped-call]
+            on_data_available=on_data_available, on_subscription_matched=on_subscription_matched
+        )
         reader = DataReader(
             self.participant, self._topic(topic, ros_type), dds_qos(qos, ros_type),
             listener=listener,

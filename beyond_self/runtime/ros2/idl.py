@@ -45,6 +45,12 @@ def _field(node: Any) -> Any:
 @cache
 def idl_type(ros_type: str) -> type[IdlStruct]:
     """The binding's struct for `ros_type` (`pkg/msg/Name`), fields in rosbags' order."""
+    return topic_type(ros_type)
+
+
+def topic_type(ros_type: str) -> type[IdlStruct]:
+    """A struct for `ros_type` of its own (nested types shared): Cyclone shares one sertype
+    between topics of the same Python class, and runtime.ros2.dds changes a topic's."""
     fields = {name: _field(node) for name, node in store().fielddefs[ros_type][1]}
     name = ros_type.rsplit("/", 1)[-1] + "_"
     return make_idl_struct(name, dds_type(ros_type), fields)
