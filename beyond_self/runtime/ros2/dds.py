@@ -69,9 +69,9 @@ def padded(cdr: bytes) -> bytes:
 
 
 def unpadded(cdr: bytes) -> bytes:
-    """CDR without the padding its encapsulation options count."""
+    """CDR without the padding its encapsulation options count (nor the count)."""
     pad = cdr[3] & 3 if len(cdr) >= 4 else 0
-    return cdr[: len(cdr) - pad] if pad else cdr
+    return cdr[:3] + bytes([cdr[3] & ~3]) + cdr[4 : len(cdr) - pad] if pad else cdr
 
 
 def matched_by_name(topic: Topic[Any], cls: type[Any]) -> bool:
