@@ -161,6 +161,7 @@ LONG_FILES = (
     "test_docs_blocks.py",
     "test_pipeline_up.py",
     "test_ros2_bridge.py",
+    "test_ros2_rclpy.py",  # first run: installs real rclpy into its side environment
     "test_damaged_recordings.py",
     "test_live_load.py",
     "test_ask_hostile.py",
