@@ -86,7 +86,7 @@ def child_running(parent: int, word: str) -> int | None:
 
 @pytest.mark.slow
 def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
-    tmp_path: Path,
+    tmp_path: Path, test_outputs: Path
 ) -> None:
     from zenoh_ros2_sdk import ROS2Subscriber
     from zenoh_ros2_sdk.discovery import get_topic_names_and_types
@@ -194,7 +194,8 @@ def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
         by_type[ros_type] = by_type.get(ros_type, 0) + 1
     assert by_type[r.STRING] == 3
     assert by_type[r.MARKER_ARRAY] > 300 and by_type[r.COMPRESSED_IMAGE] > 150, by_type
-    said = (tmp_path / "out" / "ros2" / "said.log").read_text().splitlines()
+    said = (test_outputs / "ros2" / "said.log").read_text().splitlines()  # runtime.outputs
+    assert not (tmp_path / "out").exists()  # nothing in the current folder unasked
     assert [line.split("\t")[3] for line in said] == heard
 
 

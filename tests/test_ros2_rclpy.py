@@ -73,7 +73,7 @@ class Judge:
 
 @pytest.mark.slow
 @pytest.mark.timeout(240)
-def test_real_rclpy_hears_each_sentence_once_over_dds(tmp_path: Path) -> None:
+def test_real_rclpy_hears_each_sentence_once_over_dds(tmp_path: Path, test_outputs: Path) -> None:
     python = side_python()
     config = private_config()
     ros = loopback_env(tmp_path, private_domain())
@@ -134,15 +134,15 @@ def test_real_rclpy_hears_each_sentence_once_over_dds(tmp_path: Path) -> None:
         judge.process.wait(10)
     said_by_up = [line.split(": ", 1)[1].strip('"') for line in out.splitlines() if ': "' in line]
     assert said_by_up == sentences
-    said = (tmp_path / "out" / "ros2" / "said.log").read_text().splitlines()
+    said = (test_outputs / "ros2" / "said.log").read_text().splitlines()
     assert [line.split("\t")[3] for line in said] == sentences  # each published once
     assert judge.heard == sentences  # what rclpy heard: each once, in order
 
 
 def records(path: Path, robot: str) -> list[str]:
     """touch-box.mcap as a ROS 2 body tracker and camera publish it (the Azure Kinect driver's
-    markers, K4ABT ids, as the live source reads them today; a JPEG CompressedImage), in CDR
-    rosbags serializes, one JSON line each for the rclpy player; the recording's keys in order."""
+    markers: K4ABT ids, its frame `depth_camera_link` and axes; a JPEG CompressedImage), in CDR
+    rosbags serializes, one JSON line each for the rclpy player; the recording's kinds in order."""
     ns = f"/{robot}"
     keys: list[str] = []
     with path.open("w") as f:

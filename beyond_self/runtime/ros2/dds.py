@@ -122,7 +122,7 @@ class DdsNode:
         self.name, self.namespace, self.domain = r.ros_name(name), namespace, domain
         self._domain = Domain(domain, config) if config is not None else None
         self.participant = DomainParticipant(domain, qos=Qos(Policy.Userdata(b"enclave=/;")))
-        self._topics: dict[str, Topic[Any]] = {}
+        self._topics: dict[tuple[str, str], Topic[Any]] = {}  # (DDS topic, ROS 2 type)
         self._readers: list[DataReader[Any]] = []
         self._listeners: list[Listener] = []  # kept alive as long as their readers
         self._writers: list[DataWriter[Any]] = []
@@ -137,10 +137,10 @@ class DdsNode:
         return self._typed_topic(topic_name(topic), ros_type)
 
     def _typed_topic(self, name: str, ros_type: str) -> Topic[Any]:
-        found = self._topics.get(name)
+        found = self._topics.get((name, ros_type))
         if found is None:
             cls = topic_type(ros_type)
-            found = self._topics[name] = Topic(self.participant, name, cls)
+            found = self._topics[name, ros_type] = Topic(self.participant, name, cls)
             if not matched_by_name(found, cls):
                 event(log, logging.WARNING, "DDS type information left on", topic=name)
         return found
