@@ -9,7 +9,11 @@ import next to rosbags reading the same bag alone, in one run.
    15 fps camera (goal <= 10 %).
 2. Latency a description gains: p50/p99 of one description at a time through the bridge next to
    the raw hop, idle and with three busy loops (goal: <= 1 ms p99 added).
-3. rosbag2: export (runtime.ros2.bag.export) and import (read_recording of the bag: CDR to our
+3. DDS (bench/ros2_dds.py): the bridge's DDS path next to real rclpy on Fast DDS publishing the
+   same messages (the anchor, Kilted's PyPI wheels in tests' side environment), both to a real
+   rclpy subscriber: CPU per message and a core's share at 30 Hz + 15 fps beside the anchor's
+   and rmw_zenoh's; description latency p99 added over rclpy's own (goal <= 1 ms, idle).
+4. rosbag2: export (runtime.ros2.bag.export) and import (read_recording of the bag: CDR to our
    messages) in messages/s and MB/s, next to rosbags' Reader + deserialize_cdr on the same bag.
 Last line: one JSON object with every figure.
 """
@@ -281,6 +285,29 @@ def main() -> None:
                 added = figures["added_p99_s"] * 1e3
                 print(f"description latency ({label}): raw p99 {raw_ms:.2f} ms, bridge p99 "
                       f"{ours_ms:.2f} ms, added {added:.2f} ms (goal <= 1 ms)")  # fmt: skip
+            from ros2_dds import figures
+
+            dds = results["dds"] = figures(work, samples(), ROUNDS)
+            shares = {
+                name: 30 * dds["skeleton"][key] + 15 * dds["camera"][key]
+                for name, key in (("dds_bridge", "dds_bridge_s"), ("rclpy", "rclpy_s"))
+            }
+            shares["zenoh_bridge"] = share
+            dds["core_share_30hz_15fps"] = shares
+            for kind in ("skeleton", "camera", "description"):
+                f = dds[kind]
+                anchor_us, ours_us = f["rclpy_s"] * 1e6, f["dds_bridge_s"] * 1e6
+                print(f"{kind:12s} rclpy (Fast DDS) {anchor_us:8.1f} us  DDS bridge "
+                      f"{ours_us:8.1f} us CPU/message  ratio {f['ratio']:.2f}")  # fmt: skip
+            print(f"at 30 Hz skeleton + 15 fps camera: DDS bridge {shares['dds_bridge']:.1%}, "
+                  f"rclpy {shares['rclpy']:.1%}, rmw_zenoh bridge {shares['zenoh_bridge']:.1%} "
+                  f"of a core (goal <= 10%); DDS/rclpy "
+                  f"{shares['dds_bridge'] / shares['rclpy']:.2f}, DDS/zenoh "
+                  f"{shares['dds_bridge'] / shares['zenoh_bridge']:.2f}")  # fmt: skip
+            print(f"description latency over DDS (idle): rclpy p99 "
+                  f"{dds['latency_rclpy_p99_s'] * 1e3:.2f} ms, DDS bridge p99 "
+                  f"{dds['latency_dds_bridge_p99_s'] * 1e3:.2f} ms, added "
+                  f"{dds['latency_added_p99_s'] * 1e3:.2f} ms (goal <= 1 ms)")  # fmt: skip
             results["bag"] = b = bags(work)
             print(f"rosbag2 ({b['messages']} messages, {b['bag_mb']:.1f} MB): export "
                   f"{b['export_msgs_per_s']:.0f} msg/s {b['export_mb_per_s']:.1f} MB/s; import "

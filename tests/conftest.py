@@ -162,6 +162,7 @@ LONG_FILES = (
     "test_site_browser.py",
     "test_pipeline_up.py",
     "test_ros2_bridge.py",
+    "test_ros2_rclpy.py",  # first run: installs real rclpy into its side environment
     "test_damaged_recordings.py",
     "test_live_load.py",
     "test_ask_hostile.py",

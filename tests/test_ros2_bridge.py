@@ -124,8 +124,9 @@ def test_a_ros2_subscriber_hears_each_sentence_once_across_a_killed_bridge(
             router_port=port,
         )
         up = subprocess.Popen(
-            [*BEYOND, "up", "--recording", str(THREE), "--ros2", "--ros2-connect",
-             f"tcp/127.0.0.1:{port}", "--no-live", "--rate", "1", "--timeout", "60"],
+            [*BEYOND, "up", "--recording", str(THREE), "--ros2", "--ros2-rmw", "zenoh",
+             "--ros2-connect", f"tcp/127.0.0.1:{port}", "--no-live", "--rate", "1",
+             "--timeout", "60"],
             env=env_for(config), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
             text=True,
         )  # fmt: skip
@@ -214,6 +215,7 @@ async def test_ros2_body_markers_and_camera_are_a_live_source(
     monkeypatch.setenv("BEYOND_ROBOT", robot)
     monkeypatch.setenv("BEYOND_ROS2_CONNECT", f"tcp/127.0.0.1:{port}")
     monkeypatch.setenv("ROS_DOMAIN_ID", "3")
+    monkeypatch.setenv("RMW_IMPLEMENTATION", "rmw_zenoh_cpp")
     t = STORE.types
     stamp = t["builtin_interfaces/msg/Time"](sec=1, nanosec=5)
     header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="depth_camera_link")
@@ -365,6 +367,7 @@ async def test_a_ros2_body_tracker_and_camera_are_described_as_analyse_does(
     env = env_for(
         config,
         BEYOND_ROS2_CONNECT=f"tcp/127.0.0.1:{port}",
+        RMW_IMPLEMENTATION="rmw_zenoh_cpp",
         ROS_DOMAIN_ID="0",
         BEYOND_ROS2_SKELETON=f"{ns}/body_tracking_data",
         BEYOND_ROS2_CAMERA=f"{ns}/camera/image/compressed",

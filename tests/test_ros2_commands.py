@@ -66,7 +66,8 @@ def test_beyond_ros2_bridge_joins_a_running_deployment(tmp_path: Path) -> None:
             f"0/{config.robot}/body_tracking_data/**", lambda s: got.append(s.payload.to_bytes())
         )
         bridge = subprocess.Popen(
-            [*BEYOND, "ros2", "bridge", "--ros2-connect", f"tcp/127.0.0.1:{port}",
+            [*BEYOND, "ros2", "bridge", "--ros2-rmw", "zenoh", "--ros2-connect",
+             f"tcp/127.0.0.1:{port}",
              "--out-dir", str(tmp_path / "ros2")],
             env=env_for(config), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
             text=True,
@@ -161,6 +162,7 @@ async def test_an_rgb_only_robots_camera_is_a_live_person_source(
     port = free_port()
     for name, value in {
         "BEYOND_ROBOT": "rgbbot", "BEYOND_ROS2_CONNECT": f"tcp/127.0.0.1:{port}",
+        "RMW_IMPLEMENTATION": "rmw_zenoh_cpp",
         "ROS_DOMAIN_ID": "4", "BEYOND_ROS2_SKELETON": "", "BEYOND_ROS2_TF": "",
         "BEYOND_ROS2_CAMERA": "", "BEYOND_ROS2_CAMERA_RAW": "/usb_cam/image_raw",
     }.items():  # fmt: skip

@@ -1,5 +1,5 @@
 """`beyond ros2`: the ROS 2 face of a deployment: `export` writes a recording as a rosbag2 bag
-(runtime.ros2.bag), `bridge` joins a running deployment to a ROS 2 graph over rmw_zenoh
+(runtime.ros2.bag), `bridge` joins a running deployment to a ROS 2 graph over DDS or rmw_zenoh
 (services.ros2_bridge)."""
 
 from __future__ import annotations
@@ -12,10 +12,12 @@ from beyond_self.commands import argtypes
 from beyond_self.core.errors import InputError
 from beyond_self.runtime import outputs
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
+from beyond_self.runtime.ros2 import rmw
+from beyond_self.runtime.ros2.rmw import RMWS
 from beyond_self.schemas.keys import DEFAULT_ROBOT
 from beyond_self.schemas.ros2 import DEFAULT_CONNECT, Ros2Topics
 
-HELP = "ROS 2: export a recording as a rosbag2 bag, or bridge a deployment to rmw_zenoh"
+HELP = "ROS 2: export a recording as a rosbag2 bag, or bridge a deployment to a ROS 2 graph"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
     bridge = sub.add_parser(
-        "bridge", help="join a running deployment to a ROS 2 graph (rmw_zenoh) until SIGINT"
+        "bridge", help="join a running deployment to a ROS 2 graph (DDS or rmw_zenoh) until SIGINT"
     )
     add_ros2_arguments(bridge, flag=False)
     bridge.add_argument(
@@ -45,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_ros2_arguments(parser: argparse.ArgumentParser, *, flag: bool) -> None:
     """The ROS 2 options, the same for `beyond ros2 bridge` and `beyond up --ros2`."""
-    group = parser.add_argument_group("ROS 2", "joining a ROS 2 graph over rmw_zenoh")
+    group = parser.add_argument_group("ROS 2", "joining a ROS 2 graph over DDS or rmw_zenoh")
     if flag:
         group.add_argument(
             "--ros2",
@@ -54,10 +56,17 @@ def add_ros2_arguments(parser: argparse.ArgumentParser, *, flag: bool) -> None:
             "ROS 2 topics under /ROBOT (docs/how-to/ros2.md)",
         )
     group.add_argument(
+        "--ros2-rmw",
+        choices=RMWS,
+        default=None,
+        help="the middleware (default: as $RMW_IMPLEMENTATION says: rmw_zenoh_cpp is zenoh, "
+        "unset or a DDS rmw is dds, ROS 2's default)",
+    )
+    group.add_argument(
         "--ros2-connect",
         metavar="ENDPOINT",
         default=DEFAULT_CONNECT,
-        help=f"rmw_zenoh's router (default {DEFAULT_CONNECT})",
+        help=f"rmw_zenoh's router (default {DEFAULT_CONNECT}; zenoh only)",
     )
     group.add_argument(
         "--ros2-topic",
@@ -78,7 +87,10 @@ def add_ros2_arguments(parser: argparse.ArgumentParser, *, flag: bool) -> None:
 
 def ros2_options(args: argparse.Namespace) -> dict[str, Any]:
     """The bridge service's options (services.ros2_bridge) from the ROS 2 arguments."""
-    options: dict[str, Any] = {"connect": args.ros2_connect}
+    options: dict[str, Any] = {
+        "connect": args.ros2_connect,
+        "middleware": rmw.choose(args.ros2_rmw),
+    }
     renamed = {}
     for item in args.ros2_topic:
         stream, sep, topic = item.partition("=")

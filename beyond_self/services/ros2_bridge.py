@@ -1,8 +1,8 @@
-"""The deployment's face on a ROS 2 graph (rmw_zenoh): each final description's best sentence as
-std_msgs/String on /<robot>/description, the skeleton as the Azure Kinect driver's body markers
-and the cameras as image_transport's CompressedImage, each stamped with its own message's
-stamp (schemas.ros2 names topics and types, runtime.ros2.convert converts, runtime.ros2.node
-speaks rmw_zenoh).
+"""The deployment's face on a ROS 2 graph (DDS or rmw_zenoh, runtime.ros2.rmw): each final
+description's best sentence as std_msgs/String on /<robot>/description, the skeleton as the
+Azure Kinect driver's body markers and the cameras as image_transport's CompressedImage, each
+stamped with its own message's stamp (schemas.ros2 names topics and types, runtime.ros2.convert
+converts, runtime.ros2.graph opens the node).
 
 A sentence is said once, across a SIGKILL, as the speech service says it (services.speech): a
 consumer in exactly-once (`once=True`), and its own log, written before the sentence is
@@ -18,14 +18,10 @@ from typing import Any
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, SKELETON
 from beyond_self.runtime.log import event
 from beyond_self.runtime.outputs import service_out_dir
+from beyond_self.runtime.ros2 import rmw
 from beyond_self.runtime.ros2.convert import to_ros
-from beyond_self.runtime.ros2.node import (
-    DEFAULT_CONNECT,
-    Ros2Node,
-    Ros2Publisher,
-    default_domain,
-    domain,
-)
+from beyond_self.runtime.ros2.graph import Node, Publisher, open_node
+from beyond_self.runtime.ros2.node import DEFAULT_CONNECT, default_domain, domain
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.base import Message
@@ -59,15 +55,17 @@ class Ros2Bridge(Service):
         domain_id: int | str | None = None,
         out_dir: str | None = None,
         topics: dict[str, str] | None = None,
+        middleware: str | None = None,
         **base: Any,
     ) -> None:
         super().__init__(**base)
+        self.middleware = rmw.choose(middleware)
         self.connect = connect
         self.domain = default_domain() if domain_id is None else domain(domain_id)
         self.out_dir = Path(out_dir) if out_dir is not None else service_out_dir("ros2")
         self.renamed = dict(topics or {})
-        self.node: Ros2Node | None = None
-        self.out: dict[str, Ros2Publisher] = {}
+        self.node: Node | None = None
+        self.out: dict[str, Publisher] = {}
         # written before each sentence is published, not synced: a kill cannot lose a write
         # already made, and a synced one took milliseconds a description should not wait
         self.said = SpeechLog(self.out_dir / "said.log", sync=False)
@@ -78,9 +76,9 @@ class Ros2Bridge(Service):
         topics = r.Ros2Topics(keys.robot, self.renamed)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         take_what_the_run_said(self, self.said)
-        node = self.node = Ros2Node(
-            f"beyond_{keys.robot}", f"/{r.ros_name(keys.robot)}", connect=self.connect,
-            domain=self.domain,
+        node = self.node = open_node(
+            f"beyond_{keys.robot}", f"/{r.ros_name(keys.robot)}", middleware=self.middleware,
+            connect=self.connect, domain=self.domain,
         )  # fmt: skip
         for stream, (relative, ros_type) in r.TOPICS.items():
             del relative
@@ -89,8 +87,8 @@ class Ros2Bridge(Service):
         self.subscribe(keys.description, Description, self.on_description, EVENTS, once=True)
         for stream, (cls, delivery) in OUT.items():
             self.subscribe(keys.stream(stream), cls, self._forward(stream), delivery)
-        event(self.log, logging.INFO, "on the ROS 2 graph", connect=self.connect,
-              domain=self.domain, node=node.name)  # fmt: skip
+        event(self.log, logging.INFO, "on the ROS 2 graph", middleware=self.middleware,
+              connect=self.connect, domain=self.domain, node=node.name)  # fmt: skip
 
     def _forward(self, stream: str) -> Any:
         def forward(message: Message) -> None:

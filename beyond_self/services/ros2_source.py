@@ -1,13 +1,13 @@
 """A ROS 2 body tracker and camera as the pipeline's live source: the ingest's plug-in
 (`beyond up --live-source beyond_self.services.ros2_source:source`) reads body markers (the
-Azure Kinect driver's MarkerArray), openni_tracker's TF frames and a camera (Image or
-CompressedImage) and yields skeleton joints and RGB images with their own stamps. Where and what
-it reads are environment variables (a plug-in takes no arguments): BEYOND_ROS2_CONNECT,
-ROS_DOMAIN_ID, BEYOND_ROS2_SKELETON, BEYOND_ROS2_TF, BEYOND_ROS2_CAMERA (compressed),
-BEYOND_ROS2_CAMERA_RAW and BEYOND_ROS2_PERSON_CAMERA (a camera watching the person, through the
-pose model as `beyond up --camera`; with no skeleton and no TF topic read, the camera is the
-person's); a topic set to "" is not read. Samples convert as a bag's do (runtime.ros2.convert).
-"""
+Azure Kinect driver's MarkerArray), openni_tracker's TF frames and cameras from a ROS 2 graph
+(DDS or rmw_zenoh: runtime.ros2.rmw), and yields joints and RGB images with their own stamps.
+Its settings are environment variables (a plug-in takes no arguments): ROS 2's own
+(RMW_IMPLEMENTATION, ROS_DOMAIN_ID, discovery), BEYOND_ROS2_CONNECT (rmw_zenoh's router) and
+the topics BEYOND_ROS2_SKELETON, BEYOND_ROS2_TF, BEYOND_ROS2_CAMERA (compressed),
+BEYOND_ROS2_CAMERA_RAW and BEYOND_ROS2_PERSON_CAMERA ("" is not read). The person's camera goes
+through the pose model as `up --camera` does (with no skeleton or TF topic, the camera is the
+person's); samples convert as a bag's do (runtime.ros2.convert: the driver's axes into ours)."""
 
 from __future__ import annotations
 
@@ -20,8 +20,10 @@ from typing import Any
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.error_account import LogOnce
 from beyond_self.runtime.recording.images import image_from_message
+from beyond_self.runtime.ros2 import rmw
 from beyond_self.runtime.ros2.convert import FromRos
-from beyond_self.runtime.ros2.node import Ros2Node, default_domain
+from beyond_self.runtime.ros2.graph import open_node
+from beyond_self.runtime.ros2.node import default_domain
 from beyond_self.runtime.ros2.topics import POSE
 from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.keys import DEFAULT_ROBOT
@@ -105,9 +107,10 @@ async def source() -> AsyncIterator[tuple[str, Any, int]]:
     loop = asyncio.get_running_loop()
     queue: asyncio.Queue[tuple[str, str, bytes]] = asyncio.Queue(QUEUE)
     robot = os.environ.get("BEYOND_ROBOT", DEFAULT_ROBOT)
-    node = Ros2Node(
+    node = open_node(
         f"beyond_{robot}_source",
         f"/{r.ros_name(robot)}",
+        middleware=rmw.choose(),
         connect=os.environ.get("BEYOND_ROS2_CONNECT", r.DEFAULT_CONNECT),
         domain=default_domain(),
     )
@@ -118,7 +121,7 @@ async def source() -> AsyncIterator[tuple[str, Any, int]]:
         queue.put_nowait(item)
 
     def receiver(stream: str, ros_type: str) -> Callable[[bytes], None]:
-        def receive(cdr: bytes) -> None:  # on Zenoh's thread
+        def receive(cdr: bytes) -> None:  # on the middleware's thread
             loop.call_soon_threadsafe(enqueue, (stream, ros_type, cdr))
 
         return receive
