@@ -13,9 +13,10 @@ from busutil_net import private_config
 import beyond_self.schemas as s
 from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.resilience.effect_log import LOG_START, EffectLog
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.schemas import Keys, Message
-from beyond_self.services.speech import LOG_START, SpeechLog, SpeechSynthesizer
+from beyond_self.services.speech import SpeechSynthesizer
 
 
 def test_synthesizes_a_real_wav_with_espeak(tmp_path: Path) -> None:
@@ -115,7 +116,7 @@ async def test_a_first_speech_service_says_what_an_earlier_run_logged(tmp_path: 
 def test_the_log_reads_whole_lines_and_never_appends_to_a_torn_one(tmp_path: Path) -> None:
     """A line cut short (the machine lost power mid-write) is not taken as said, and the next
     sentence starts a line of its own."""
-    log = SpeechLog(tmp_path / "speech.log")
+    log = EffectLog(tmp_path / "speech.log")
     log.path.write_text("1001\t1\t-\tone\n1002\t2\t-\tt")
     assert log.gestures_since(0) == [1]
     assert log.gestures_since(log.size()) == []

@@ -18,7 +18,7 @@ import time
 import zlib
 from collections.abc import Callable, Coroutine, Mapping, Sequence
 from pathlib import Path
-from typing import Any, NoReturn, TypeVar, overload
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar, overload
 
 from beyond_self.core.errors import InputError
 from beyond_self.core.restorable import Restorable
@@ -34,9 +34,11 @@ from beyond_self.runtime.log import event
 from beyond_self.runtime.progress import ProgressReport
 from beyond_self.runtime.resilience import heap, process
 from beyond_self.runtime.resilience.accounting import ErrorAccount
+from beyond_self.runtime.resilience.effect_log import EffectLog, take_over
 from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.runtime.resilience.resume import InputGate, gated
 from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
+from beyond_self.runtime.resilience.source_plan import ResumePlan, plan
 from beyond_self.runtime.resilience.state import LedgerFile, state_dir
 from beyond_self.runtime.security.acl import check_declared
 from beyond_self.runtime.self_report import (
@@ -47,13 +49,19 @@ from beyond_self.runtime.self_report import (
     stop_counts,
 )
 from beyond_self.runtime.service_cli import options_from_command_line
+from beyond_self.runtime.service_upstream import CLOSES, Upstream, counted
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
 from beyond_self.schemas.identity import TYPES as IDENTIFIED
 from beyond_self.schemas.keys import check_name
 from beyond_self.schemas.messages import Progress, ServiceHealth, StreamClock
 
+if TYPE_CHECKING:
+    from beyond_self.runtime.recording.pacing import Pacer
+
 M = TypeVar("M", bound=Message)
+# the constructor's keyword arguments every service takes (the rest are its own options)
+BASE_OPTIONS = frozenset({"config", "bus", "clock", "health_period", "name"})
 Q = TypeVar("Q", bound=Message)
 R = TypeVar("R", bound=Restorable)
 
@@ -103,6 +111,7 @@ class Service:
         self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.resilience.ledger)
         self.fleet_member = False  # run by runtime.fleet for one robot of many
         self._once: set[str] = set()  # keys whose handling is not repeated after a restart
+        self._upstreams: list[Upstream] = []  # numbered event streams (`complete=`)
         self._gates: dict[str, InputGate[Any]] = {}  # sensor key -> its restored position
         # what `keep_state` keeps: the snapshots, and how to ask for the state now
         self._state: tuple[Snapshots[Any], Callable[[], Any]] | None = None
@@ -148,7 +157,9 @@ class Service:
         delivery: Delivery = RELIABLE,
         *,
         paced: bool = False,
-        once: bool = False,
+        once: bool | EffectLog = False,
+        complete: Callable[[int], None] | None = None,
+        producer: str = "",
     ) -> Subscription[M]:
         """Call `handler(message)` for every well-formed `cls` message on `key`, received as
         `delivery` says (runtime.bus.delivery), each identity once (runtime.resilience.ledger). With
@@ -158,8 +169,17 @@ class Service:
         another's messages, and the owner's not after the last one handled (a restarted
         source repeats what was handled), are skipped and counted. With
         `once` (a handler whose effect is not to be repeated: a sentence said), a restarted
-        instance does not handle again what its predecessor handled."""
+        instance does not handle again what its predecessor handled; given the effect's own
+        log (runtime.resilience.effect_log), nor what that log says was done. With `complete`
+        (a numbered event stream from `producer`, runtime.service_upstream), the base counts
+        what was received and calls `complete(stamp)` once every event `producer` derived from
+        its input up to `stamp` has arrived."""
         self._check_declared("subscribe", key)
+        upstream = None
+        if complete is not None:
+            upstream = Upstream(key, producer, complete)
+            self._upstreams.append(upstream)
+            handler = counted(upstream, handler)
         sub = self.bus.subscribe(key, cls, delivery, on_malformed=self.account.malformed)
         if (gate := self._gates.get(key)) is not None:
             handler = gated(gate, handler)
@@ -168,11 +188,15 @@ class Service:
             self.ledgers.handled.declare(key)
         if once:
             self._once.add(key)
+        if isinstance(once, EffectLog):
+            take_over(self.ledgers, key, cls, once, self.log)
         if paced:
             self._progress.pace(key)
             self.times.track(key)
         if self.started.is_set():
             self.spawn(self._consume(sub, handler), key)
+        if upstream is not None:  # the producer's progress says when its events are complete
+            self.subscribe(self.bus.keys.progress(producer), Progress, upstream.progress)
         return sub
 
     def publisher(self, key: str, cls: type[M], delivery: Delivery = RELIABLE) -> Publisher[M]:
@@ -219,6 +243,20 @@ class Service:
         """Gestures some consumer of this service's output `key` has had with one of `kinds`
         (a predecessor's numbering, what it closed)."""
         return self.ledgers.seen_downstream(key, kinds)
+
+    def resume_plan(self, pacer: Pacer) -> ResumePlan:
+        """A source's resume plan (runtime.resilience.source_plan), once `pacer` has heard its
+        consumers: what they all have, moved back to what their successors need again."""
+        keys = self.bus.keys
+        return plan(self.ledgers, pacer.handled_by_all(), keys.gesture_segment, keys.description)
+
+    def _closed(self, key: str) -> set[int]:
+        """Gestures of the events on `key` closed for this service: its last per-gesture output
+        every consumer has, or cancelled (runtime.service_upstream)."""
+        done = [self.done_downstream(p.key, CLOSES[p.cls]) for p in self._publishers
+                if p.cls in CLOSES]  # fmt: skip
+        closed = set.intersection(*done) if done else set()
+        return closed | self.seen_downstream(key, ("cancel",))
 
     def state_folder(self) -> Path | None:
         """This service's state folder on this machine (runtime.resilience.state); None without
@@ -328,7 +366,9 @@ class Service:
     def received_counts(self) -> dict[str, int]:
         """Messages received per input key, as reported in `Progress` (a service whose inputs
         carry their own sequence numbers may report those instead: they survive a restart)."""
-        return {s.key: s.received for s, _ in self._subscriptions}
+        counts = {s.key: s.received for s, _ in self._subscriptions}
+        counts.update({up.key: up.received for up in self._upstreams})
+        return counts
 
     def published_counts(self) -> dict[str, int]:
         """Messages published per output key, as reported in `Progress` (a service whose
@@ -449,6 +489,8 @@ class Service:
                 self.ledgers.file = LedgerFile(folder)
             await self.ledgers.ask(self.bus, self.log, restarted=restarts() > 0)
             await self.setup()
+            for upstream in self._upstreams:  # restarted: the gestures it had closed
+                upstream.closed(self._closed(upstream.key))
             outputs = [p.key for p in self._publishers if p.cls in IDENTIFIED]
             self.ledgers.adopt(self._once, outputs)
             self.spawn(self.ledgers.open(self.bus, self.report_error), "ledger")
