@@ -1,18 +1,12 @@
 """Per-frame work that never goes before per-gesture work: a service's `FrameSchedule`.
 
-A gesture's result waits on few messages and a person waits on it; a frame's own result (the
-objects the object segmenter describes in every camera frame) is the costly part, and no gesture
-result waits for it. The schedule gives the per-gesture work the first turn, three ways:
-- a frame first lets a gesture event already received go before it (`YIELDS_TO_EVENTS` turns of
-  the event loop while one waits on the service's event subscriptions);
-- a live source's frames (`newest`) are worked on newest first: a frame overtaken by a newer one
-  before its turn is skipped and counted (`skipped`, and per output `overtaken()`), and the work
-  runs beside the handlers, so the frame counts as handled at once; a replay's every frame is
-  worked on before it counts as handled (the player is paced on it);
-- the worker process that does the costly part runs at `niceness` (a live source's: lower
-  priority, so the system runs the gestures' work first).
-`Steps` runs work that comes in small steps (a gesture's window fed the frames queued for it) one
-step per turn of the event loop, so that a message waiting goes between two steps.
+A frame's own result (the objects of a camera frame) is the costly part, and no gesture result
+waits for it. So a frame first lets a gesture event already received go before it
+(`YIELDS_TO_EVENTS` turns of the event loop); a live source's frames (`newest`) are worked on
+newest first beside the handlers, an overtaken one skipped and counted, while a replay's every
+frame is worked on before it counts as handled (the player is paced on it); and the worker process
+runs at a lower priority when live (`niceness`). `Steps` runs work that comes in small steps one
+per turn of the event loop, so that a message waiting goes between two steps.
 """
 
 from __future__ import annotations

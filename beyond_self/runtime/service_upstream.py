@@ -1,16 +1,12 @@
 """A consumer of a numbered event stream, gated on its producer's progress: `Upstream`.
 
-The gesture streamer's events (GestureSegment) carry their running count (`event_seq`), which a
-restarted streamer continues, and it reports that count as published in its `Progress`
-(runtime.progress). A consumer that subscribes with `complete=` (`Service.subscribe`) gets two
-things from the base:
-- what counts as received on the key, for the player's pacing (runtime.recording.pacing): the
-  highest count it has had, and at least the events of every gesture it had closed before a
-  restart (its last per-gesture output every consumer has, or a cancel some consumer had): a
-  producer restarted before it may not send them again, and it does not need them;
-- `complete(stamp)`: every event the producer derived from its input up to `stamp` has arrived
-  (no gesture it has not heard of started before), from the producer's `Progress`, told before
-  the event that completes it is handled.
+The gesture streamer's events carry their running count (`event_seq`), continued by a restarted
+streamer and reported as published in its `Progress`. A consumer that subscribes with `complete=`
+(`Service.subscribe`) gets from the base what counts as received for the player's pacing (the
+highest count had, and at least the events of every gesture it closed before a restart, which a
+restarted producer may not send again), and `complete(stamp)` once every event the producer
+derived from its input up to `stamp` has arrived (told before the event that completes it is
+handled).
 """
 
 from __future__ import annotations

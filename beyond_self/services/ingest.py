@@ -13,9 +13,7 @@ successors need to rebuild), read from the recording again or from its source lo
 from __future__ import annotations
 
 import asyncio
-import functools
 import logging
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -27,7 +25,6 @@ from beyond_self.runtime.bus.publisher import Publisher
 from beyond_self.runtime.clock import Clock, ClockTicks
 from beyond_self.runtime.log import event
 from beyond_self.runtime.recording.damage import Losses
-from beyond_self.runtime.recording.images import message_from_image
 from beyond_self.runtime.recording.pacing import Pacer
 from beyond_self.runtime.recording.replay import Cue, Player, looped
 from beyond_self.runtime.recording.replay_control import rate_option
@@ -44,8 +41,8 @@ from beyond_self.schemas import (
     StreamClock,
     StreamEnd,
 )
-from beyond_self.services.plugins import joints_of, load_plugin
-from beyond_self.services.pose_source import PersonFrame, PoseCounts, person_messages
+from beyond_self.services.live_source import play_live
+from beyond_self.services.pose_source import PoseCounts
 from beyond_self.services.sources import Passes, Source, log_cues, recording_cues
 
 
@@ -143,7 +140,7 @@ class SensorIngest(Service):
                 await self._play_cues(*log_cues(Path(source.log), source, keys.skeleton, self.name))
             else:
                 while True:  # a live source is not restamped: it has its own clock
-                    await self._play_live()
+                    await play_live(self)
                     if not source.loop:
                         break
         except InputError as exc:  # nothing playable (a file that is no recording...)
@@ -178,7 +175,8 @@ class SensorIngest(Service):
         if self.pose_counts is not None:  # per-frame work a live video shed is said, counted
             event(self.log, logging.INFO, "pose", **vars(self.pose_counts))
 
-    def _sent(self, stream: str, stamp: int) -> None:
+    def sent(self, stream: str, stamp: int) -> None:
+        """A message of `stream` stamped `stamp` was published."""
         self.published += 1
         self.last_stamps[stream] = stamp
 
@@ -196,59 +194,7 @@ class SensorIngest(Service):
         def send(cue: Cue) -> None:
             stream, pub = self.streams[cue.key]
             pub.put(cue.ours())
-            self._sent(stream, cue.stamp)
+            self.sent(stream, cue.stamp)
 
         cues = looped(passes, loop=self.source.loop, span=span, resume_at=plan.start)
         await self.player.play(filter(fresh, cues), send)
-
-    async def _play_live(self) -> None:
-        source: AsyncIterator[tuple[str, Any]]
-        if self.source.plugin is not None:
-            source = load_plugin(self.source.plugin)()
-        else:
-            from beyond_self.services.pose_source import PoseSource
-
-            pose = PoseSource(video=self.source.video, camera=self.source.camera)
-            self.pose_counts = pose.counts
-            source = aiter(pose)
-        queue: asyncio.Queue[tuple[Any, ...]] = asyncio.Queue(self.source.queue)
-        done = object()
-
-        async def pump() -> None:
-            async for item in source:
-                if queue.full():  # backpressure: drop the oldest, count it
-                    queue.get_nowait()
-                    self.dropped_items += 1
-                queue.put_nowait(item)
-            await queue.put(("", done))
-
-        task = asyncio.get_running_loop().create_task(pump())
-        frame = 0
-        try:
-            while True:
-                kind, payload, *own = await queue.get()
-                if payload is done:
-                    break
-                frame += 1
-                self._put_live(kind, payload, own, frame)
-        finally:
-            task.cancel()
-
-    def _put_live(self, kind: str, payload: Any, own: list[int], frame: int) -> None:
-        if kind == "skeleton":
-            header = self.header(SkeletonFrame, *own)
-            joints = joints_of(payload)
-            self.skeleton.put(SkeletonFrame(header=header, frame=frame, joints=joints))
-            self._sent("skeleton", header.stamp)
-        elif kind == "camera":
-            header = self.header(CameraFrame, *own)
-            self.camera.put(message_from_image(header, payload))  # type: ignore[arg-type]
-            self._sent("camera", header.stamp)
-        elif kind == "person" and isinstance(payload, PersonFrame):
-            stamp = self.clock.now_ns()  # one stamp: image, skeleton, pose in the image
-            stamped = functools.partial(self.header, stamp=stamp)
-            for stream, msg in person_messages(stamped, payload):
-                self.person_streams[stream].put(msg)
-                self._sent(stream, stamp)
-        else:
-            raise InputError(f"plug-in item kind {kind!r}; valid: skeleton, camera, person")

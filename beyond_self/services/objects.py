@@ -33,13 +33,13 @@ from beyond_self.schemas import (
     GestureObject,
     GestureSegment,
     Header,
-    ObjectEffect,
     ObjectEffects,
     ServiceHealth,
     StreamEnd,
 )
 from beyond_self.services import shared
 from beyond_self.services.frame_describer import FrameDescriber
+from beyond_self.services.object_messages import effects_message, gesture_object
 
 
 class ObjectSegmenter(Service):
@@ -84,12 +84,16 @@ class ObjectSegmenter(Service):
         )
         keys = self.bus.keys
         # restarted: the gestures whose effects every consumer has are not measured again
-        self.watch.done(self.done_downstream(keys.effects, "effects"))
+        self.watch.done(self.downstream(keys.effects).done("effects"))
         cameras = [keys.camera, keys.camera_compressed]
         self.keep_state(WatchSnapshot, self.watch.resume, self.watch.snapshot, inputs=cameras)
         self.objects_out = self.publisher(keys.objects, DetectedObjects, FRAMES)
-        self.at_start_out = self.publisher(keys.gesture_object, GestureObject, EVENTS)
-        self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS)
+        # told in progress at once, not after the frame's own objects: an instance restarted
+        # meanwhile learns from the player's copy of the report not to publish them again
+        self.at_start_out = self.publisher(
+            keys.gesture_object, GestureObject, EVENTS, progress=True
+        )
+        self.effects_out = self.publisher(keys.effects, ObjectEffects, EVENTS, progress=True)
         # recovered: restarted mid-gesture, it gets the gesture's frames back from the cache
         self.subscribe(keys.camera, CameraFrame, self.on_camera, CAMERA, paced=True)
         self.subscribe(
@@ -164,13 +168,9 @@ class ObjectSegmenter(Service):
         self.windows.poke()  # whatever the watch was told may have queued frames
         for out in outputs:
             if isinstance(out, ObjectAtStart):
-                self.at_start_out.put(_gesture_object(self.derive(out.ref, GestureObject), out))
+                self.at_start_out.put(gesture_object(self.derive(out.ref, GestureObject), out))
             elif isinstance(out, GestureEffects):
-                self.effects_out.put(_effects(self.derive(out.ref, ObjectEffects), out))
-        if outputs:
-            # said at once, not after the frame's own objects: an instance restarted meanwhile
-            # learns from the player's copy of this report not to publish them again
-            self.publish_progress()
+                self.effects_out.put(effects_message(self.derive(out.ref, ObjectEffects), out))
 
 
 def detected_object(o: FoundObject) -> DetectedObject:
@@ -191,44 +191,3 @@ def detected_object(o: FoundObject) -> DetectedObject:
         shape_label=o.labels.get("Shape", ""),
         size_label=o.labels.get("Size", ""),
     )
-
-
-def _gesture_object(header: Header, out: ObjectAtStart[Header]) -> GestureObject:
-    """The object a gesture is about, as the reasoner joins it to the gesture's beliefs."""
-    return GestureObject(
-        header=header,
-        segment_id=out.segment_id,
-        frame=out.frame,
-        labels=out.labels,
-        reason=out.reason,
-    )
-
-
-def _effects(header: Header, out: GestureEffects[Header]) -> ObjectEffects:
-    effects: list[ObjectEffect] = []
-    if out.analysis is not None:
-        eff = out.analysis.effects
-        effects.append(
-            ObjectEffect(
-                object_id=0,
-                object_velocity=float(eff.object_speed),
-                hand_velocity=_optional(eff.hand_speed),
-                object_hand_velocity=_optional(eff.relative_speed),
-                contact=int(out.analysis.contact_flags.sum()) > 0,
-                contact_duration=_optional(eff.contact_s),
-                labels=out.effect_labels,
-                object_labels=out.object_labels,
-            )
-        )
-    return ObjectEffects(
-        header=header,
-        frame=out.frame,
-        segment_id=out.segment_id,
-        effects=effects,
-        measured=out.analysis is not None,
-        reason=out.reason,
-    )
-
-
-def _optional(x: float | None) -> float | None:
-    return None if x is None else float(x)

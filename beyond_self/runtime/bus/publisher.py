@@ -82,6 +82,7 @@ class Publisher(Generic[M]):
         self.last_stamp = -1  # of the last message sent
         self.suppress: Callable[[str, Message], bool] | None = None  # consumers have it already
         self.suppressed = 0
+        self.after_put: Callable[[], None] | None = None  # called after every put
         # written to before each put (the source's log, runtime.resilience.source_log): key, stamp,
         # payload
         self.tap: Callable[[str, int, bytes], None] | None = None
@@ -94,6 +95,11 @@ class Publisher(Generic[M]):
         self._pub = declare_zenoh_publisher(session, key, wire_encoding(cls), delivery)
 
     def put(self, message: M) -> None:
+        self._send(message)
+        if self.after_put is not None:  # sent or suppressed: the owner tells its progress
+            self.after_put()
+
+    def _send(self, message: M) -> None:
         if type(message) is not self.cls:
             raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
         if self.suppress is not None and self.suppress(self.key, message):
