@@ -95,15 +95,12 @@ class Publisher(Generic[M]):
         self._pub = declare_zenoh_publisher(session, key, wire_encoding(cls), delivery)
 
     def put(self, message: M) -> None:
-        self._send(message)
-        if self.after_put is not None:  # sent or suppressed: the owner tells its progress
-            self.after_put()
-
-    def _send(self, message: M) -> None:
         if type(message) is not self.cls:
             raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
         if self.suppress is not None and self.suppress(self.key, message):
             self.suppressed += 1  # handled by every consumer, sent by a previous instance
+            if self.after_put is not None:
+                self.after_put()
             return
         self.last_stamp = message.header.stamp
         if self.tap is not None:
@@ -117,6 +114,8 @@ class Publisher(Generic[M]):
         else:  # another thread must not share the buffer
             self._pub.put(encode(message))
         self.sent += 1
+        if self.after_put is not None:  # the owner tells its progress (Service.publisher)
+            self.after_put()
 
     def put_bytes(self, payload: bytes) -> None:
         """Publish an already encoded payload (replay, benchmarks)."""
