@@ -36,6 +36,7 @@ import zenoh
 
 from beyond_self.cognition.paths import DEMO_RECORDING
 from beyond_self.runtime.recording.reader import read_recording
+from beyond_self.runtime.resilience.effect_log import EffectLog
 from beyond_self.runtime.ros2.bag_export import export
 from beyond_self.runtime.ros2.convert import store, to_ros
 from beyond_self.runtime.ros2.node import Ros2Node
@@ -43,7 +44,6 @@ from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import decode, encode
 from beyond_self.schemas.messages import Description, Evidence, ScoredSentence
-from beyond_self.services.speech import SpeechLog
 
 RECORDING = Path(DEMO_RECORDING).with_name("three-actions.mcap")
 ROUNDS = 300
@@ -114,7 +114,7 @@ def per_message(
             r.data_key(0, topic, ros_type, store().hash_rihs01(ros_type)), ros
         )
         time.sleep(0.5)  # routes
-        said = SpeechLog(log, sync=False)
+        said = EffectLog(log, sync=False)
 
         def raw_hop() -> None:
             for _, payload in items:
@@ -160,7 +160,7 @@ def latency(port: int, log: Path) -> dict[str, float]:
         key = r.data_key(0, "/bench/said", r.STRING, store().hash_rihs01(r.STRING))
         b.declare_subscriber(key, lambda _s: arrived.set())
         time.sleep(0.5)
-        said = SpeechLog(log, sync=False)
+        said = EffectLog(log, sync=False)
         payload = samples_description()
 
         def raw() -> None:

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from beyond_self.runtime.resilience.effect_log import EffectLog
 from beyond_self.runtime.ros2.convert import to_ros
 from beyond_self.runtime.ros2.dds import DdsNode
 from beyond_self.runtime.ros2.rmw import cyclone_config
@@ -24,7 +25,6 @@ from beyond_self.schemas import ros2 as r
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import decode
 from beyond_self.schemas.messages import Description
-from beyond_self.services.speech import SpeechLog
 
 NODES = Path(__file__).resolve().parent / "rclpy_nodes"
 STREAMS = {"skeleton": "skeleton", "camera": "camera_compressed", "description": "description"}
@@ -98,7 +98,7 @@ def figures(
         while not all(p.writer.get_matched_subscriptions() for p in out.values()):
             time.sleep(0.05)
         assert anchor.next(60) == {"ready": True}
-        said = SpeechLog(work / "dds-said.log", sync=False)
+        said = EffectLog(work / "dds-said.log", sync=False)
 
         def bridge(cls: type[Message], payload: bytes, kind: str) -> None:
             message = decode(payload, cls)

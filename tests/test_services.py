@@ -13,6 +13,7 @@ from busutil_net import private_config, serve_cut_predecessor
 import beyond_self.schemas as s
 from beyond_self.cognition.gestures import synthesize_continuous
 from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.resilience.ledger import Position
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.services.registry import SERVICES, service_class
 
@@ -239,17 +240,17 @@ async def test_a_successor_object_segmenter_goes_back_for_a_gesture_not_yet_said
         pub.put(s.GestureSegment(header=header, event_seq=5, event="start", segment_id=3,
                                  frame=210, start_stamp=7_000))  # fmt: skip
         for _ in range(500):
-            if "stamp@3" in service.ledgers.resume_stamps:  # type: ignore[attr-defined]
+            if "stamp@3" in service._ledgers.resume_stamps:  # type: ignore[attr-defined]
                 break
             await asyncio.sleep(0.02)
-        stamps = service.ledgers.resume_stamps  # type: ignore[attr-defined]
+        stamps = service._ledgers.resume_stamps  # type: ignore[attr-defined]
         assert stamps["stamp@0"] == 200 and stamps["stamp@1"] == 1_000
         assert 0 <= stamps["stamp@3"] <= 7_000, stamps  # after 3 gestures: gesture 4's point
-        positions = service.ledgers.positions  # type: ignore[attr-defined]
+        positions = service._ledgers.positions  # type: ignore[attr-defined]
         camera = others.keys.camera
-        assert positions[f"{camera}@4"] == stamps["stamp@3"]  # where 4 needs it from
+        assert positions[Position(camera, 4)] == stamps["stamp@3"]  # where 4 needs it from
         # gesture 3 again: from the newest point before it started, the restored one's or older
-        assert positions[f"{camera}@2"] <= expected and f"{camera}@3" not in positions
+        assert positions[Position(camera, 2)] <= expected and Position(camera, 3) not in positions
         await _stop(service)
 
 

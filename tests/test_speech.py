@@ -13,9 +13,10 @@ from busutil_net import private_config
 import beyond_self.schemas as s
 from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.resilience.effect_log import LOG_START, EffectLog
 from beyond_self.runtime.self_report import RESTARTS_ENV
 from beyond_self.schemas import Keys, Message
-from beyond_self.services.speech import LOG_START, SpeechLog, SpeechSynthesizer
+from beyond_self.services.speech import SpeechSynthesizer
 
 
 def test_synthesizes_a_real_wav_with_espeak(tmp_path: Path) -> None:
@@ -65,7 +66,7 @@ async def say(
         await pub.wait_matching(timeout=10)
         for gesture in gestures:
             pub.put(description(gesture))
-        while speech.spoken + speech.ledgers.duplicates < len(gestures):
+        while speech.spoken + speech._ledgers.duplicates < len(gestures):
             await asyncio.sleep(0.02)  # every description handled: said or skipped
         speech.stop()
         await asyncio.wait_for(task, 20)
@@ -97,7 +98,7 @@ async def test_a_restarted_speech_service_does_not_repeat_what_its_log_says_was_
         resume={LOG_START: start},
     )  # fmt: skip
     speech = await say(tmp_path, [1, 2, 3, 4], stale, config)
-    assert speech.spoken == 2 and speech.ledgers.duplicates == 2
+    assert speech.spoken == 2 and speech._ledgers.duplicates == 2
     assert said(tmp_path) == [0, 1, 2, 3, 4]
 
 
@@ -106,16 +107,16 @@ async def test_a_first_speech_service_says_what_an_earlier_run_logged(tmp_path: 
     and the run's part of the log starts where the file ended."""
     (tmp_path / "speech.log").write_text("1001\t1\t-\tone\n1002\t2\t-\ttwo\n")
     speech = await say(tmp_path, [1, 2], None, private_config())
-    assert speech.spoken == 2 and speech.ledgers.duplicates == 0
+    assert speech.spoken == 2 and speech._ledgers.duplicates == 0
     assert said(tmp_path) == [1, 2, 1, 2]
-    assert speech.ledgers.predecessor() == {}
-    assert speech.ledgers.resume == {LOG_START: len("1001\t1\t-\tone\n1002\t2\t-\ttwo\n")}
+    assert speech._ledgers.predecessor() == {}
+    assert speech._ledgers.resume == {LOG_START: len("1001\t1\t-\tone\n1002\t2\t-\ttwo\n")}
 
 
 def test_the_log_reads_whole_lines_and_never_appends_to_a_torn_one(tmp_path: Path) -> None:
     """A line cut short (the machine lost power mid-write) is not taken as said, and the next
     sentence starts a line of its own."""
-    log = SpeechLog(tmp_path / "speech.log")
+    log = EffectLog(tmp_path / "speech.log")
     log.path.write_text("1001\t1\t-\tone\n1002\t2\t-\tt")
     assert log.gestures_since(0) == [1]
     assert log.gestures_since(log.size()) == []

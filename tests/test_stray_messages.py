@@ -92,7 +92,7 @@ async def test_a_foreign_or_refused_frame_moves_no_time_of_the_owner() -> None:
         await asyncio.wait_for(service.last.wait(), 20)
         health = service.health_report()
         clock = service.clock.now_ns()
-        owner = service.times.owner(bus.keys.skeleton)
+        owner = service._times.owner(bus.keys.skeleton)
         service.stop()
         await asyncio.wait_for(task, 10)
     assert service.handled == [100, 200, 400]

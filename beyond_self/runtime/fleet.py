@@ -309,7 +309,7 @@ class Fleet:
         bus = self._host_bus().for_robot(robot)
         config = self.config.with_(robot=robot, robots=None, standby=None)
         service = self.cls(config=config, bus=bus, **self.options)
-        service.fleet_member = True
+        service._fleet_member = True
         task = asyncio.get_running_loop().create_task(
             service.run(install_signals=False), name=f"{self.name}: {robot}"
         )

@@ -7,7 +7,6 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Collection, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
 from beyond_self.runtime.log import event
@@ -21,6 +20,7 @@ if TYPE_CHECKING:
     from beyond_self.runtime.clock import Clock
     from beyond_self.runtime.error_account import ErrorAccount
     from beyond_self.runtime.event_time import SourceTimes
+    from beyond_self.runtime.progress import ProgressReport
 
 RESTARTS_ENV = "BEYOND_RESTARTS"  # set by a supervisor (services.supervision) on a restart
 _STOP_COUNTS = ("messages_in", "messages_out", "malformed", "dropped", "errors", "restarts")
@@ -34,7 +34,8 @@ class Duplicates(Protocol):
 
 
 class Reporting(Protocol):
-    """What a report reads of a running service (runtime.service.Service)."""
+    """What a report reads of a running service (runtime.service.Service): its public face and
+    the runtime's own bookkeeping of it, which a service author never touches."""
 
     @property
     def name(self) -> str: ...
@@ -44,21 +45,21 @@ class Reporting(Protocol):
     def clock(self) -> Clock: ...
     @property
     def log(self) -> logging.Logger: ...
+
     @property
-    def started_at(self) -> float: ...
+    def _started_at(self) -> float: ...
     @property
-    def subscriptions(self) -> Sequence[Subscription[Any]]: ...
+    def _subscriptions(self) -> list[tuple[Subscription[Any], Any]]: ...
     @property
-    def publishers(self) -> Sequence[Publisher[Any]]: ...
+    def _publishers(self) -> list[Publisher[Any]]: ...
     @property
-    def paced_keys(self) -> Collection[str]: ...
+    def _progress(self) -> ProgressReport: ...
     @property
-    def account(self) -> ErrorAccount: ...
+    def _account(self) -> ErrorAccount: ...
     @property
-    def times(self) -> SourceTimes: ...
+    def _times(self) -> SourceTimes: ...
     @property
-    def ledgers(self) -> Duplicates: ...
-    def recovery(self) -> tuple[int, int]: ...
+    def _ledgers(self) -> Duplicates: ...
 
 
 def restarts() -> int:
@@ -73,43 +74,43 @@ def health_header(name: str, seq: int, stamp: int) -> Header:
 
 
 def health_of(service: Reporting, seq: int) -> ServiceHealth:
-    subs, publishers = service.subscriptions, service.publishers
+    subs, publishers = [s for s, _ in service._subscriptions], service._publishers
     keys = service.bus.keys
     return ServiceHealth(
         header=health_header(service.name, seq, service.clock.now_ns()),
         service=service.name,
-        uptime_s=round(time.monotonic() - service.started_at, 3),
+        uptime_s=round(time.monotonic() - service._started_at, 3),
         messages_in=sum(s.received for s in subs),
         messages_out=sum(p.sent for p in publishers),
         dropped=sum(s.dropped for s in subs),
-        malformed=sum(s.malformed for s in subs) + service.account.malformed_other,
-        errors=service.account.errors,
-        last_error=service.account.last_error,
+        malformed=sum(s.malformed for s in subs) + service._account.malformed_other,
+        errors=service._account.errors,
+        last_error=service._account.last_error,
         inputs=sorted({s.key for s in subs}),
         outputs=sorted(
             {p.key for p in publishers}
-            | ({keys.progress(service.name)} if service.paced_keys else set())
+            | ({keys.progress(service.name)} if service._progress.paced else set())
         ),
         restarts=restarts(),
-        stale=service.times.stale,
-        foreign=service.times.foreign,
-        refused=service.times.refused,
+        stale=service._times.stale,
+        foreign=service._times.foreign,
+        refused=service._times.refused,
     )
 
 
 def stop_counts(service: Reporting, health: ServiceHealth) -> dict[str, Any]:
     """What a stopping service logs: its counts, what caches gave back, what it skipped."""
-    recovered, missed = service.recovery()
+    recovered, missed = recovery_of([s for s, _ in service._subscriptions])
     counts: dict[str, Any] = {"service": service.name}
     counts.update({f: getattr(health, f) for f in _STOP_COUNTS})
     counts.update(recovered=recovered, missed=missed)
-    counts["not_logged"] = service.account.once.repeats  # problems of a shape logged before
-    counts["duplicates"] = service.ledgers.duplicates  # handled already: skipped
+    counts["not_logged"] = service._account.once.repeats  # problems of a shape logged before
+    counts["duplicates"] = service._ledgers.duplicates  # handled already: skipped
     counts["stale"] = health.stale  # sensor messages out of order, never read: lost
-    counts["repeated"] = service.times.repeated  # read already: a restarted source played again
+    counts["repeated"] = service._times.repeated  # read already: a restarted source played again
     counts["foreign"] = health.foreign  # sensor messages of a source not their key's own
     counts["refused"] = health.refused  # refused by a handler as bad input
-    counts["suppressed"] = sum(p.suppressed for p in service.publishers)  # consumers had it
+    counts["suppressed"] = sum(p.suppressed for p in service._publishers)  # consumers had it
     return counts
 
 
@@ -120,7 +121,7 @@ def recovery_of(subscriptions: list[Any]) -> tuple[int, int]:
 
 def log_recovery(service: Reporting, reported: tuple[int, int]) -> tuple[int, int]:
     """Log what publisher caches gave back since `reported`; the new figures."""
-    now = service.recovery()
+    now = recovery_of([s for s, _ in service._subscriptions])
     if now != reported:
         event(
             service.log,

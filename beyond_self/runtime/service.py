@@ -1,12 +1,10 @@
-"""The base every service stands on: its surface (subscribe, publish, serve, spawn, report), its
-lifecycle (liveliness, health, clean shutdown on signals) and its accounting.
+"""The base every service stands on: what a service calls (docs/concepts/service.md), its
+lifecycle; the machinery beneath is runtime.service_core.
 
-A service declares the streams it touches (`subscribes`, `publishes`, `serves`, names from
-schemas/keys.py) and opens only those in `setup()`: runtime/security/acl.py generates a secure
-router's rules from the declarations, and a key not declared is refused, so the rules cannot drift
-from the code. Bad input never stops a service (runtime.resilience.accounting): what does not
-decode, or what a handler, timer, task or queryable raises, is counted and logged once per kind of
-problem. runtime/README.md shows a whole service.
+A service declares the streams it touches (`subscribes`, `publishes`, `serves`, schemas/keys.py)
+and opens only those in `setup()`: a secure router's rules are generated from the declarations
+(runtime/security/acl.py), and a key not declared is refused. Bad input never stops a service:
+it is counted and logged once per kind of problem (runtime.error_account).
 """
 
 from __future__ import annotations
@@ -18,43 +16,44 @@ import time
 import zlib
 from collections.abc import Callable, Coroutine, Mapping, Sequence
 from pathlib import Path
-from typing import Any, NoReturn, TypeVar, overload
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar, overload
 
-from beyond_self.core.errors import InputError
 from beyond_self.core.restorable import Restorable
 from beyond_self.runtime import process
+from beyond_self.runtime import service_core as core
 from beyond_self.runtime.bus.config import BusConfig, load_config
-from beyond_self.runtime.bus.delivery import RELIABLE, STATUS, Delivery
+from beyond_self.runtime.bus.delivery import RELIABLE, Delivery
 from beyond_self.runtime.bus.publisher import Publisher
 from beyond_self.runtime.bus.queries import PlainQueryHandler, QueryHandler
 from beyond_self.runtime.bus.session import Bus
-from beyond_self.runtime.bus.subscription import Handler, Received, Subscription, consume
+from beyond_self.runtime.bus.subscription import Handler, Subscription
 from beyond_self.runtime.clock import Clock
 from beyond_self.runtime.error_account import ErrorAccount
-from beyond_self.runtime.event_time import SourceTimes, Verdict
-from beyond_self.runtime.log import event
-from beyond_self.runtime.process import heap
+from beyond_self.runtime.event_time import SourceTimes
 from beyond_self.runtime.progress import ProgressReport
+from beyond_self.runtime.resilience.effect_log import EffectLog, take_over
 from beyond_self.runtime.resilience.ledger import Keeper
 from beyond_self.runtime.resilience.resume import InputGate, gated
-from beyond_self.runtime.resilience.snapshots import Snapshots, SnapshotStore
-from beyond_self.runtime.resilience.state import LedgerFile, state_dir
+from beyond_self.runtime.resilience.snapshots import Snapshots
+from beyond_self.runtime.resilience.source_plan import ResumePlan, plan
+from beyond_self.runtime.resilience.state import state_dir
 from beyond_self.runtime.security.acl import check_declared
-from beyond_self.runtime.self_report import (
-    health_of,
-    log_recovery,
-    recovery_of,
-    restarts,
-    stop_counts,
-)
+from beyond_self.runtime.self_report import health_of
 from beyond_self.runtime.service_cli import options_from_command_line
+from beyond_self.runtime.service_core import Downstream
+from beyond_self.runtime.service_upstream import CLOSES, Upstream, counted
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.codec import SchemaError
 from beyond_self.schemas.identity import TYPES as IDENTIFIED
 from beyond_self.schemas.keys import check_name
-from beyond_self.schemas.messages import Progress, ServiceHealth, StreamClock
+from beyond_self.schemas.messages import Progress, ServiceHealth
+
+if TYPE_CHECKING:
+    from beyond_self.runtime.recording.pacing import Pacer
 
 M = TypeVar("M", bound=Message)
+# the constructor's keyword arguments every service takes (the rest are its own options)
+BASE_OPTIONS = frozenset({"config", "bus", "clock", "health_period", "name"})
 Q = TypeVar("Q", bound=Message)
 R = TypeVar("R", bound=Restorable)
 
@@ -66,7 +65,8 @@ def report_phase(robot: str) -> float:
 
 
 class Service:
-    """Subclass, set `name` (or pass it), override `setup()`."""
+    """Subclass, set `name` (or pass it), override `setup()`. What a service calls is listed in
+    docs/concepts/service.md (fifteen names); the machinery is runtime.service_core's."""
 
     name: str = "service"
     health_period: float = 1.0
@@ -88,7 +88,7 @@ class Service:
         self.name = check_name("service", name or self.name)
         if config is not None and config.secure is not None and config.identity is None:
             config = config.with_(identity=self.name)  # on a secure bus a service is its name
-        self.config = config
+        self._config = config
         self._bus = bus
         self._owns_bus = bus is None
         self.clock = clock or Clock.from_env()
@@ -96,26 +96,27 @@ class Service:
             self.health_period = health_period
         self.log = logging.getLogger(f"beyond.{self.name}")
         self.started = asyncio.Event()
-        self.account = ErrorAccount(self.log, self.name)
+        self._account = ErrorAccount(self.log, self.name)
         self._stop = asyncio.Event()
         self._subscriptions: list[tuple[Subscription[Any], Handler[Any]]] = []
         self._publishers: list[Publisher[Any]] = []
         self._progress = ProgressReport(self.name, self.header)
-        self.ledgers = Keeper(self.name, self.header)  # exactly once (runtime.resilience.ledger)
-        self.fleet_member = False  # run by runtime.fleet for one robot of many
+        self._ledgers = Keeper(self.name, self.header)  # exactly once (runtime.resilience.ledger)
+        self._fleet_member = False  # run by runtime.fleet for one robot of many
         self._once: set[str] = set()  # keys whose handling is not repeated after a restart
+        self._upstreams: list[Upstream] = []  # numbered event streams (`complete=`)
         self._gates: dict[str, InputGate[Any]] = {}  # sensor key -> its restored position
         # what `keep_state` keeps: the snapshots, and how to ask for the state now
         self._state: tuple[Snapshots[Any], Callable[[], Any]] | None = None
-        self.times = SourceTimes()  # whose time each sensor key keeps (runtime.event_time)
+        self._times = SourceTimes()  # whose time each sensor key keeps (runtime.event_time)
         self._recovery_reported: tuple[int, int] = (0, 0)
         self._tasks: set[asyncio.Task[Any]] = set()
         self._timers: set[asyncio.TimerHandle] = set()
         self._seq = 0
         self._health_seq = 0
-        self.started_at = time.monotonic()
+        self._started_at = time.monotonic()
 
-    # --- for subclasses --------------------------------------------------------------------
+    # --- overridden by subclasses ----------------------------------------------------------
 
     async def setup(self) -> None:
         """Open subscriptions, publishers and queryables here."""
@@ -123,17 +124,19 @@ class Service:
     async def teardown(self) -> None:
         """Release anything `setup` acquired beyond subscriptions and publishers."""
 
-    @property
-    def subscriptions(self) -> list[Subscription[Any]]:
-        return [s for s, _ in self._subscriptions]
+    def health_report(self) -> ServiceHealth:
+        """This service's `ServiceHealth`: what it received, sent, dropped, could not read."""
+        seq = self._health_seq
+        self._health_seq += 1
+        return health_of(self, seq)
 
-    @property
-    def publishers(self) -> list[Publisher[Any]]:
-        return list(self._publishers)
+    def published_counts(self) -> dict[str, int]:
+        """Messages published per output key, as reported in `Progress` (a service whose
+        outputs carry their own running count may report that instead: it survives a
+        restart)."""
+        return {p.key: p.sent for p in self._publishers}
 
-    @property
-    def paced_keys(self) -> set[str]:
-        return set(self._progress.paced)
+    # --- called by subclasses --------------------------------------------------------------
 
     @property
     def bus(self) -> Bus:
@@ -149,39 +152,59 @@ class Service:
         delivery: Delivery = RELIABLE,
         *,
         paced: bool = False,
-        once: bool = False,
+        once: bool | EffectLog = False,
+        complete: Callable[[int], None] | None = None,
+        producer: str = "",
     ) -> Subscription[M]:
         """Call `handler(message)` for every well-formed `cls` message on `key`, received as
-        `delivery` says (runtime.bus.delivery), each identity once (runtime.resilience.ledger). With
-        `paced`
-        (sensor inputs), the stamp of every message handled is published as `Progress`, so a
-        player never outruns this service; `key` belongs to one source (runtime.event_time):
-        another's messages, and the owner's not after the last one handled (a restarted
-        source repeats what was handled), are skipped and counted. With
-        `once` (a handler whose effect is not to be repeated: a sentence said), a restarted
-        instance does not handle again what its predecessor handled."""
+        `delivery` says (runtime.bus.delivery), each identity once (runtime.resilience.ledger).
+        With `paced` (sensor inputs), the stamp of every message handled is published as
+        `Progress`, so a player never outruns this service; `key` belongs to one source
+        (runtime.event_time): another's messages, and the owner's not after the last one handled
+        (a restarted source repeats what was handled), are skipped and counted. With `once` (a
+        handler whose effect is not to be repeated: a sentence said), a restarted instance does
+        not handle again what its predecessor handled; given the effect's own log
+        (runtime.resilience.effect_log), nor what that log says was done. With `complete` (a
+        numbered event stream from `producer`, runtime.service_upstream), the base counts what
+        was received and calls `complete(stamp)` once every event `producer` derived from its
+        input up to `stamp` has arrived."""
         self._check_declared("subscribe", key)
-        sub = self.bus.subscribe(key, cls, delivery, on_malformed=self.account.malformed)
+        upstream = None
+        if complete is not None:
+            upstream = Upstream(key, producer, complete)
+            self._upstreams.append(upstream)
+            handler = counted(upstream, handler)
+        sub = self.bus.subscribe(key, cls, delivery, on_malformed=self._account.malformed)
         if (gate := self._gates.get(key)) is not None:
             handler = gated(gate, handler)
         self._subscriptions.append((sub, handler))
         if cls in IDENTIFIED:
-            self.ledgers.handled.declare(key)
+            self._ledgers.handled.declare(key)
         if once:
             self._once.add(key)
+        if isinstance(once, EffectLog):
+            take_over(self._ledgers, key, cls, once, self.log)
         if paced:
             self._progress.pace(key)
-            self.times.track(key)
+            self._times.track(key)
         if self.started.is_set():
-            self.spawn(self._consume(sub, handler), key)
+            self.spawn(core.consume_loop(self, sub, handler), key)
+        if upstream is not None:  # the producer's progress says when its events are complete
+            self.subscribe(self.bus.keys.progress(producer), Progress, upstream.progress)
         return sub
 
-    def publisher(self, key: str, cls: type[M], delivery: Delivery = RELIABLE) -> Publisher[M]:
-        """A publisher of `cls` messages on `key`, sending as `delivery` says."""
+    def publisher(
+        self, key: str, cls: type[M], delivery: Delivery = RELIABLE, *, progress: bool = False
+    ) -> Publisher[M]:
+        """A publisher of `cls` messages on `key`, sending as `delivery` says. With `progress`,
+        each put is told in this service's `Progress` at once (not after the message being
+        handled): a successor started meanwhile learns from it not to send it again."""
         self._check_declared("publish", key)
         pub = self.bus.publisher(key, cls, delivery)
         if cls in IDENTIFIED:
-            pub.suppress = self.ledgers.suppressed
+            pub.suppress = self._ledgers.suppressed
+        if progress:
+            pub.after_put = lambda: core.publish_progress(self)
         self._publishers.append(pub)
         return pub
 
@@ -211,20 +234,17 @@ class Service:
 
         self.bus.watch_tokens(key_expr, guarded)
 
-    def done_downstream(self, key: str, kind: str) -> set[int]:
-        """Gestures whose `kind` on this service's output `key` every consumer has, and which
-        are said: a successor does not work on them again (runtime.resilience.ledger)."""
-        return self.ledgers.done_downstream(key, kind)
+    def downstream(self, key: str) -> Downstream:
+        """What the consumers of this service's output `key` have had (`done(kind)`: every
+        consumer, and said; `seen(*kinds)`: some consumer): a successor does not work on what is
+        done again, and numbers on from what was seen (runtime.resilience.ledger)."""
+        return Downstream(self, key)
 
-    def seen_downstream(self, key: str, kinds: tuple[str, ...]) -> set[int]:
-        """Gestures some consumer of this service's output `key` has had with one of `kinds`
-        (a predecessor's numbering, what it closed)."""
-        return self.ledgers.seen_downstream(key, kinds)
-
-    def state_folder(self) -> Path | None:
-        """This service's state folder on this machine (runtime.resilience.state); None without
-        one, or when a fleet runs it for one of its robots (the robot's side keeps its own)."""
-        return None if self.fleet_member else state_dir(self.bus.keys.robot, self.name)
+    def resume_plan(self, pacer: Pacer) -> ResumePlan:
+        """A source's resume plan (runtime.resilience.source_plan), once `pacer` has heard its
+        consumers: what they all have, moved back to what their successors need again."""
+        keys = self.bus.keys
+        return plan(self._ledgers, pacer.handled_by_all(), keys.gesture_segment, keys.description)
 
     def keep_state(
         self,
@@ -241,20 +261,7 @@ class Service:
         reach their handlers from the restored state's stamp on (runtime.resilience.resume), and
         `on_gap(message, since)` hears of inputs that are gone (without it, the service takes
         what comes). Called in `setup()`, before those keys are subscribed."""
-        if self._state is not None:
-            raise RuntimeError(f"{self.name}: keep_state called twice")
-        folder = self.state_folder()
-        store = SnapshotStore(folder) if folder is not None else None
-        snapshots = Snapshots(cls, self.ledgers, store, self.bus.keys.description, inputs)
-        restored = snapshots.chosen(restarted=restarts() > 0)
-        restore(restored)
-        gate = InputGate(restored, lambda: snapshots.newest, restore, on_gap)
-        for key in inputs:
-            if key in self._gates or any(sub.key == key for sub, _ in self._subscriptions):
-                raise RuntimeError(f"{self.name}: keep_state after {key} was subscribed")
-            self._gates[key] = gate
-        self._state = (snapshots, snapshot)
-        return snapshots
+        return core.keep_state(self, cls, restore, snapshot, inputs, on_gap)
 
     def spawn(self, work: Coroutine[Any, Any, Any], name: str = "task") -> asyncio.Task[Any]:
         """Run `work` beside the handlers until the service stops (then it is cancelled); what
@@ -288,17 +295,7 @@ class Service:
 
     def report_error(self, key: str, exc: BaseException) -> None:
         """Count and log `exc`, raised while handling `key`; the service goes on."""
-        self.account.error(key, exc)
-
-    def _query_failed(self, key: str, exc: Exception) -> None:
-        if isinstance(exc, SchemaError):
-            self.account.malformed_other += 1
-            self.account.malformed(key, exc)
-        else:
-            self.report_error(key, exc)
-
-    def _check_declared(self, kind: str, key: str) -> None:
-        check_declared(self.name, type(self), kind, key, self.bus.keys.root)
+        self._account.error(key, exc)
 
     def derive(self, source: Header, cls: type[Message]) -> Header:
         """Header of a `cls` output computed from `source`: same stamp, same sequence number and the
@@ -318,114 +315,30 @@ class Service:
         self._seq += 1
         return cls.original_header(self.name, seq, self.clock.now_ns() if stamp is None else stamp)
 
-    # --- health and progress -------------------------------------------------------------
+    # --- the base's own --------------------------------------------------------------------
 
-    def health_report(self) -> ServiceHealth:
-        """This service's `ServiceHealth`: what it received, sent, dropped, could not read."""
-        seq = self._health_seq
-        self._health_seq += 1
-        return health_of(self, seq)
-
-    def received_counts(self) -> dict[str, int]:
-        """Messages received per input key, as reported in `Progress` (a service whose inputs
-        carry their own sequence numbers may report those instead: they survive a restart)."""
-        return {s.key: s.received for s, _ in self._subscriptions}
-
-    def published_counts(self) -> dict[str, int]:
-        """Messages published per output key, as reported in `Progress` (a service whose
-        outputs carry their own running count may report that instead: it survives a
-        restart)."""
-        return {p.key: p.sent for p in self._publishers}
-
-    def progress_report(self) -> Progress:
-        """How far each paced input is handled, and what was received and published
-        (runtime.progress)."""
-        stamps = {p.key: p.last_stamp for p in self._publishers}
-        now = self.clock.now_ns()  # as it stands now: it bounds a stream with no owner yet
-        for key in self._progress.paced:
-            self._progress.handled_up_to(key, self.times.progress(key, ceiling=now))
-        return self._progress.report(self.published_counts(), self.received_counts(), stamps)
-
-    def publish_progress(self) -> None:
-        self._progress.publish(self.progress_report())
-
-    def recovery(self) -> tuple[int, int]:
-        """(recovered, missed): messages of recovering subscriptions that came from publisher
-        caches after a link failure or a late start, and those no cache held any more."""
-        return recovery_of(self.subscriptions)
-
-    async def _consume(self, sub: Subscription[Any], handler: Handler[Any]) -> None:
-        ledgers, progress, times = self.ledgers, self._progress, self.times
-        paced, identified = times.tracked(sub.key), sub.cls in IDENTIFIED
-        refusal: list[Exception] = []  # the current message's, if its handler refused it
-
-        def fresh(received: Received[Any]) -> bool:
-            refusal.clear()
-            if identified and ledgers.duplicate(received.key, received.message) is not None:
-                return False
-            if paced:
-                header = received.message.header
-                verdict = times.verdict(sub.key, header.source, header.stamp)
-                if verdict is Verdict.FOREIGN:
-                    self.account.refused(sub.key, times.why_foreign(sub.key, header.source))
-                return verdict is Verdict.FRESH
-            return True
-
-        def failed(key: str, exc: Exception) -> None:
-            refusal.append(exc)
+    def _query_failed(self, key: str, exc: Exception) -> None:
+        if isinstance(exc, SchemaError):
+            self._account.malformed_other += 1
+            self._account.malformed(key, exc)
+        else:
             self.report_error(key, exc)
 
-        def done(received: Received[Any]) -> None:
-            header = received.message.header
-            refused = bool(refusal) and isinstance(refusal[0], InputError)
-            # bad input is counted and forgotten: no time, no owner, no ledger entry
-            if refused:
-                times.refuse(sub.key, header.source, header.stamp)
-            elif times.take(sub.key, header.source, header.stamp):  # the key's own stream
-                self.clock.observe(header.stamp)
-            if identified and not refused:
-                ledgers.record(received.key, received.message)
-            if self._state is not None:
-                snapshots, snapshot = self._state
-                try:
-                    snapshots.offer(snapshot())
-                except Exception as exc:  # counted; the next message offers one again
-                    self.report_error("snapshot", exc)
-            if progress.wanted:
-                self.publish_progress()
+    def _check_declared(self, kind: str, key: str) -> None:
+        check_declared(self.name, type(self), kind, key, self.bus.keys.root)
 
-        await consume(sub, handler, failed, after=done, accept=fresh)
+    def _state_folder(self) -> Path | None:
+        """This service's state folder on this machine (runtime.resilience.state); None without
+        one, or when a fleet runs it for one of its robots (the robot's side keeps its own)."""
+        return None if self._fleet_member else state_dir(self.bus.keys.robot, self.name)
 
-    def _follow_clock(self) -> None:
-        """On a replay, follow the player's stream clock (runtime.clock), so that health and
-        progress are stamped on the stream's time even when no input has come for a while."""
-        # not one of the subscriptions (nor in health's inputs): a malformed tick is counted
-        # as malformed input outside them, as a malformed query is
-        sub = self.bus.subscribe(
-            self.bus.keys.clock, StreamClock, STATUS, on_malformed=self._query_failed
-        )
-
-        def tick(message: StreamClock) -> None:
-            self.clock.observe(message.header.stamp)
-
-        self.spawn(consume(sub, tick, self.report_error), "clock")
-
-    async def _report_periodically(self) -> None:
-        pub = self.bus.publisher(self.bus.keys.health(self.name), ServiceHealth, STATUS)
-        loop = asyncio.get_running_loop()
-        # the first report at once (it shows the service is up), the next ones at a phase of
-        # the period of this robot's own: a fleet's runs start together when their robots
-        # appear, and reports in step would build and send a health report and a ledger for
-        # every robot in one go each second, a burst that every gesture under way queues behind
-        due = loop.time() + self.health_period * report_phase(self.bus.keys.robot)
-        while True:
-            pub.put(self.health_report())
-            if self._progress.paced:
-                self.publish_progress()
-            self.ledgers.tick()
-            self._recovery_reported = log_recovery(self, self._recovery_reported)
-            await asyncio.sleep(max(due - loop.time(), 0.0))
-            due = max(due, loop.time()) + self.health_period
+    def _closed(self, key: str) -> set[int]:
+        """Gestures of the events on `key` closed for this service: its last per-gesture output
+        every consumer has, or cancelled (runtime.service_upstream)."""
+        done = [self._ledgers.done_downstream(p.key, CLOSES[p.cls]) for p in self._publishers
+                if p.cls in CLOSES]  # fmt: skip
+        closed = set.intersection(*done) if done else set()
+        return closed | self._ledgers.seen_downstream(key, ("cancel",))
 
     # --- lifecycle ------------------------------------------------------------------------
 
@@ -436,7 +349,7 @@ class Service:
     async def run(self, *, install_signals: bool = True) -> None:
         """Open the bus (unless given one), set up, serve until stopped, clean up."""
         if self._bus is None:
-            config = self.config or load_config()
+            config = self._config or load_config()
             if config.secure is not None and config.identity is None:
                 config = config.with_(identity=self.name)
             self._bus = Bus.open(config)
@@ -444,68 +357,15 @@ class Service:
         installed = process.install_signals(self.stop) if install_signals else []
         undeclare_token: Callable[[], None] | None = None
         try:
-            # before setup: a restarted one resumes
-            self.ledgers.said_key = self.bus.keys.description
-            if (folder := self.state_folder()) is not None:
-                self.ledgers.file = LedgerFile(folder)
-            await self.ledgers.ask(self.bus, self.log, restarted=restarts() > 0)
-            await self.setup()
-            outputs = [p.key for p in self._publishers if p.cls in IDENTIFIED]
-            self.ledgers.adopt(self._once, outputs)
-            self.spawn(self.ledgers.open(self.bus, self.report_error), "ledger")
-            for sub, handler in self._subscriptions:
-                self.spawn(self._consume(sub, handler), sub.key)
-            if self.clock.is_recording:
-                self._follow_clock()
-            health_key = self.bus.keys.health(self.name)
-
-            async def answer_health(_key: str, _request: None) -> list[tuple[str, Message]]:
-                return [(health_key, self.health_report())]
-
-            self.queryable(health_key, None, answer_health)
-            if self._progress.paced:
-                progress_key = self.bus.keys.progress(self.name)
-
-                async def answer_progress(_key: str, _request: None) -> Progress:
-                    return self.progress_report()
-
-                self.queryable(progress_key, None, answer_progress)
-                self._progress.open(self.bus, self.progress_report())
-            self.spawn(self._report_periodically(), "health")
-            undeclare_token = self.bus.declare_token(self.bus.keys.alive(self.name))
-            self.started.set()
-            heap.settle_soon()
-            event(self.log, logging.INFO, "started", service=self.name, robot=self.bus.keys.robot)
+            undeclare_token = await core.start(self, report_phase(self.bus.keys.robot))
             await self._stop.wait()
         finally:
-            await self._shut_down(undeclare_token)
+            await core.shut_down(self, undeclare_token)
+            if self._owns_bus and self._bus is not None:
+                self._bus.close()
+                self._bus = None
             for sig in installed:
                 asyncio.get_running_loop().remove_signal_handler(sig)
-
-    async def _shut_down(self, undeclare_token: Callable[[], None] | None) -> None:
-        for timer in self._timers:
-            timer.cancel()
-        self._timers.clear()
-        tasks = list(self._tasks)
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
-        if undeclare_token is not None:
-            undeclare_token()
-        for sub, _ in self._subscriptions:
-            sub.close()
-        for pub in self._publishers:
-            pub.close()
-        try:
-            await self.teardown()
-        except Exception as exc:
-            self.report_error("teardown", exc)
-        heap.release()
-        stopped = stop_counts(self, self.health_report())
-        event(self.log, logging.INFO, "stopped", **stopped)
-        if self._owns_bus and self._bus is not None:
-            self._bus.close()
-            self._bus = None
 
     @classmethod
     def add_arguments(cls, parser: argparse.ArgumentParser) -> None:

@@ -487,6 +487,16 @@ LEDGER_RANGES = 4096  # (segment, first, last) ranges per key and kind in a Ledg
 Range = tuple[Id, Count, Count]
 
 
+class InputPosition(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Where a service's next instance needs a sensor input from: the first `stamp` on `key` it
+    needs again; with `gesture`, to derive that gesture again (not said yet), else from its
+    newest snapshot."""
+
+    key: Text
+    stamp: Stamp
+    gesture: Id | None = None
+
+
 class Ledger(Message, frozen=True):
     """What one service has handled, by identity (schemas.identity), and where its next
     instance starts: how a restarted service neither stalls nor repeats (runtime.resilience.ledger).
@@ -499,17 +509,19 @@ class Ledger(Message, frozen=True):
     (the gesture streamer's checkpoint: a skeleton stamp from which its state can be rebuilt,
     and its counts there; the object segmenter's camera restart point). Stamps apart: they
     exceed 2^53, and the JSON form writes them as times.
-    `positions`: sensor key -> the first stamp on it the next instance needs again (its
-    snapshot's input position): a restarted source plays again from there (services/ingest.py);
-    `<key>@N`: where a successor that goes back to gesture N (not said yet) needs it from.
+    `positions`: per sensor key, the first stamp on it the next instance needs again (its
+    snapshot's input position, `InputPosition`): a restarted source plays again from there
+    (runtime.resilience.source_plan); with a gesture N, where a successor that goes back to
+    gesture N (not said yet) needs it from.
     Every service publishes its own on `ledger/<service>` when it changes, keeps the last one
     of every other service of its robot, and answers for all of them on query, so a service's
     record outlives the service.
     Version 2: `instance`, which instance of the service this is (its predecessor's plus one):
     a producer withholds only what the consumer's instance alive now has handled, so a
-    consumer replaced with it (a workstation taken over) gets what it needs to rebuild."""
+    consumer replaced with it (a workstation taken over) gets what it needs to rebuild.
+    Version 3: `positions` are typed (`InputPosition`), no longer "<key>@N" strings."""
 
-    VERSION: ClassVar[int] = 2
+    VERSION: ClassVar[int] = 3
 
     service: Name
     instance: Count = 0
@@ -529,8 +541,8 @@ class Ledger(Message, frozen=True):
     resume_stamps: Annotated[dict[Name, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = (
         msgspec.field(default_factory=dict)
     )
-    positions: Annotated[dict[Text, Stamp], msgspec.Meta(max_length=VARIABLES_MAX)] = msgspec.field(
-        default_factory=dict
+    positions: Annotated[list[InputPosition], msgspec.Meta(max_length=VARIABLES_MAX)] = (
+        msgspec.field(default_factory=list)
     )
 
 

@@ -6,7 +6,7 @@ GIL with the gestures' work, so the frame that completes a gesture waited behind
 of its own, at a lower priority when the source is live, the system runs the gestures' work first
 and a live segmenter skips the frames nothing was left for. A replay's describer keeps its
 priority: every frame is described. The worker dies with the segmenter
-(runtime.resilience.lifeline).
+(runtime.process.lifeline).
 """
 
 from __future__ import annotations

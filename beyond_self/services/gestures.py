@@ -111,9 +111,9 @@ class GestureStreamer(Service):
     def frames_lost(self, frame: SkeletonFrame, since: int) -> None:
         """The frames from `since` to `frame` are gone (source and streamer restarted): cancel
         each gesture a consumer saw start and none saw end (they would wait on it for ever)."""
-        key = self.bus.keys.gesture_segment
-        seen = self.seen_downstream(key, SEGMENT_KINDS)
-        under_way = seen - self.seen_downstream(key, ("end", "cancel"))
+        downstream = self.downstream(self.bus.keys.gesture_segment)
+        seen = downstream.seen(*SEGMENT_KINDS)
+        under_way = seen - downstream.seen("end", "cancel")
         stamp = frame.header.stamp
         reason = f"its frames before {stamp} are gone (source and streamer restarted)"
         self.emit(

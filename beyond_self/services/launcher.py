@@ -87,7 +87,7 @@ async def start_service(
         cmd += ["--set", f"{key}={json.dumps(value)}"]
     proc = await asyncio.create_subprocess_exec(  # started from this thread: the event loop's
         *cmd,
-        # it dies with us (runtime.resilience.lifeline)
+        # it dies with us (runtime.process.lifeline)
         env={**env, **lifeline.child_env(), **({HELD_ENV: "1"} if held else {})},
         stdin=asyncio.subprocess.PIPE if held else asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE,

@@ -55,13 +55,19 @@ def load_options(path: str | Path | None) -> dict[str, dict[str, Any]]:
 
 
 def check_options(service: str, cls: type, options: dict[str, Any]) -> dict[str, Any]:
-    """The options `cls.__init__` accepts; anything else is an InputError listing the valid."""
-    params = inspect.signature(cls).parameters
-    valid = [n for n, p in params.items() if p.kind == p.KEYWORD_ONLY and n not in _BASE]
+    """The options `cls.__init__` accepts (the fields of `cls.Options`, a class whose options
+    are one value); anything else is an InputError listing the valid."""
+    grouped = getattr(cls, "Options", None)
+    if grouped is not None:
+        valid = [f.name for f in msgspec.structs.fields(grouped)]
+        hints = typing.get_type_hints(grouped)
+    else:
+        params = inspect.signature(cls).parameters
+        valid = [n for n, p in params.items() if p.kind == p.KEYWORD_ONLY and n not in _BASE]
+        hints = typing.get_type_hints(getattr(cls, "__init__"))  # noqa: B009 (mypy: class)
     for name in options:
         if name not in valid:
             raise unknown(f"option of service {service!r}", name, valid)
-    hints = typing.get_type_hints(getattr(cls, "__init__"))  # noqa: B009 (mypy: class, not instance)
     return {name: _typed(service, name, value, hints.get(name)) for name, value in options.items()}
 
 

@@ -68,7 +68,7 @@ class AffordanceReasoner(Service):
         keys = self.bus.keys
         # restarted: the gestures whose words every consumer has are done; what comes back
         # about them from the caches is not worked on again, nor waited for
-        self.join.done(self.done_downstream(keys.words, "words"))
+        self.join.done(self.downstream(keys.words).done("words"))
         self.predictions = self.publisher(keys.affordance, AffordancePrediction, FRAMES)
         self.words_out = self.publisher(keys.words, WordProbabilities, EVENTS)
         self.subscribe(keys.gesture_object, GestureObject, self.on_object, EVENTS)

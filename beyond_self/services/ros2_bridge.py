@@ -5,7 +5,7 @@ stamped with its own message's stamp (schemas.ros2 names topics and types, runti
 converts, runtime.ros2.graph opens the node).
 
 A sentence is said once, across a SIGKILL, as the speech service says it (services.speech): a
-consumer in exactly-once (`once=True`), and its own log, written before the sentence is
+consumer in exactly-once whose `once=` is its own log, written before the sentence is
 published and read back by a restarted bridge. A kill between the two loses that sentence
 rather than saying it twice; the log is not synced, so a power loss may let one be said again."""
 
@@ -18,6 +18,7 @@ from typing import Any
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, SKELETON
 from beyond_self.runtime.log import event
 from beyond_self.runtime.outputs import service_out_dir
+from beyond_self.runtime.resilience.effect_log import EffectLog
 from beyond_self.runtime.ros2 import rmw
 from beyond_self.runtime.ros2.convert import to_ros
 from beyond_self.runtime.ros2.graph import Node, Publisher, open_node
@@ -31,7 +32,6 @@ from beyond_self.schemas.messages import (
     Description,
     SkeletonFrame,
 )
-from beyond_self.services.speech import SpeechLog, take_what_the_run_said
 
 # our stream -> (message type, delivery) the bridge takes it with
 OUT: dict[str, tuple[type[Message], Any]] = {
@@ -68,14 +68,13 @@ class Ros2Bridge(Service):
         self.out: dict[str, Publisher] = {}
         # written before each sentence is published, not synced: a kill cannot lose a write
         # already made, and a synced one took milliseconds a description should not wait
-        self.said = SpeechLog(self.out_dir / "said.log", sync=False)
+        self.said = EffectLog(self.out_dir / "said.log", sync=False)
         self.published = 0
 
     async def setup(self) -> None:
         keys = self.bus.keys
         topics = r.Ros2Topics(keys.robot, self.renamed)
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        take_what_the_run_said(self, self.said)
         node = self.node = open_node(
             f"beyond_{keys.robot}", f"/{r.ros_name(keys.robot)}", middleware=self.middleware,
             connect=self.connect, domain=self.domain,
@@ -84,7 +83,7 @@ class Ros2Bridge(Service):
             del relative
             qos = r.RELIABLE_QOS if stream == "description" else r.SENSOR_QOS
             self.out[stream] = node.publisher(topics.topic(stream), ros_type, qos)
-        self.subscribe(keys.description, Description, self.on_description, EVENTS, once=True)
+        self.subscribe(keys.description, Description, self.on_description, EVENTS, once=self.said)
         for stream, (cls, delivery) in OUT.items():
             self.subscribe(keys.stream(stream), cls, self._forward(stream), delivery)
         event(self.log, logging.INFO, "on the ROS 2 graph", middleware=self.middleware,

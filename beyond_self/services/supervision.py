@@ -5,9 +5,9 @@ Like systemd's `Restart=on-failure`: a service that dies (a signal, a non-zero s
 as stuck by the health watch) is started again after a delay that doubles with each restart in
 the last `interval_s`, at most `burst` times in it; then the supervisor gives up and says so. A
 status 0 or SIGTERM/SIGINT meant to stop; status 2 is bad input, which a restart would read
-again (`RestartPreventExitStatus=2`): neither is restarted. A restarted service resumes
-(runtime.resilience.ledger) and learns its restart count from `BEYOND_RESTARTS`
-(runtime.self_report).
+again (`RestartPreventExitStatus=2`): neither is restarted. A restarted service resumes where
+its predecessor stopped (docs/concepts/recovery.md) and learns its restart count from
+`BEYOND_RESTARTS` (runtime.self_report).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from beyond_self.core.errors import InputError
 
-BAD_INPUT = 2  # the exit status of a service refusing its input (runtime.resilience.process)
+BAD_INPUT = 2  # the exit status of a service refusing its input (runtime.process)
 CLEAN_SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
 

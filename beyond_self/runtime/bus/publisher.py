@@ -82,6 +82,7 @@ class Publisher(Generic[M]):
         self.last_stamp = -1  # of the last message sent
         self.suppress: Callable[[str, Message], bool] | None = None  # consumers have it already
         self.suppressed = 0
+        self.after_put: Callable[[], None] | None = None  # called after every put
         # written to before each put (the source's log, runtime.resilience.source_log): key, stamp,
         # payload
         self.tap: Callable[[str, int, bytes], None] | None = None
@@ -98,6 +99,8 @@ class Publisher(Generic[M]):
             raise TypeError(f"publisher of {self.cls.__name__} got {type(message).__name__}")
         if self.suppress is not None and self.suppress(self.key, message):
             self.suppressed += 1  # handled by every consumer, sent by a previous instance
+            if self.after_put is not None:
+                self.after_put()
             return
         self.last_stamp = message.header.stamp
         if self.tap is not None:
@@ -111,6 +114,8 @@ class Publisher(Generic[M]):
         else:  # another thread must not share the buffer
             self._pub.put(encode(message))
         self.sent += 1
+        if self.after_put is not None:  # the owner tells its progress (Service.publisher)
+            self.after_put()
 
     def put_bytes(self, payload: bytes) -> None:
         """Publish an already encoded payload (replay, benchmarks)."""

@@ -30,11 +30,23 @@ from beyond_self.runtime.log import event
 from beyond_self.runtime.resilience.state import LedgerFile
 from beyond_self.schemas.base import Header, Message
 from beyond_self.schemas.identity import GESTURE_KINDS, Identity, identify
-from beyond_self.schemas.messages import LEDGER_RANGES, Ledger, Range
+from beyond_self.schemas.messages import LEDGER_RANGES, InputPosition, Ledger, Range
 
 SEGMENTS_KEPT = 256  # per key and kind: older segments are forgotten (no cache holds them)
 RANGES_KEPT = 64  # per key, kind and segment: older ranges are forgotten
 SEGMENT_EVENTS = ("start", "end", "cancel")
+
+
+class Position(msgspec.Struct, frozen=True):
+    """A sensor key where a successor needs its input from, to derive `gesture` again (None:
+    from its newest snapshot); a ledger tells the first stamp it needs there."""
+
+    key: str
+    gesture: int | None = None
+
+
+def on_the_wire(positions: Mapping[Position, int]) -> list[InputPosition]:
+    return [InputPosition(p.key, stamp, p.gesture) for p, stamp in positions.items()]
 
 
 class Handled:
@@ -121,7 +133,7 @@ class LedgerBook:
         self.handled: dict[str, Handled] = {}
         self.current: dict[str, tuple[int, Handled]] = {}  # service -> (instance, its handled)
         self.resume: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, numbers)
-        self.positions: dict[str, tuple[int, dict[str, int]]] = {}  # service -> (stamp, key ->)
+        self.positions: dict[str, tuple[int, list[InputPosition]]] = {}  # service -> (stamp, ...)
         self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
         self.past: dict[str, int] = {}  # service -> its newest instance known to be dead
 
@@ -148,7 +160,7 @@ class LedgerBook:
             self.resume[name] = (ledger.header.stamp, numbers)
         stamp, _ = self.positions.get(name, (-1, {}))
         if ledger.positions and ledger.header.stamp >= stamp:
-            self.positions[name] = (ledger.header.stamp, dict(ledger.positions))
+            self.positions[name] = (ledger.header.stamp, list(ledger.positions))
 
     def instance_of(self, service: str) -> int:
         """The newest instance of `service` heard of (-1: none)."""
@@ -159,19 +171,20 @@ class LedgerBook:
 
     def needed(self, keys: Iterable[str], back_to: int | None = None) -> dict[str, int]:
         """Per key of `keys`, the oldest input position of any service's snapshot; with
-        `back_to` (a gesture not said yet), each service's "<key>@N" with the highest N up to
-        it where it has one (from there its successor derives gesture N again)."""
+        `back_to` (a gesture not said yet), each service's position for the highest gesture N
+        up to it where it has one (from there its successor derives gesture N again)."""
         wanted = set(keys)
         out: dict[str, int] = {}
         for _, positions in self.positions.values():
             mine: dict[str, tuple[int, int]] = {}  # key -> (N, stamp); N = -1: the newest
-            for entry, stamp in positions.items():
-                key, _, count = entry.partition("@")
-                n = int(count) if count.isdigit() else -1
-                if key not in wanted or (count and (back_to is None or not 0 <= n <= back_to)):
+            for p in positions:
+                n = -1 if p.gesture is None else p.gesture
+                if p.key not in wanted:
                     continue
-                if key not in mine or n > mine[key][0]:
-                    mine[key] = (n, stamp)
+                if p.gesture is not None and (back_to is None or not 0 <= n <= back_to):
+                    continue
+                if p.key not in mine or n > mine[p.key][0]:
+                    mine[p.key] = (n, p.stamp)
             for key, (_, stamp) in mine.items():
                 out[key] = min(stamp, out.get(key, stamp))
         return out
@@ -242,7 +255,7 @@ class Keeper:
         # what this service's next instance resumes from (its checkpoint)
         self.resume: dict[str, int] = {}
         self.resume_stamps: dict[str, int] = {}
-        self.positions: dict[str, int] = {}  # sensor key -> first stamp a successor needs
+        self.positions: dict[Position, int] = {}  # -> the first stamp a successor needs there
         self._header = header
         self._pub: Publisher[Ledger] | None = None
         self._dirty = False
@@ -348,7 +361,7 @@ class Keeper:
             handled=self.handled.wire(),
             resume=dict(self.resume),
             resume_stamps=dict(self.resume_stamps),
-            positions=dict(self.positions),
+            positions=on_the_wire(self.positions),
         )
 
     def publish(self) -> None:
@@ -370,7 +383,7 @@ class Keeper:
         self,
         stamps: Mapping[str, int],
         counts: Mapping[str, int] | None = None,
-        positions: Mapping[str, int] | None = None,
+        positions: Mapping[Position, int] | None = None,
     ) -> None:
         """Where a next instance would resume, its stamps and counts (`predecessor` gives both
         back as one mapping), and per sensor key the first stamp it needs (`positions`)."""

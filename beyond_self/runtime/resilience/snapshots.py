@@ -22,7 +22,7 @@ from typing import Any, Generic, TypeVar
 import msgspec
 
 from beyond_self.core.restorable import Restorable
-from beyond_self.runtime.resilience.ledger import Keeper
+from beyond_self.runtime.resilience.ledger import Keeper, Position
 from beyond_self.runtime.resilience.state import write_atomically
 
 S = TypeVar("S", bound=Restorable)
@@ -192,9 +192,10 @@ class Snapshots(Generic[S]):
             kept = stamps if name.endswith("stamp") else counts
             kept[name] = value
             kept |= at_gestures(name, {n: getattr(s, name) for n, s in self.history.items()})
-        # "<key>@N": where a successor goes back to derive gesture N again (schemas.Ledger)
-        at = {f"{k}@{n + 1}": s.stamp for n, s in self.history.items() for k in self.inputs}
-        self.keeper.checkpoint(stamps, counts, {**self.positions(state), **at})
+        # where a successor goes back to derive gesture N again (schemas.InputPosition)
+        at = {Position(k, n + 1): s.stamp for n, s in self.history.items() for k in self.inputs}
+        newest = {Position(k): stamp for k, stamp in self.positions(state).items()}
+        self.keeper.checkpoint(stamps, counts, {**newest, **at})
         self.taken_count += 1
         now = time.monotonic()
         if self._writer is not None and (first_at_count or now - self._stored_at >= self.every_s):
