@@ -13,6 +13,7 @@ import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -185,16 +186,26 @@ async def test_an_rgb_only_robots_camera_is_a_live_person_source(
     key = f"4/usb_cam/image_raw/{r.dds_type(r.IMAGE)}/{STORE.hash_rihs01(r.IMAGE)}"
     with plain_router(port) as router:
         items = source()
-        first = asyncio.ensure_future(anext(items))
-        for _ in range(100):  # until the plug-in's subscription is declared
-            await asyncio.sleep(0.05)
-            tokens = [reply.ok for reply in router.liveliness().get("@ros2_lv/4/**")]
-            if any(tok is not None and "/MS/" in str(tok.key_expr) for tok in tokens):
-                break
-        router.put(key, image(person, 7))
-        got = [await asyncio.wait_for(first, 60)]
-        router.put(key, image(room, 8))
-        got.append(await asyncio.wait_for(anext(items), 60))
+        pending: asyncio.Future[Any] = asyncio.ensure_future(anext(items))
+
+        async def until_stamp(rgb: np.ndarray, sec: int) -> tuple[Any, ...]:
+            """The plug-in's item for image `rgb` stamped `sec`: the image is put again until it
+            comes (a put before the plug-in's subscription has its route is not delivered),
+            and items of an earlier image put again are passed over. Bounded by the test's
+            timeout, not by a guess of how long discovery or the pose model take."""
+            nonlocal pending
+            while True:
+                router.put(key, image(rgb, sec))
+                done, _ = await asyncio.wait({pending}, timeout=0.5)
+                while done:
+                    item = pending.result()
+                    pending = asyncio.ensure_future(anext(items))
+                    if item[2] == sec * 10**9:
+                        return tuple(item)
+                    done, _ = await asyncio.wait({pending}, timeout=0)
+
+        got = [await until_stamp(person, 7), await until_stamp(room, 8)]
+        pending.cancel()
         await items.aclose()
     (kind, seen, stamp), (_, empty, stamp2) = got
     assert (kind, stamp, stamp2) == ("person", 7 * 10**9, 8 * 10**9)
