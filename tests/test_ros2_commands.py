@@ -206,6 +206,7 @@ async def test_an_rgb_only_robots_camera_is_a_live_person_source(
 
         got = [await until_stamp(person, 7), await until_stamp(room, 8)]
         pending.cancel()
+        await asyncio.wait({pending})  # the generator is let go before it is closed
         await items.aclose()
     (kind, seen, stamp), (_, empty, stamp2) = got
     assert (kind, stamp, stamp2) == ("person", 7 * 10**9, 8 * 10**9)
