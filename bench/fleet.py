@@ -497,9 +497,12 @@ def each_robot(
     ratio of one process set per robot (`reference`, same run) to those."""
     by = {r["robots"]: r for r in rounds}
     lo, hi = search.lo, search.hi
-    out: dict[str, Any] = {"robots": lo, "first_over": None}
-    if hi is not None:
-        out["first_over"] = {"robots": hi, "description_p99_ms": by[hi]["description_p99_ms"]}
+    # the smallest round over the budget (none when a cap stopped the search first)
+    over = {
+        "robots": hi,
+        "description_p99_ms": None if hi is None else by[hi]["description_p99_ms"],
+    }
+    out: dict[str, Any] = {"robots": lo, "first_over": over}
     if lo == 0:
         return out
     at, one = by[lo], by[1]
@@ -612,7 +615,7 @@ def print_table(result: dict[str, Any]) -> None:
     for kind, lim in result["limits"].items():
         over = lim["first_over"]
         line = f"  {KINDS[kind]}: {'at least ' if lim['lower_bound'] else ''}{lim['robots']}"
-        if over:
+        if over["robots"] is not None:
             line += f" ({over['robots']}: p99 {over['description_p99_ms']:.1f} ms)"
         if lim["robots"]:
             mb, pss = lim["mb_per_added_robot"], lim["pss_mb_per_added_robot"]
