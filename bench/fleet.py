@@ -502,8 +502,12 @@ def each_robot(
         "robots": hi,
         "description_p99_ms": None if hi is None else by[hi]["description_p99_ms"],
     }
-    out: dict[str, Any] = {"robots": lo, "first_over": over}
-    if lo == 0:
+    keys = ["description_p99_ms", "cores", "sources_cores", "rss_mb", "cores_per_robot"]
+    keys += ["cores_per_added_robot", "mb_per_added_robot", "pss_mb_per_added_robot"]
+    keys += ["robot_set_cores", "robot_set_mb", "robot_set_pss_mb"]
+    keys += ["cpu_ratio", "memory_ratio", "pss_ratio"]
+    out: dict[str, Any] = {"robots": lo, "first_over": over} | dict.fromkeys(keys)
+    if lo == 0:  # the first round was over the budget: no figures at a limit
         return out
     at, one = by[lo], by[1]
     added = max(lo - 1, 1)
