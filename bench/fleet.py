@@ -481,12 +481,22 @@ class Caps:
         if time.monotonic() + expected > case_deadline:
             left = max(0.0, case_deadline - time.monotonic())
             return f"time: about {expected:.0f} s for the next round, {left:.0f} s left", n
-        per_robot = max(
-            (r["rss_mb"] + r["sources_rss_mb"]) / r["robots"] for r in rounds if r["robots"]
-        )
-        if per_robot * n > self.memory_mb:
-            return f"memory: about {per_robot * n:.0f} MB, over {self.memory_mb:.0f} MB", n
+        expected_mb = memory_at(n, rounds)
+        if expected_mb > self.memory_mb:
+            return f"memory: about {expected_mb:.0f} MB, over {self.memory_mb:.0f} MB", n
         return None
+
+
+def memory_at(n: int, rounds: list[dict[str, Any]]) -> float:
+    """The processes' and this script's resident MB at `n` robots, extrapolated along the line
+    through the smallest and the largest round so far (the processes' own memory is fixed; a
+    robot adds its runs' and its source's)."""
+    small, large = (min(rounds, key=lambda r: r["robots"]), max(rounds, key=lambda r: r["robots"]))
+    mb = {k: float(r["rss_mb"] + r["sources_rss_mb"]) for k, r in (("s", small), ("l", large))}
+    if large["robots"] == small["robots"]:
+        return mb["l"]
+    slope = max(0.0, (mb["l"] - mb["s"]) / float(large["robots"] - small["robots"]))
+    return mb["l"] + slope * max(0, n - int(large["robots"]))
 
 
 def each_robot(
@@ -712,9 +722,9 @@ def main() -> None:
         args.minutes = 10 if args.quick else 90
     began, load = datetime.datetime.now(datetime.UTC), os.getloadavg()[0]
     result = asyncio.run(main_async(args))
-    print_table(result)
     if args.save:
         save(result, began, load)
+    print_table(result)
     print(json.dumps(result))
 
 
