@@ -1,7 +1,7 @@
 """How many robots one workstation serves: one process per service for a fleet (runtime/fleet.py)
-next to one process set per robot, measured in the same run.
+next to one process set per robot, measured in the same run; the bench searches for the limit.
 
-    .venv/bin/python bench/fleet.py [--max N] [--gestures G]
+    .venv/bin/python bench/fleet.py [--quick] [--minutes M] [--cases own,aligned,camera] [--save]
 
 Skeleton only (no vision: the gesture streamer, the affordance reasoner and the description
 generator; the reasoner told there is no object segmenter). Each round, N robots appear (this
@@ -12,22 +12,34 @@ gesture is over is published (found offline by the same segmenter, bench/pipelin
 when the gesture's description is taken off Zenoh for that robot. Every gesture that ended must
 be described, or the bench fails.
 
-Two kinds of rounds: a person each (each robot its own synthetic person, a seed each: gestures
-of their own lengths at their own times, as in a lab), and aligned (every robot the same stream,
-so every robot's gestures end within one frame of each other and each stage gets N gestures at
-once: the worst case). Rounds double N (1, 2, 4, ...) until the description's p99 reaches 33 ms
-(a frame at 30 Hz) or N reaches --max, then one round halfway back; the robots of a round leave
-before the next (their runs are dropped).
+Three cases: a person each (`own`: each robot its own synthetic person, a seed each: gestures
+of their own lengths at their own times, as in a lab), aligned (every robot the same stream, so
+every robot's gestures end within one frame of each other and each stage gets N gestures at
+once: a burst, the worst case), and a camera each (below).
 
-Costs: resident memory (VmRSS) of the processes, summed, and their CPU time over the round
-(cores); next to them the same three services as one process set for one robot (`beyond up`'s
-way before fleets), started and measured in the same run with one robot: N robots that way
-cost N of those; and the CPU of this script itself (the robots' simulated sources and its
-observers, which a real fleet would not run on the workstation: `sources_cores`). Where the
-time goes: per stage, the p99 of the time from the gesture's deciding
-frame to its end event leaving the gesture streamer, from there to its words leaving the
-reasoner, and from there to the description (each message's arrival taken off Zenoh, wall
-clock).
+The limit: per case, rounds of 1, 2, 4, ... robots (doubling; x4 with --quick) until a round's
+description p99 reaches 33 ms (a frame at 30 Hz), then bisecting between the largest round under
+the budget and the smallest over it until they are within an eighth of each other (a half with
+--quick); the limit is that largest round under the budget. There is no cap on N below that,
+only safety caps, reported when hit (the limit is then a lower bound): wall time (--minutes, the
+time left shared among the cases left; a round is not started when the last one, scaled by the
+robots' count, would not end in time), memory (a round is not started when its processes and
+this script's, extrapolated from the rounds so far, would take more than --memory-share of the
+memory available at the start), and --max if given. The robots of a round leave before the next
+(their runs are dropped). A full search (6 gestures per robot) takes 30-60 minutes on a 2-core
+machine; --quick (3 gestures, coarser steps, a 10-minute cap) about 10.
+
+Costs: resident memory of the processes, summed (VmRSS, and PSS, which shares each page among
+the processes that map it), and their CPU time over the round (cores); next to them the same
+three services as one process set for one robot (`beyond up`'s way before fleets), started and
+measured in the same run with one robot: N robots that way cost N of those; and the CPU of this
+script itself (the robots' simulated sources and its observers, which a real fleet would not run
+on the workstation: `sources_cores`). Beside each limit: CPU per robot (cores at the limit / N),
+memory per added robot (MB, the slope from the case's one-robot round to the limit), and the
+ratios of the process set per robot's figures to those. Where the time goes: per stage, the p99
+of the time from the gesture's deciding frame to its end event leaving the gesture streamer,
+from there to its words leaving the reasoner, and from there to the description (each message's
+arrival taken off Zenoh, wall clock).
 
 With a camera: the same rounds with the object segmenter in the fleet too, each robot its own
 simulated scene (skeleton at 30 Hz and 15 fps JPEG frames, a seed and a gesture order each;
@@ -35,7 +47,9 @@ simulated scene (skeleton at 30 Hz and 15 fps JPEG frames, a seed and a gesture 
 needs (the later of the skeleton frame that ends it and the first camera frame after its end,
 found offline by the same tracker) to its description, next to one process set for one robot;
 and how many camera frames the object segmenter described and skipped (a live source sheds
-per-frame work under overload, never a gesture's). Ends with one line of JSON.
+per-frame work under overload, never a gesture's). Progress goes to stderr; ends with one line
+of JSON. --save also writes it to bench/results/fleet.json as `result`, with the date, the
+machine and the provenance (command, commit, duration), keeping the file's table.
 """
 
 from __future__ import annotations
@@ -43,12 +57,16 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import datetime
 import functools
 import json
 import os
+import platform
+import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -74,16 +92,33 @@ FRAME_NS = 33_333_333
 BUDGET_MS = 1e3 / 30
 
 
-def process_cost(pids: list[int]) -> tuple[float, float]:
-    """(resident MB, CPU seconds so far) of processes `pids` and their children."""
-    rss_kb, ticks = 0, 0
+def process_cost(pids: list[int]) -> tuple[float, float, float]:
+    """(resident MB, proportional MB, CPU seconds so far) of processes `pids` and their
+    children. Proportional (PSS) counts a page shared by k processes as 1/k in each, so the
+    fleet's shared libraries count once."""
+    rss_kb, pss_kb, ticks = 0, 0, 0
     for pid in _with_children(pids):
-        with contextlib.suppress(OSError):
+        with contextlib.suppress(OSError, StopIteration):
             status = Path(f"/proc/{pid}/status").read_text()
             rss_kb += int(next(x for x in status.splitlines() if x.startswith("VmRSS")).split()[1])
             fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
             ticks += int(fields[11]) + int(fields[12])  # utime, stime
-    return rss_kb / 1024, ticks / os.sysconf("SC_CLK_TCK")
+            rollup = Path(f"/proc/{pid}/smaps_rollup").read_text()
+            pss_kb += int(next(x for x in rollup.splitlines() if x.startswith("Pss:")).split()[1])
+    return rss_kb / 1024, pss_kb / 1024, ticks / os.sysconf("SC_CLK_TCK")
+
+
+def _own_rss_mb() -> float:
+    """Resident MB of this script (the robots' sources and their cached streams)."""
+    status = Path("/proc/self/status").read_text()
+    return int(next(x for x in status.splitlines() if x.startswith("VmRSS")).split()[1]) / 1024
+
+
+def _available_mb() -> float:
+    meminfo = Path("/proc/meminfo").read_text()
+    return (
+        int(next(x for x in meminfo.splitlines() if x.startswith("MemAvailable")).split()[1]) / 1024
+    )
 
 
 def _own_cpu_s() -> float:
@@ -336,18 +371,19 @@ async def measure(
     its own person (`own`), all the same (`aligned`), or with a camera (`camera`)."""
     services, options = (CAMERA_SERVICES, {}) if kind == "camera" else (SERVICES, OPTIONS)
     side = Deployment(config, services, options=options, env={**QUIET, LEAVE_ENV: "1"})
+    wall0 = time.monotonic()
     try:
         bus = await side.open()
         await side.start()
         pids = [sp.process.pid for sp in side.processes]
-        _, cpu0 = process_cost(pids)
+        _, _, cpu0 = process_cost(pids)
         bench0 = _own_cpu_s()
         if kind == "camera":
             served = await serve_camera(bus, robots)
         else:
             streams = streams_for(len(robots), gestures, kind == "aligned")
             served = await serve(bus, robots, streams)
-        rss, cpu1 = process_cost(pids)
+        rss, pss, cpu1 = process_cost(pids)
         bench_s = _own_cpu_s() - bench0
     finally:
         await side.stop()
@@ -358,10 +394,13 @@ async def measure(
         "description_p50_ms": round(_p(lat, 50), 2),
         "description_p99_ms": round(_p(lat, 99), 2),
         "rss_mb": round(rss, 1),
+        "pss_mb": round(pss, 1),
         "cores": round((cpu1 - cpu0) / served["stream_s"], 3),
         # the robots' simulated sources and the bench's observers, on the same 2 cores (a real
         # robot publishes from its own machine)
         "sources_cores": round(bench_s / served["stream_s"], 3),
+        "sources_rss_mb": round(_own_rss_mb(), 1),
+        "wall_s": round(time.monotonic() - wall0, 1),
     }
     if "stages_ms" in served:
         result["stage_p99_ms"] = {k: round(_p(v, 99), 2) for k, v in served["stages_ms"].items()}
@@ -373,77 +412,205 @@ async def measure(
 
 KINDS = {
     "own": "a person each",
-    "aligned": "the same stream, aligned",
+    "aligned": "the same stream, aligned (a burst)",
     "camera": "a person each, with a 15 fps camera",
 }
+REFERENCE = {"own": "single", "aligned": "single", "camera": "single_camera"}
+ROUNDS = {"own": "fleet", "aligned": "fleet_aligned", "camera": "fleet_camera"}
 
 
-async def rounds_of(args: argparse.Namespace, port: int, kind: str) -> list[dict[str, Any]]:
-    """Fleet rounds of 1, 2, 4, ... robots until the description's p99 reaches a frame or N
-    reaches --max; after the first round over the budget, one round halfway back."""
+@dataclass
+class Search:
+    """Where the limit lies, from the rounds so far: doubling (`factor`) from one robot until a
+    round is over the budget, then bisecting between the largest round under it below every
+    round over it (`lo`) and the smallest round over it (`hi`) until `hi - lo` is at most
+    `resolution` of `lo` (one robot at least). The limit is `lo`."""
+
+    factor: int = 2
+    resolution: float = 1 / 8
+    within: dict[int, bool] = field(default_factory=dict)  # robots -> p99 under the budget
+
+    def record(self, robots: int, p99_ms: float) -> None:
+        self.within[robots] = p99_ms < BUDGET_MS
+
+    @property
+    def hi(self) -> int | None:
+        over = [n for n, ok in self.within.items() if not ok]
+        return min(over) if over else None
+
+    @property
+    def lo(self) -> int:
+        hi = self.hi
+        under = [n for n, ok in self.within.items() if ok and (hi is None or n < hi)]
+        return max(under, default=0)
+
+    def next(self) -> int | None:
+        """The next round's robots, or None when the limit is found."""
+        lo, hi = self.lo, self.hi
+        if hi is None:
+            return max(1, lo * self.factor)
+        if hi - lo <= max(1, int(lo * self.resolution)):
+            return None
+        return (lo + hi) // 2
+
+
+@dataclass
+class Caps:
+    """The safety caps: wall time (a deadline for the whole bench), memory (a share of what was
+    available at the start) and, if given, most robots."""
+
+    deadline: float  # time.monotonic()
+    memory_mb: float
+    most: int | None
+
+    def refuse(
+        self, n: int, rounds: list[dict[str, Any]], case_deadline: float
+    ) -> tuple[str, int] | None:
+        """Why a round of `n` robots is not started (and the robots it would have had), or
+        None to go on."""
+        if self.most is not None and n > self.most:
+            if any(r["robots"] == self.most for r in rounds):
+                return f"--max {self.most}", n
+            return None
+        if not rounds:
+            return None
+        last = max(rounds, key=lambda r: r["robots"])
+        # a round's time: the processes' start and stop and the streams (fixed), their sources'
+        # making (grows with the robots): scaled by the square root of the robots' ratio
+        expected = last["wall_s"] * max(1.0, n / last["robots"]) ** 0.5
+        if time.monotonic() + expected > case_deadline:
+            left = max(0.0, case_deadline - time.monotonic())
+            return f"time: about {expected:.0f} s for the next round, {left:.0f} s left", n
+        expected_mb = memory_at(n, rounds)
+        if expected_mb > self.memory_mb:
+            return f"memory: about {expected_mb:.0f} MB, over {self.memory_mb:.0f} MB", n
+        return None
+
+
+def memory_at(n: int, rounds: list[dict[str, Any]]) -> float:
+    """The processes' and this script's resident MB at `n` robots, extrapolated along the line
+    through the smallest and the largest round so far (the processes' own memory is fixed; a
+    robot adds its runs' and its source's)."""
+    small, large = (min(rounds, key=lambda r: r["robots"]), max(rounds, key=lambda r: r["robots"]))
+    mb = {k: float(r["rss_mb"] + r["sources_rss_mb"]) for k, r in (("s", small), ("l", large))}
+    if large["robots"] == small["robots"]:
+        return mb["l"]
+    slope = max(0.0, (mb["l"] - mb["s"]) / float(large["robots"] - small["robots"]))
+    return mb["l"] + slope * max(0, n - int(large["robots"]))
+
+
+def each_robot(
+    rounds: list[dict[str, Any]], search: Search, reference: dict[str, Any]
+) -> dict[str, Any]:
+    """The limit and, at it, what each robot costs: CPU (cores at the limit / robots, and per
+    added robot), memory per added robot (RSS and PSS, from the case's one-robot round), and the
+    ratio of one process set per robot (`reference`, same run) to those."""
+    by = {r["robots"]: r for r in rounds}
+    lo, hi = search.lo, search.hi
+    # the smallest round over the budget (none when a cap stopped the search first)
+    over = {
+        "robots": hi,
+        "description_p99_ms": None if hi is None else by[hi]["description_p99_ms"],
+    }
+    keys = ["description_p99_ms", "cores", "sources_cores", "rss_mb", "cores_per_robot"]
+    keys += ["cores_per_added_robot", "mb_per_added_robot", "pss_mb_per_added_robot"]
+    keys += ["robot_set_cores", "robot_set_mb", "robot_set_pss_mb"]
+    keys += ["cpu_ratio", "memory_ratio", "pss_ratio"]
+    out: dict[str, Any] = {"robots": lo, "first_over": over} | dict.fromkeys(keys)
+    if lo == 0:  # the first round was over the budget: no figures at a limit
+        return out
+    at, one = by[lo], by[1]
+    added = max(lo - 1, 1)
+    mb = (at["rss_mb"] - one["rss_mb"]) / added if lo > 1 else None
+    pss = (at["pss_mb"] - one["pss_mb"]) / added if lo > 1 else None
+    cores = at["cores"] / lo
+    out |= {
+        "description_p99_ms": at["description_p99_ms"],
+        "cores": at["cores"],
+        "sources_cores": at["sources_cores"],
+        "rss_mb": at["rss_mb"],
+        "cores_per_robot": round(cores, 4),
+        "cores_per_added_robot": round((at["cores"] - one["cores"]) / added, 4),
+        "mb_per_added_robot": None if mb is None else round(mb, 2),
+        "pss_mb_per_added_robot": None if pss is None else round(pss, 2),
+        "robot_set_cores": reference["cores"],
+        "robot_set_mb": reference["rss_mb"],
+        "robot_set_pss_mb": reference["pss_mb"],
+        "cpu_ratio": round(reference["cores"] / cores, 2) if cores > 0 else None,
+        "memory_ratio": round(reference["rss_mb"] / mb, 1) if mb and mb > 0 else None,
+        "pss_ratio": round(reference["pss_mb"] / pss, 1) if pss and pss > 0 else None,
+    }
+    return out
+
+
+async def find_limit(
+    args: argparse.Namespace, port: int, kind: str, caps: Caps, case_deadline: float
+) -> tuple[list[dict[str, Any]], Search, str | None]:
+    """A case's rounds, searched for the limit (`Search`) within the caps; the rounds by robots,
+    the search, and the cap that stopped it (None when the limit was found)."""
     rounds: list[dict[str, Any]] = []
+    search = Search(factor=4 if args.quick else 2, resolution=1 / 2 if args.quick else 1 / 8)
     tag = kind[0]
-    n, over = 1, None
-    while n <= args.max:
-        print(f"fleet: {n} robot(s), {KINDS[kind]} ...", file=sys.stderr, flush=True)
+    stopped = None
+    while (n := search.next()) is not None:
+        if caps.most is not None and n > caps.most and caps.most not in search.within:
+            n = caps.most
+        refused = caps.refuse(n, rounds, case_deadline)
+        if refused is not None:
+            stopped = f"{refused[0]} (a round of {refused[1]} robots not started)"
+            print(f"fleet: {KINDS[kind]}: stopped by the cap on {stopped}", file=sys.stderr)
+            break
+        hi = search.hi
+        step = "doubling" if hi is None else f"bisecting {search.lo}..{hi}"
+        print(f"fleet: {n} robot(s), {KINDS[kind]} ({step}) ...", file=sys.stderr, flush=True)
         fleet = BusConfig(robot="ws", robots=f"{tag}{n}-*", port=port)
         robots = [f"{tag}{n}-{k}" for k in range(n)]
         result = await measure(fleet, robots, args.gestures, kind) | {"kind": kind}
         rounds.append(result)
+        search.record(n, result["description_p99_ms"])
         print(json.dumps(result), file=sys.stderr, flush=True)
-        if over is not None:
-            break
-        if result["description_p99_ms"] >= BUDGET_MS:
-            over = n
-            if n < 4:
-                break
-            n = 3 * n // 4  # halfway back from the round over the budget
-            continue
-        n *= 2
-    return sorted(rounds, key=lambda r: r["robots"])
-
-
-def within_budget(rounds: list[dict[str, Any]]) -> int:
-    """Most robots of a round under the budget with no smaller round over it."""
-    best = 0
-    for r in rounds:
-        if r["description_p99_ms"] >= BUDGET_MS:
-            break
-        best = r["robots"]
-    return best
+    return sorted(rounds, key=lambda r: r["robots"]), search, stopped
 
 
 async def main_async(args: argparse.Namespace) -> dict[str, Any]:
     port = 17900 + os.getpid() % 1000
+    start = time.monotonic()
+    caps = Caps(
+        deadline=start + args.minutes * 60,
+        memory_mb=_available_mb() * args.memory_share,
+        most=args.max,
+    )
+    result: dict[str, Any] = {"mode": "quick" if args.quick else "full", "gestures": args.gestures}
     print("one process set for one robot ...", file=sys.stderr, flush=True)
-    reference = await measure(BusConfig(robot="solo", port=port), ["solo"], args.gestures)
-    own = await rounds_of(args, port, "own")
-    aligned = await rounds_of(args, port, "aligned")
-    print("one process set for one robot, with a camera ...", file=sys.stderr, flush=True)
     solo = BusConfig(robot="solo", port=port)
-    camera_reference = await measure(solo, ["solo"], args.gestures, "camera")
-    camera = await rounds_of(args, port, "camera")
-    return {
-        "single": reference,
-        "fleet": own,
-        "fleet_aligned": aligned,
-        "single_camera": camera_reference,
-        "fleet_camera": camera,
-        "robots_within_33ms": within_budget(own),
-        "robots_within_33ms_aligned": within_budget(aligned),
-        "robots_within_33ms_camera": within_budget(camera),
-    }
+    result["single"] = await measure(solo, ["solo"], args.gestures)
+    if "camera" in args.cases:
+        print("one process set for one robot, with a camera ...", file=sys.stderr, flush=True)
+        result["single_camera"] = await measure(solo, ["solo"], args.gestures, "camera")
+    limits: dict[str, Any] = {}
+    for left, kind in enumerate(args.cases):
+        # the time left, shared among the cases left (a case that ends early leaves its share)
+        share = (caps.deadline - time.monotonic()) / (len(args.cases) - left)
+        rounds, search, stopped = await find_limit(args, port, kind, caps, time.monotonic() + share)
+        result[ROUNDS[kind]] = rounds
+        limits[kind] = each_robot(rounds, search, result[REFERENCE[kind]])
+        limits[kind] |= {"stopped_by_cap": stopped, "lower_bound": stopped is not None}
+        result[f"robots_within_33ms{'' if kind == 'own' else '_' + kind}"] = search.lo
+    result["limits"] = limits
+    result["wall_minutes"] = round((time.monotonic() - start) / 60, 1)
+    return result
 
 
 def print_table(result: dict[str, Any]) -> None:
     rows = [("one set, 1 robot", result["single"])]
-    rows += [(f"fleet, {r['robots']} robot(s)", r) for r in result["fleet"]]
-    rows += [(f"fleet, {r['robots']} aligned", r) for r in result["fleet_aligned"]]
-    rows += [("one set, 1 robot, camera", result["single_camera"])]
-    rows += [(f"fleet, {r['robots']} with camera", r) for r in result["fleet_camera"]]
+    rows += [(f"fleet, {r['robots']} robot(s)", r) for r in result.get("fleet", [])]
+    rows += [(f"fleet, {r['robots']} aligned", r) for r in result.get("fleet_aligned", [])]
+    if "single_camera" in result:
+        rows += [("one set, 1 robot, camera", result["single_camera"])]
+    rows += [(f"fleet, {r['robots']} with camera", r) for r in result.get("fleet_camera", [])]
     print(
-        f"{'':26} {'gestures':>8} {'p50 ms':>8} {'p99 ms':>8} {'RSS MB':>8} {'cores':>6}"
-        f" {'sources':>7}   p99 ms per stage: gestures reasoner describer"
+        f"{'':26} {'gestures':>8} {'p50 ms':>8} {'p99 ms':>8} {'RSS MB':>8} {'PSS MB':>8}"
+        f" {'cores':>6} {'sources':>7}   p99 ms per stage: gestures reasoner describer"
         " | camera frames described, skipped"
     )
     for name, r in rows:
@@ -455,34 +622,108 @@ def print_table(result: dict[str, Any]) -> None:
         )
         print(
             f"{name:26} {r['gestures']:>8} {r['description_p50_ms']:>8.1f} "
-            f"{r['description_p99_ms']:>8.1f} {r['rss_mb']:>8.0f} {r['cores']:>6.2f} "
-            f"{r['sources_cores']:>7.2f}{tail}"
+            f"{r['description_p99_ms']:>8.1f} {r['rss_mb']:>8.0f} {r['pss_mb']:>8.0f} "
+            f"{r['cores']:>6.2f} {r['sources_cores']:>7.2f}{tail}"
         )
-    single = result["single"]
-    best = max(result["fleet"], key=lambda r: r["robots"])
-    if best["robots"] > 1:
-        base = result["fleet"][0]
-        per_robot_mb = (best["rss_mb"] - base["rss_mb"]) / (best["robots"] - 1)
-        per_robot_cores = (best["cores"] - base["cores"]) / (best["robots"] - 1)
-        print(
-            f"each robot more: {per_robot_mb:.1f} MB and {per_robot_cores:.3f} cores in the "
-            f"fleet's processes, against {single['rss_mb']:.0f} MB and {single['cores']:.3f} "
-            "cores for a process set of its own"
-        )
-    print(
-        f"robots served with description p99 < {BUDGET_MS:.0f} ms: "
-        f"{result['robots_within_33ms']} (a person each), "
-        f"{result['robots_within_33ms_aligned']} (all gestures ending within one frame), "
-        f"{result['robots_within_33ms_camera']} (a person each, with a 15 fps camera)"
+    print(f"\nthe limit: most robots with description p99 < {BUDGET_MS:.1f} ms ({result['mode']})")
+    for kind, lim in result["limits"].items():
+        over = lim["first_over"]
+        line = f"  {KINDS[kind]}: {'at least ' if lim['lower_bound'] else ''}{lim['robots']}"
+        if over["robots"] is not None:
+            line += f" ({over['robots']}: p99 {over['description_p99_ms']:.1f} ms)"
+        if lim["robots"]:
+            mb, pss = lim["mb_per_added_robot"], lim["pss_mb_per_added_robot"]
+            line += (
+                f"; p99 {lim['description_p99_ms']:.1f} ms at {lim['cores']:.2f} cores;"
+                f" each robot {lim['cores_per_robot']:.4f} cores"
+                f" ({lim['cores_per_added_robot']:.4f} added),"
+                f" {'-' if mb is None else f'{mb:.2f}'} MB RSS,"
+                f" {'-' if pss is None else f'{pss:.2f}'} MB PSS added;"
+                f" a process set per robot: {lim['robot_set_cores']:.3f} cores,"
+                f" {lim['robot_set_mb']:.0f} MB RSS, {lim['robot_set_pss_mb']:.0f} MB PSS"
+                f" (x{lim['cpu_ratio']} CPU, x{lim['memory_ratio']} RSS, x{lim['pss_ratio']} PSS)"
+            )
+        if lim["stopped_by_cap"]:
+            line += f"; stopped by the cap on {lim['stopped_by_cap']}"
+        print(line)
+    print(f"wall time: {result['wall_minutes']} minutes")
+
+
+def git(*argv: str) -> str:
+    done = subprocess.run(["git", *argv], cwd=REPO, capture_output=True, text=True, check=False)
+    return done.stdout.strip()
+
+
+def machine(load_at_start: float) -> str:
+    """The machine as the results files describe it."""
+    cpuinfo = Path("/proc/cpuinfo").read_text()
+    model = next(
+        (x.split(":", 1)[1].strip() for x in cpuinfo.splitlines() if "model name" in x), ""
     )
+    return (
+        f"{os.cpu_count()} cores ({model}), Linux {platform.release()}, Python "
+        f"{platform.python_version()}; load average {load_at_start:.2f} at the start, "
+        f"{os.getloadavg()[0]:.2f} at the end (one-minute figure; it counts the fleet's own "
+        "processes)"
+    )
+
+
+def save(result: dict[str, Any], began: datetime.datetime, load_at_start: float) -> None:
+    """`result` into bench/results/fleet.json with its date, machine and provenance, keeping the
+    file's table (its rows are templates over `result`)."""
+    path = REPO / "bench" / "results" / "fleet.json"
+    old = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
+    commit = git("rev-parse", "--short", "HEAD")
+    dirty = " with uncommitted changes" if git("status", "--porcelain", "--", "bench/") else ""
+    command = " ".join([".venv/bin/python", "bench/fleet.py", *sys.argv[1:]])
+    data = {
+        "script": "bench/fleet.py",
+        "date": began.strftime("%Y-%m-%d"),
+        "machine": machine(load_at_start),
+        "provenance": (
+            f"printed by `{command}` ({result['mode']} search, {result['gestures']} gestures per "
+            f"robot; {result['wall_minutes']} minutes) on {began:%Y-%m-%d} from "
+            f"{began:%H:%M} UTC at commit {commit}{dirty}, its last line kept as `result`"
+        ),
+        "result": result,
+        "table": old.get("table", []),
+    }
+    path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    print(f"written: {path.relative_to(REPO)}", file=sys.stderr)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--max", type=int, default=64, help="most robots tried (default 64)")
-    parser.add_argument("--gestures", type=int, default=6, help="gestures per robot (default 6)")
+    parser.add_argument(
+        "--quick", action="store_true",
+        help="x4 steps, bisect to a half, 3 gestures per robot, 10-minute cap (about 10 minutes)",
+    )  # fmt: skip
+    parser.add_argument("--gestures", type=int, help="gestures per robot (default 6; 3 quick)")
+    parser.add_argument(
+        "--minutes", type=float, help="cap on wall time, all cases (default 90; 10 quick)"
+    )
+    parser.add_argument(
+        "--memory-share", type=float, default=0.5,
+        help="cap: share of the memory available at the start (default 0.5)",
+    )  # fmt: skip
+    parser.add_argument("--max", type=int, help="most robots tried (default: no cap)")
+    parser.add_argument(
+        "--cases", default="own,aligned,camera",
+        help="cases searched, in order (default own,aligned,camera)",
+    )  # fmt: skip
+    parser.add_argument("--save", action="store_true", help="write bench/results/fleet.json")
     args = parser.parse_args()
+    args.cases = [c for c in args.cases.split(",") if c]
+    if not args.cases or set(args.cases) - set(KINDS):
+        parser.error(f"--cases: {','.join(args.cases)!r}; valid: a list of {', '.join(KINDS)}")
+    if args.gestures is None:
+        args.gestures = 3 if args.quick else 6
+    if args.minutes is None:
+        args.minutes = 10 if args.quick else 90
+    began, load = datetime.datetime.now(datetime.UTC), os.getloadavg()[0]
     result = asyncio.run(main_async(args))
+    if args.save:
+        save(result, began, load)
     print_table(result)
     print(json.dumps(result))
 
