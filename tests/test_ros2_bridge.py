@@ -8,15 +8,13 @@ described as `beyond analyse` describes the recording."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import io
-import json
 import os
 import re
 import signal
 import subprocess
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,14 +22,14 @@ import numpy as np
 import pytest
 import zenoh
 from busutil_net import env_for, free_port, private_config, run_beyond
-from ros2util import STORE, zero
+from ros2util import STORE, ProgressWatch, plain_router, zero
 from zenoh_ros2_sdk.attachment import Attachment
 
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.recording.reader import read_recording
 from beyond_self.runtime.ros2.node import attachment, read_attachment
 from beyond_self.schemas import ros2 as r
-from beyond_self.schemas.messages import CompressedCameraFrame, Progress, SkeletonFrame
+from beyond_self.schemas.messages import CompressedCameraFrame, SkeletonFrame
 from beyond_self.services.launcher import BEYOND
 
 THREE = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"
@@ -53,20 +51,6 @@ def test_attachment_is_the_design_documents_layout() -> None:
         gid,
     )
     assert read_attachment(data) == (7, 1_546_300_800_123_456_789, gid)
-
-
-@contextlib.contextmanager
-def plain_router(port: int) -> Iterator[zenoh.Session]:
-    """A Zenoh router on loopback, nothing of ours in it (rmw_zenohd's part)."""
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("router"))
-    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
-    try:
-        yield session
-    finally:
-        session.close()  # type: ignore[no-untyped-call]
 
 
 def child_running(parent: int, word: str) -> int | None:
@@ -344,28 +328,14 @@ async def test_a_ros2_body_tracker_and_camera_are_described_as_analyse_does(
     ns = f"/{config.robot}"
     bus = Bus.open(config)
     keys = bus.keys
-    handled: dict[str, dict[str, int]] = {}  # consumer -> sensor key -> last stamp handled
-    moved = asyncio.Event()
-
-    async def progress() -> None:
-        async for received in bus.subscribe(keys.progress(), Progress):
-            handled[received.message.service] = dict(received.message.handled)
-            moved.set()
-
-    async def until(done: Callable[[], bool], what: str, timeout_s: float = 20.0) -> None:
-        try:
-            async with asyncio.timeout(timeout_s):
-                while not done():
-                    moved.clear()
-                    await moved.wait()
-        except TimeoutError:
-            raise AssertionError(f"no progress in {timeout_s} s: {what}; {handled}") from None
+    watch = ProgressWatch(bus)
+    handled, until = watch.handled, watch.until
 
     def consumers_of(key: str) -> set[str]:
         return {name for name, stamps in handled.items() if key in stamps}
 
     loop = asyncio.get_running_loop()
-    watching = loop.create_task(progress())
+    watching = loop.create_task(watch.run())
     lines: list[str] = []
     said = asyncio.Event()
     env = env_for(

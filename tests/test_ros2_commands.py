@@ -7,19 +7,16 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import signal
 import subprocess
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-import zenoh
 from busutil_net import env_for, free_port, private_config
-from ros2util import STORE
+from ros2util import STORE, plain_router
 from rosbags.rosbag2 import Reader
 
 from beyond_self.cli import main
@@ -32,20 +29,6 @@ from beyond_self.services.launcher import BEYOND
 
 RECORDINGS = Path(__file__).resolve().parent.parent / "beyond_self" / "recordings"
 TOUCH = RECORDINGS / "touch-box.mcap"
-
-
-@contextlib.contextmanager
-def plain_router(port: int) -> Iterator[zenoh.Session]:
-    """A Zenoh router on loopback, nothing of ours in it (rmw_zenohd's part)."""
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("router"))
-    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
-    try:
-        yield session
-    finally:
-        session.close()  # type: ignore[no-untyped-call]
 
 
 @pytest.mark.timeout(120)

@@ -14,20 +14,19 @@ import signal
 import subprocess
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 from busutil_net import env_for, private_config, run_beyond
 from rclpyutil import NODES, loopback_env, private_domain, side_python
-from ros2util import STORE
+from ros2util import STORE, ProgressWatch
 from test_ros2_bridge import TOUCH, frameless, jpeg_image, k4abt_markers
 
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.recording.reader import read_recording
 from beyond_self.schemas import ros2 as r
-from beyond_self.schemas.messages import CompressedCameraFrame, Progress, SkeletonFrame
+from beyond_self.schemas.messages import CompressedCameraFrame, SkeletonFrame
 from beyond_self.services.launcher import BEYOND
 
 THREE = Path(__file__).resolve().parent.parent / "recordings" / "three-actions.mcap"
@@ -191,25 +190,11 @@ async def test_a_real_rclpy_body_tracker_and_camera_are_described_as_analyse_doe
     )  # fmt: skip
     bus = Bus.open(config)
     keys = bus.keys
-    handled: dict[str, dict[str, int]] = {}
-    moved = asyncio.Event()
-
-    async def progress() -> None:
-        async for received in bus.subscribe(keys.progress(), Progress):
-            handled[received.message.service] = dict(received.message.handled)
-            moved.set()
-
-    async def until(done: Callable[[], bool], what: str, timeout_s: float = 20.0) -> None:
-        try:
-            async with asyncio.timeout(timeout_s):
-                while not done():
-                    moved.clear()
-                    await moved.wait()
-        except TimeoutError:
-            raise AssertionError(f"no progress in {timeout_s} s: {what}; {handled}") from None
+    watch = ProgressWatch(bus)
+    handled, until = watch.handled, watch.until
 
     loop = asyncio.get_running_loop()
-    watching = loop.create_task(progress())
+    watching = loop.create_task(watch.run())
     lines: list[str] = []
     said = asyncio.Event()
     up = await asyncio.create_subprocess_exec(
