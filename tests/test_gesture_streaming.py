@@ -17,6 +17,7 @@ from beyond_self.cognition.gestures.logs import read_hand_log
 from beyond_self.cognition.gestures.matlab import load_matlab_models
 from beyond_self.cognition.gestures.streaming import (
     BatchRecognizer,
+    CompiledModels,
     StreamingRecognizer,
     recognize_sequence,
 )
@@ -118,6 +119,29 @@ def test_batch_matches_single_streams_at_different_offsets() -> None:
         batch.push(np.zeros((1, 3)), streams=[4])
     with pytest.raises(InputError):
         batch.push(np.zeros((2, 3)), streams=[1, 1])
+
+
+def test_streams_of_one_model_set_share_its_tables_and_keep_their_own_state() -> None:
+    """A fleet's process runs a recogniser per robot on one model set: the compiled tables are
+    built once and read-only, and robots pushed in turn get exactly what each gets alone (the
+    same arithmetic on the same tables: a shared table must not move a single bit)."""
+    models = mixed_models(10)
+    robots = [StreamingRecognizer(models) for _ in range(3)]
+    assert robots[0].compiled is robots[1].compiled is CompiledModels.of(models)
+    assert CompiledModels.of(mixed_models(10)) is not robots[0].compiled  # per model set
+    with pytest.raises(ValueError):
+        robots[0].compiled.trans[0, 0, 0] = 0.5
+    rng = np.random.default_rng(11)
+    xs = [rng.normal(size=(30, 3)) for _ in robots]
+    together = [[r.push(x[t]) for t in range(30)][-1] for r, x in zip(robots, xs, strict=True)]
+    for rec in robots:
+        rec.reset()
+    for t in range(30):  # frame by frame, robot after robot
+        turn = [r.push(x[t]) for r, x in zip(robots, xs, strict=True)]
+    for alone, interleaved in zip(together, turn, strict=True):
+        assert np.array_equal(alone.loglik, interleaved.loglik)
+        assert np.array_equal(alone.posterior, interleaved.posterior)
+    assert not np.array_equal(turn[0].loglik, turn[1].loglik)  # the robots are told apart
 
 
 @pytest.mark.numeric  # computed again under a second OpenBLAS kernel

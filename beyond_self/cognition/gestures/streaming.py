@@ -12,6 +12,7 @@ frame; `recognize_sequence` a whole (T, D) array.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from typing import cast
 
@@ -29,7 +30,19 @@ from beyond_self.core.errors import InputError
 
 
 class CompiledModels:
-    """A model set rearranged for fast evaluation; built once, shared by any number of streams."""
+    """A model set rearranged for fast evaluation; built once, shared by any number of streams.
+
+    `CompiledModels.of(models)` is the one kept per model set: every recogniser given the set
+    itself shares it (a fleet's process runs a tracker per robot on one model set). Its arrays
+    are read-only, so no stream can change what the others read."""
+
+    @staticmethod
+    def of(models: GestureModels) -> CompiledModels:
+        """The compiled form of `models`, built at the first call and kept while they live."""
+        compiled = _COMPILED.get(models)
+        if compiled is None:
+            compiled = _COMPILED[models] = CompiledModels(models)
+        return compiled
 
     def __init__(self, models: GestureModels) -> None:
         self.models = models
@@ -70,6 +83,13 @@ class CompiledModels:
         with np.errstate(divide="ignore"):
             self.log_start = np.log(start)
             self.log_trans = np.log(trans)
+        # one frame's evaluation on plain floats (StreamingRecognizer): the quadratic terms'
+        # index pairs, and the table with the constant term folded in, lg = [phi(x), 1] @ table
+        self.pairs = list(zip(iu.tolist(), ju.tolist(), strict=True))
+        self.table = np.vstack([self.coef, self.const[None, :]])
+        for array in (self.coef, self.const, self.start, self.trans, self.log_start,
+                      self.log_trans, self.table, iu, ju):  # fmt: skip
+            array.flags.writeable = False
 
     def phi(self, x: FloatArray) -> FloatArray:
         """Quadratic features (..., D) -> (..., D(D+1)/2 + D)."""
@@ -83,6 +103,14 @@ class CompiledModels:
     def log_emission(self, x: FloatArray) -> FloatArray:
         """State log emission densities (..., D) -> (..., K, Q)."""
         return logsumexp_last(self.log_gauss(x))
+
+
+_COMPILED: weakref.WeakKeyDictionary[GestureModels, CompiledModels] = weakref.WeakKeyDictionary()
+
+
+def compiled(models: GestureModels | CompiledModels) -> CompiledModels:
+    """`models` compiled: the model set's shared form (`CompiledModels.of`)."""
+    return models if isinstance(models, CompiledModels) else CompiledModels.of(models)
 
 
 def _check_frames(x: ArrayLike, d: int, n: int | None) -> FloatArray:
@@ -236,13 +264,12 @@ class StreamingRecognizer:
     def __init__(
         self, models: GestureModels | CompiledModels, priors: ArrayLike | None = None
     ) -> None:
-        c = models if isinstance(models, CompiledModels) else CompiledModels(models)
+        c = compiled(models)
         self.compiled = c
         self.actions = c.actions
         self._log_prior = log_prior(priors, c.k)
-        self._pairs = list(zip(c._iu.tolist(), c._ju.tolist(), strict=True))
-        # constant term folded into the table: lg = [phi(x), 1] @ table
-        self._table = np.vstack([c.coef, c.const[None, :]])
+        self._pairs = c.pairs
+        self._table = c.table
         self._alpha = np.zeros((c.k, c.q))
         self._loglik = np.zeros(c.k)
         self._t = 0
@@ -338,7 +365,7 @@ class BatchRecognizer:
     ) -> None:
         if n_streams < 1:
             raise InputError(f"n_streams = {n_streams}; valid: at least 1")
-        self.compiled = models if isinstance(models, CompiledModels) else CompiledModels(models)
+        self.compiled = compiled(models)
         self.actions = self.compiled.actions
         self.n_streams = n_streams
         self._state = _ForwardState(self.compiled, n_streams, priors)
@@ -404,21 +431,21 @@ def recognize_sequence(
     priors: ArrayLike | None = None,
 ) -> SequenceResult:
     """Run the streaming recogniser over a whole (T, D) feature array, keeping every frame."""
-    compiled = models if isinstance(models, CompiledModels) else CompiledModels(models)
+    c = compiled(models)
     x = np.asarray(features, dtype=np.float64)
-    if x.ndim != 2 or x.shape[1] != compiled.d or x.shape[0] < 1:
-        raise InputError(f"features have shape {x.shape}; valid: (T, {compiled.d}) with T >= 1")
+    if x.ndim != 2 or x.shape[1] != c.d or x.shape[0] < 1:
+        raise InputError(f"features have shape {x.shape}; valid: (T, {c.d}) with T >= 1")
     if not np.all(np.isfinite(x)):
         raise InputError("features hold NaN or infinite values; valid: finite numbers")
-    state = _ForwardState(compiled, 1, priors)
-    out = np.empty((len(x), compiled.k))
-    lg = compiled.log_gauss(x)  # all frames at once; only the recursion is sequential
+    state = _ForwardState(c, 1, priors)
+    out = np.empty((len(x), c.k))
+    lg = c.log_gauss(x)  # all frames at once; only the recursion is sequential
     for t in range(len(x)):
         state.step(x[t : t + 1], slice(None), lg[t : t + 1])
         out[t] = state.loglik[0]
     steps = np.arange(1, len(x) + 1)[:, None]
     return SequenceResult(
-        actions=compiled.actions,
+        actions=c.actions,
         loglik=out,
         normalized=out / steps,
         posterior=_posterior(out, state.log_prior),
