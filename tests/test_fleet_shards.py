@@ -85,6 +85,8 @@ def test_shards_need_a_fleet_and_hosts_apart_from_its_robots() -> None:
     assert list(Deployment(config, STAGES, shards=1).units) == STAGES  # as it always was
     with pytest.raises(InputError, match="shards share out a fleet's robots; give --robots"):
         Deployment(BusConfig(robot="ws"), STAGES, shards=2)
+    with pytest.raises(InputError, match="not on a secure bus yet"):
+        Deployment(config.with_(secure="keys", mode="client"), STAGES, shards=2)
     with pytest.raises(InputError, match="ingest serve one robot"):
         Deployment(config, ["ingest", "gestures"], shards=2)
     with pytest.raises(InputError, match=r"shard host 'ws\.shard0' is one of the robots 'ws\.\*'"):

@@ -40,6 +40,11 @@ def plan_units(
         return {n: Unit(n, n, config.robot) for n in services}
     if config.robots is None:
         raise InputError(f"--shards {shards}: shards share out a fleet's robots; give --robots")
+    if config.secure is not None:  # the access rules grant a workstation its own name only
+        raise InputError(
+            f"--shards {shards}: not on a secure bus yet (the certificates name the workstation, "
+            "not its shards); use --shards 1"
+        )
     single = [n for n in services if n not in fleet]
     if single:
         raise InputError(f"--shards {shards}: {', '.join(single)} serve one robot, not a fleet")
