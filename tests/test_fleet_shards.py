@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 from busutil_net import private_config
-from test_fleet import wait_until
+from test_fleet import Echo, wait_until
 
 from beyond_self.cli import main
 from beyond_self.commands.analyse import _inputs, default_run
@@ -26,7 +26,8 @@ from beyond_self.core.errors import InputError
 from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.delivery import FRAMES
-from beyond_self.runtime.fleet import LEAVE_ENV
+from beyond_self.runtime.bus.session import Bus
+from beyond_self.runtime.fleet import LEAVE_ENV, Fleet
 from beyond_self.runtime.shard import Shard, parse_shard, shard_count, shard_of
 from beyond_self.schemas import GestureSegment, Header, Joint, Keys, SkeletonFrame
 from beyond_self.schemas.keys import for_robots, split_key
@@ -93,6 +94,48 @@ def test_shards_need_a_fleet_and_hosts_apart_from_its_robots() -> None:
         Deployment(BusConfig(robot="ws", robots="ws.*"), STAGES, shards=2)
 
 
+async def test_each_shard_serves_its_own_robots_and_none_of_a_dead_siblings() -> None:
+    """Shards 0 and 1 of one service (in this process, each on its own session as its own
+    host): each serves the robots its shard gives it; shard 1 gone (its session closed, tokens
+    and all), shard 0 does not wait to take its robots over; shard 1 back (as its supervisor
+    would start it), it serves them again."""
+    config = private_config()
+    loop = asyncio.get_running_loop()
+
+    def shard(k: int, bus: Bus) -> tuple[Fleet, asyncio.Task[None]]:
+        ws = config.with_(robot=Shard(k, 2).host("ws"), robots="lab-*")
+        fleet = Fleet(Echo, ws, bus=bus, takeover_after_s=0.2, shard=Shard(k, 2))
+        return fleet, loop.create_task(fleet.run(install_signals=False))
+
+    with Bus.open(config) as robots, Bus.open(config) as bus0:
+        bus1 = Bus.open(config)
+        (zero, task0), (one, task1) = shard(0, bus0), shard(1, bus1)
+        present: list[Callable[[], None]] = []
+        try:
+            views = [robots.for_robot(name) for name in ROBOTS]
+            present = [v.declare_token(v.keys.alive("ingest")) for v in views]
+            await wait_until("each shard its own", lambda: (zero.robots, one.robots) == (
+                ["lab-1"], ["lab-4", "lab-5"]))  # fmt: skip
+            hosts = await robots.live_tokens(Keys("lab-4").server("echo"))
+            assert hosts == ["beyond/lab-4/alive/echo/ws.shard1"]
+            task1.cancel()  # shard 1 dies
+            bus1.close()
+            await wait_until("shard 0 saw it go", lambda: not zero.served_by.get("lab-4"))
+            # no takeover under way, nor ever to come: shard 0 is not waiting on them
+            assert zero.robots == ["lab-1"] and not zero._takeover and not zero._unserved_since
+            bus1 = Bus.open(config)
+            one, task1 = shard(1, bus1)
+            await wait_until("shard 1 back", lambda: one.robots == ["lab-4", "lab-5"])
+            assert zero.robots == ["lab-1"] and zero.takeovers == 0
+        finally:
+            for undeclare in present:
+                undeclare()
+            for fleet in (zero, one):
+                fleet.stop()
+            await asyncio.gather(task0, task1, return_exceptions=True)
+            bus1.close()
+
+
 def burst_recordings(folder: Path) -> dict[str, Path]:
     """Each robot's recording: its own gestures, its person at rest for as long before them as
     makes its last gesture end on the same frame as every other robot's (a burst)."""
@@ -147,6 +190,7 @@ def descendants(pids: list[int]) -> list[int]:
     return found
 
 
+@pytest.mark.slow  # about 15 s: twelve processes start
 @pytest.mark.timeout(120)
 async def test_a_shard_killed_mid_burst_repeats_nothing_and_loses_nothing(
     tmp_path: Path,
