@@ -88,7 +88,7 @@ def test_shards_need_a_fleet_and_hosts_apart_from_its_robots() -> None:
         Deployment(BusConfig(robot="ws"), STAGES, shards=2)
     with pytest.raises(InputError, match="not on a secure bus yet"):
         Deployment(config.with_(secure="keys", mode="client"), STAGES, shards=2)
-    with pytest.raises(InputError, match="ingest serve one robot"):
+    with pytest.raises(InputError, match=r"sharded, not ingest \(one robot's own\)"):
         Deployment(config, ["ingest", "gestures"], shards=2)
     with pytest.raises(InputError, match=r"shard host 'ws\.shard0' is one of the robots 'ws\.\*'"):
         Deployment(BusConfig(robot="ws", robots="ws.*"), STAGES, shards=2)

@@ -47,7 +47,10 @@ def plan_units(
         )
     single = [n for n in services if n not in fleet]
     if single:
-        raise InputError(f"--shards {shards}: {', '.join(single)} serve one robot, not a fleet")
+        raise InputError(
+            f"--shards {shards}: only a fleet's services are sharded, not {', '.join(single)} "
+            "(one robot's own)"
+        )
     hosts = [Shard(k, shards).host(config.robot) for k in range(shards)]
     for pattern in (config.robots, config.standby):
         taken = [h for h in hosts if pattern is not None and robot_matches(pattern, h)]
