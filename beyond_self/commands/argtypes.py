@@ -15,7 +15,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from beyond_self.core.errors import InputError
 from beyond_self.runtime.recording.replay_control import RATE_MAX
+from beyond_self.runtime.shard import shard_count
 
 SEED_MAX = 2**32 - 1  # numpy's legacy seeding and our simulators take 32-bit seeds
 SECONDS_MAX = 366 * 86400.0  # a year: longer is a typo, and asyncio deadlines stay exact
@@ -167,6 +169,14 @@ def add_seed(parser: argparse.ArgumentParser, help: str, default: int = 0) -> No
 
 
 port = number(int, lo=1, hi=65535, what="TCP port")
+
+
+def shards(text: str) -> int:
+    """`--shards`: a number of processes per stage, or `auto` (runtime.shard.shard_count)."""
+    try:
+        return shard_count(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _parent_problem(folder: Path) -> str | None:

@@ -16,6 +16,7 @@ from typing import Any
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.cliargs import add_bus_arguments, config_from_args
 from beyond_self.runtime.process import configure, exit_process
+from beyond_self.runtime.shard import parse_shard
 from beyond_self.services.launcher import wait_for_release
 from beyond_self.services.options import check_options, load_options
 from beyond_self.services.registry import SERVICES, service_class
@@ -42,6 +43,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with --robots: also serve the robots PATTERN matches while no other workstation "
         "does, taking over a dead workstation's robots ($BEYOND_STANDBY)",
     )
+    parser.add_argument(
+        "--shard",
+        metavar="K/N",
+        help="with --robots: serve only shard K (0 to N-1) of N, the robots a stable hash of "
+        "their names gives it (`beyond up --shards N` starts one process per shard)",
+    )
     add_bus_arguments(parser)
 
 
@@ -67,6 +74,9 @@ def run(args: argparse.Namespace) -> int:
     options = service_options(args.name, args.config, args.set)
     cls = service_class(args.name)
     config = config_from_args(args)
+    shard = parse_shard(args.shard) if args.shard is not None else None
+    if shard is not None and config.robots is None:
+        raise InputError("--shard K/N shares out a fleet's robots: give --robots PATTERN too")
     configure()
     with contextlib.suppress(Exception):  # what fails is said by the service's setup
         cls.warm(options)
@@ -84,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
     consumers = fleet_consumers(args.name)
 
     def fleet() -> Fleet:
-        return Fleet(cls, config, options, consumers=consumers, takeover_latest_s=latest)
+        return Fleet(
+            cls, config, options, consumers=consumers, takeover_latest_s=latest, shard=shard
+        )
 
     exit_process(run_to_completion(lambda: fleet().run()))

@@ -90,7 +90,9 @@ async def up(args: argparse.Namespace, config: BusConfig) -> int:
         pipeline.start()
         await side.start()
         if not side.exited():
-            lines.emit(f"pipeline up: {', '.join(side.services)} on robot {side.config.robot!r}")
+            shards = f", {args.shards} shards each" if args.shards > 1 else ""
+            names = ", ".join(side.services)
+            lines.emit(f"pipeline up: {names} on robot {side.config.robot!r}{shards}")
         hints.append(loop.create_task(say_what_is_awaited(bus, awaited_elsewhere(args))))
         ending = await watch(side, pipeline, lines, timeout, finite, live=not args.no_live)
         await pipeline.last_health()  # what was dropped since the last report counts too
@@ -127,7 +129,8 @@ def run_state(args: argparse.Namespace, side: Deployment, bus: BusConfig) -> Run
 
 
 # what does not change a run's results: the same command but for these goes on from its state
-PRESENTATION = frozenset(("fresh", "no_live", "timeout", "foxglove", "func", "command"))
+# (--shards only spreads the robots' runs, whose state is each robot's own, over processes)
+PRESENTATION = frozenset(("fresh", "no_live", "timeout", "foxglove", "func", "command", "shards"))
 
 
 def run_command(args: argparse.Namespace, side: Deployment) -> str:

@@ -155,6 +155,14 @@ def add_side_options(parser: argparse.ArgumentParser) -> None:
         "does (failover: takes over another workstation's robots when it dies); with --robots",
     )
     parser.add_argument(
+        "--shards",
+        type=argtypes.shards,
+        default=1,
+        metavar="N",
+        help="with --robots: run each service as N processes (auto: one per core this process "
+        "may use), each serving the robots a stable hash of their names gives it (default 1)",
+    )
+    parser.add_argument(
         "--until-stream-end",
         action="store_true",
         help="exit once the (remote) source has ended and every gesture is described",

@@ -127,6 +127,7 @@ def deployment(
         log=log_line,
         on_stuck=lambda n, why: lines.emit(f"service {n} is stuck ({why}); stopping it"),
         stop_on_signals=True,
+        shards=args.shards,
         # what dies is started again: said on stderr, beside the services' own logs (stdout
         # holds the gesture lines, the same as beyond analyse prints)
         on_restart=lambda n, what: print(f"[up] {n}: {what}", file=sys.stderr, flush=True),

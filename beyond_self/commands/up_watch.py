@@ -14,6 +14,7 @@ from rich.live import Live
 from beyond_self.live_view import render
 from beyond_self.monitor import PipelineMonitor
 from beyond_self.runtime.bus.session import Bus
+from beyond_self.schemas.keys import Keys
 from beyond_self.services.deployment import Deployment, Ending
 
 ALIVE_QUERY_S = 2.0  # how long the services already on the bus have to answer
@@ -46,12 +47,14 @@ async def already_up(side: Deployment, bus: Bus) -> list[str]:
     info = bus.session.info
     if not list(info.peers_zid()) and not list(info.routers_zid()):
         return []
-    names = [*side.services, *([side.watcher] if side.watcher else [])]
+    keys = {n: Keys(u.robot).alive(u.service) for n, u in side.units.items()}
+    if side.watcher:
+        keys[side.watcher] = bus.keys.alive(side.watcher)
     seen = await asyncio.gather(
-        *(bus.wait_alive(bus.keys.alive(n), timeout=ALIVE_QUERY_S) for n in names),
+        *(bus.wait_alive(key, timeout=ALIVE_QUERY_S) for key in keys.values()),
         return_exceptions=True,
     )
-    return [name for name, got in zip(names, seen, strict=True) if isinstance(got, set)]
+    return [name for name, got in zip(keys, seen, strict=True) if isinstance(got, set)]
 
 
 async def say_what_is_awaited(

@@ -4,10 +4,10 @@ One process per service, not one per robot, so the models load once per process 
 What a run holds (what `setup` builds; the base's clock, ledger, progress, publishers) is per
 robot, on that robot's view of the one session (`Bus.for_robot`): each run is exactly the
 single-robot service, on its keys, with its own event time, checkpoints, token and health.
-A run starts when the robot's ingest token appears and ends `leave_after_s` after it has gone.
-One host serves a robot at a time (`Keys.server`); a standby takes a robot over after
-`takeover_after_s`, sink first, so each new run finds its consumers' new instances and sends them
-what they need to rebuild. Failover and its waits: docs/concepts/fleets.md.
+A run starts when the robot's ingest token appears (a robot its `shard` gives it, if any) and ends
+`leave_after_s` after it has gone. One host serves a robot at a time (`Keys.server`); a standby
+takes a robot over after `takeover_after_s`, sink first, so each new run finds its consumers' new
+instances and sends them what they need to rebuild. Failover, waits: docs/concepts/fleets.md.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from beyond_self.runtime.bus.config import BusConfig
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.log import event
 from beyond_self.runtime.self_report import health_header, restarts
+from beyond_self.runtime.shard import Shard
 from beyond_self.schemas.keys import Keys, for_robots, robot_matches, split_key
 from beyond_self.schemas.messages import ServiceHealth
 
@@ -88,6 +89,7 @@ class Fleet:
         takeover_after_s: float | None = None,
         consumers: tuple[str, ...] = (),
         takeover_latest_s: float | None = None,
+        shard: Shard | None = None,
     ) -> None:
         if config.robots is None:
             raise InputError("a fleet's service needs the robots it serves (--robots PATTERN)")
@@ -102,6 +104,7 @@ class Fleet:
         self.config = config
         self.pattern = config.robots
         self.standby = config.standby
+        self.shard = shard  # None: every robot the patterns match
         self.host = config.robot  # the workstation's own name: its runs' server tokens say it
         self.options = dict(options or {})
         self.leave_after_s = leave_after_s if leave_after_s is not None else leave_after_s_env()
@@ -158,7 +161,8 @@ class Fleet:
 
             bus.queryable(own.health(self.name), None, answer_health)
             bus.declare_token(own.alive(self.name))
-            event(self.log, logging.INFO, "serving robots", service=self.name, robots=self.pattern)
+            event(self.log, logging.INFO, "serving robots", service=self.name, robots=self.pattern,
+                  shard=str(self.shard or "-"))  # fmt: skip
             await self._stop.wait()
         finally:
             timers = [*self._leaving.values(), *self._takeover.values(), *self._latest.values()]
@@ -207,6 +211,8 @@ class Fleet:
         if split is None or self._stop.is_set():
             return
         robot = split[0]
+        if self.shard is not None and not self.shard.serves(robot):
+            return  # a sibling shard's, never this process's: not even as a standby
         if present:
             self.present.add(robot)
             pending = self._leaving.pop(robot, None)

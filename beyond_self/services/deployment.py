@@ -37,6 +37,7 @@ from beyond_self.services.link_watch import SILENT_S, LinkWatch
 from beyond_self.services.options import check_options
 from beyond_self.services.registry import PIPELINE, service_class
 from beyond_self.services.supervision import RestartPolicy, Restarts, how_it_ended
+from beyond_self.services.units import plan_units
 
 if TYPE_CHECKING:
     from beyond_self.runtime.bus.session import Bus
@@ -78,7 +79,8 @@ class Deployment:
     service that dies is started again as the policy says (services.supervision; None: never),
     and `on_restart(name, what)` is told each restart and each time the policy gives up. With a
     restart policy the router is supervised too, and restarted when the other side is present
-    but none of its health has arrived for `link_silent_s` (services.link_watch)."""
+    but none of its health has arrived for `link_silent_s` (services.link_watch). `shards` N > 1:
+    a fleet's services run as N shards each, each process its own (`units`: services.units)."""
 
     def __init__(
         self,
@@ -97,12 +99,15 @@ class Deployment:
         restart: RestartPolicy | None = DEFAULT_RESTART,
         on_restart: Callable[[str, str], None] | None = None,
         link_silent_s: float = SILENT_S,
+        shards: int = 1,
     ) -> None:
         if clock not in CLOCKS:
             raise unknown("clock", clock, CLOCKS)
         self.config = config
         self.services = list(services)
         self.options = _checked_options(self.services, options or {})
+        fleet = [n for n in self.services if service_class(n).fleet]
+        self.units = plan_units(config, self.services, shards, fleet)  # its processes, by name
         if SOURCE in self.services:
             local = [n for n in self.services if n != SOURCE] + ([watcher] if watcher else [])
             self.options[SOURCE]["wait_for"] = local + list(wait_for)
@@ -165,7 +170,7 @@ class Deployment:
         most of its start, then waits off the bus until `start` (or `launch`) lets it join.
         Whatever the caller does meanwhile (open the session, look for another deployment on
         the bus) overlaps the processes' own start; `stop` ends those never let in."""
-        for name in self.services:
+        for name in self.units:
             if all(sp.name != name for sp in self.processes):
                 await self._spawn(name, held=True)
 
@@ -182,8 +187,9 @@ class Deployment:
         the robot's own pipeline until Zenoh gives the link up (tests/test_deploy_netns.py)."""
         await self.prepare()
         bus = await self.open()
-        for group in ([n for n in self.services if n != SOURCE], [SOURCE]):
-            launched = [await self.launch(name) for name in group if name in self.services]
+        units = self.units.values()
+        for group in ([u.name for u in units if u.service != SOURCE], [SOURCE]):
+            launched = [await self.launch(name) for name in group if name in self.units]
             await asyncio.gather(*(_alive_or_exited(bus, sp, ALIVE_TIMEOUT_S) for sp in launched))
         if self.on_stuck is not None:
             self.health_watch = HealthWatch(bus, self.processes, self.on_stuck)
@@ -200,8 +206,8 @@ class Deployment:
         process takes the old one's place in `processes` (and in the health watch); one
         started held (`prepare`) is let in. `start` launches them all; launch them one by one
         instead to choose the order (tests)."""
-        if name not in self.options:
-            raise unknown("service of this deployment", name, self.services)
+        if name not in self.units:
+            raise unknown("service of this deployment", name, list(self.units))
         bus = await self.open()
         if self.watcher is not None and self._token is None:
             # after the caller's subscriptions, before any service: the source waits for it
@@ -218,7 +224,11 @@ class Deployment:
             raise InputError(f"service {name} is already running in this deployment")
         restarts = self.restarts.get(name)
         env = self.env if restarts is None else {**self.env, RESTARTS_ENV: str(restarts.count)}
-        sp = await start_service(name, env, options=self.options[name], sink=self.log, held=held)
+        unit = self.units[name]
+        sp = await start_service(
+            name, env, options=self.options[unit.service], sink=self.log, held=held,
+            command=unit.command, service=unit.service, robot=unit.robot,
+        )  # fmt: skip
         if old is None:
             self.processes.append(sp)
         else:
@@ -263,7 +273,7 @@ class Deployment:
         router = [self.router] if self.router is not None and not self.router.running else []
         if self.restart is None:
             return [sp.name for sp in self.processes + router if not sp.running]
-        return [n for n in [ROUTER, *self.services] if n in self._final]
+        return [n for n in [ROUTER, *self.units] if n in self._final]
 
     async def _supervise(self) -> None:
         """Start again, as the restart policy says, every service that dies, and the router."""
@@ -406,7 +416,7 @@ async def _alive_or_exited(bus: Bus, sp: ServiceProcess, timeout: float) -> None
     """Until `sp`'s liveliness token is seen (declared after its health queryable, so it then
     answers health) or it exited (`wait` then reports it): a process merely spawned serves
     nothing yet, and whoever takes "pipeline up" at its word asks the services for their health."""
-    alive = asyncio.ensure_future(bus.wait_alive(bus.keys.alive(sp.name), timeout=timeout))
+    alive = asyncio.ensure_future(bus.wait_alive(sp.alive_key(bus.keys), timeout=timeout))
     exited = asyncio.ensure_future(sp.process.wait())
     try:
         await asyncio.wait({alive, exited}, return_when=asyncio.FIRST_COMPLETED)

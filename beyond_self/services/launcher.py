@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 from beyond_self.runtime.bus.config import ENV_VARS, BusConfig
 from beyond_self.runtime.process import lifeline
+from beyond_self.schemas.keys import Keys
 
 if TYPE_CHECKING:
     from beyond_self.runtime.bus.session import Bus
@@ -37,16 +38,25 @@ RELEASE = b"go\n"
 
 @dataclass
 class ServiceProcess:
-    name: str
+    name: str  # in its deployment: the service's, or a shard's (`gestures.shard1`)
     process: asyncio.subprocess.Process
     reader: asyncio.Task[None] | None = None
     lines: deque[str] = field(default_factory=lambda: deque(maxlen=LINES_KEPT))
     stuck: bool = False
     held: bool = False  # started, waiting for `release` before it joins the bus
+    service: str = ""  # the service it runs ("": its name)
+    robot: str = ""  # whose keys it is alive and answers health on ("": its deployment's)
 
     @property
     def running(self) -> bool:
         return self.process.returncode is None
+
+    def alive_key(self, keys: Keys) -> str:
+        """Its liveliness token, `keys` being its deployment's."""
+        return Keys(self.robot or keys.robot).alive(self.service or self.name)
+
+    def health_key(self, keys: Keys) -> str:
+        return Keys(self.robot or keys.robot).health(self.service or self.name)
 
 
 def service_env(config: BusConfig, extra: Mapping[str, str] | None = None) -> dict[str, str]:
@@ -75,9 +85,12 @@ async def start_service(
     sink: LogSink | None = None,
     command: list[str] | None = None,
     held: bool = False,
+    service: str = "",
+    robot: str = "",
 ) -> ServiceProcess:
     """Start service `name` (or, with `command`, `beyond COMMAND...` under that name); `held`:
-    it waits for `release` before it joins the bus."""
+    it waits for `release` before it joins the bus. `service` and `robot`: what it runs and
+    whose keys it is alive on, when not its name and its deployment's (a shard)."""
     import json
 
     cmd = [*BEYOND, *(command or ["service", name])]
@@ -94,7 +107,7 @@ async def start_service(
         stderr=asyncio.subprocess.STDOUT,
         start_new_session=True,  # Ctrl-C in the terminal reaches `up`, which stops us cleanly
     )
-    sp = ServiceProcess(name, proc, held=held)
+    sp = ServiceProcess(name, proc, held=held, service=service, robot=robot)
 
     def line(text: str) -> None:
         sp.lines.append(text)
@@ -217,7 +230,7 @@ class HealthWatch:
     async def check(self, sp: ServiceProcess) -> None:
         from beyond_self.schemas import ServiceHealth
 
-        key = self.bus.keys.health(sp.name)
+        key = sp.health_key(self.bus.keys)
         try:
             replies = await self.bus.query(key, ServiceHealth, timeout=self.timeout)
         except Exception:  # a malformed reply is no answer either
