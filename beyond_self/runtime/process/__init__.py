@@ -16,7 +16,7 @@ from typing import Any, NoReturn
 
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.log import setup_logging
-from beyond_self.runtime.process import heap
+from beyond_self.runtime.process import heap, native_heap
 
 
 def install_signals(stop: Callable[[], None]) -> list[signal.Signals]:
@@ -43,8 +43,9 @@ SWITCH_INTERVAL_S = 0.02
 @functools.cache  # once per process
 def configure() -> None:
     """Set this process up as a service's own: logging, BLAS on one thread, the GIL's switch
-    interval for one busy loop (`SWITCH_INTERVAL_S`) and the heap settled after set-up
-    (runtime.process.heap). Once; `run_to_completion` does it, a process started held
+    interval for one busy loop (`SWITCH_INTERVAL_S`), the heap settled after set-up
+    (runtime.process.heap) and the C allocator's free memory given back (runtime.process.
+    native_heap). Once; `run_to_completion` does it, a process started held
     (services.launcher) before it waits."""
     import numpy  # noqa: F401  (loads OpenBLAS, so the limit reaches it)
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
@@ -52,6 +53,7 @@ def configure() -> None:
     threadpool_limits(limits=1, user_api="blas")
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     heap.manage()
+    native_heap.start_trimming()
     setup_logging()
 
 
