@@ -91,11 +91,9 @@ def stream_frames(seed: int, gestures: int = GESTURES) -> tuple[list[s.SkeletonF
     """Skeleton frames of `gestures` gestures and the indices of the frames that end them."""
     stream = synthesize_continuous(gestures, seed=seed)
     frames = []
+    rows = {n: p.tolist() for n, p in stream.joints.items()}  # floats, not numpy's per element
     for i in range(stream.n_frames):
-        joints = {
-            n: s.Joint(position=(float(p[i, 0]), float(p[i, 1]), float(p[i, 2])))
-            for n, p in stream.joints.items()
-        }
+        joints = {n: s.Joint(position=(r[i][0], r[i][1], r[i][2])) for n, r in rows.items()}
         header = s.Header(version=1, source="bench", seq=i, stamp=10**18 + i * 33_333_333)
         frames.append(s.SkeletonFrame(header=header, frame=i + 1, joints=joints))
     seg = GestureSegmenter()

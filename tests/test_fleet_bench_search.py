@@ -133,3 +133,24 @@ def test_a_limit_of_no_robots_names_every_figure(fleet: ModuleType) -> None:
     got = fleet.each_robot([round_of(1)], search, {"cores": 0.05, "rss_mb": 1.0, "pss_mb": 1.0})
     assert got["robots"] == 0 and search.next() is None
     assert got["cores_per_robot"] is None and got["memory_ratio"] is None
+
+
+def test_a_robots_frames_are_sent_as_the_frames_encoded_at_their_stamps(
+    fleet: ModuleType,
+) -> None:
+    """The bench encodes each frame once and puts the send time's stamp in: what the fleet
+    receives is byte for byte the frame encoded with that stamp."""
+    import beyond_self.schemas as s
+    from beyond_self.schemas.codec import encode
+
+    def frame(number: int, joints: int) -> s.SkeletonFrame:
+        positions = {f"j{j}": s.Joint(position=(0.1 * j, -2.5, number / 7)) for j in range(joints)}
+        header = s.Header(version=1, source="robot", seq=0, stamp=10**18)
+        return s.SkeletonFrame(header=header, frame=number, joints=positions)
+
+    frames = [frame(1, 1), frame(300, 9), frame(70_000, 15)]  # numbers of 1, 3 and 5 bytes
+    stream = fleet.encoded_stream(frames, [2])
+    for i, stamp in [(0, 2**32), (1, 1_765_000_000_123_456_789), (2, 2**62 + 1), (2, 2**33)]:
+        assert stream.payload(i, stamp) == encode(fleet.live_frame(frames[i], i, stamp))
+    with pytest.raises(ValueError, match="2\\^32"):
+        stream.payload(0, 2**32 - 1)
