@@ -6,11 +6,12 @@ next to one process set per robot, measured in the same run; the bench searches 
 Skeleton only (no vision: the gesture streamer, the affordance reasoner and the description
 generator; the reasoner told there is no object segmenter). Each round, N robots appear (this
 script declares each robot's source token and publishes its 30 Hz skeleton stream live, at real
-time, all N at once, phases spread over a frame), the workstation's fleet processes start a run
-for each, and per gesture the clock starts when the frame that lets the segmenter decide the
-gesture is over is published (found offline by the same segmenter, bench/pipeline.py) and stops
-when the gesture's description is taken off Zenoh for that robot. Every gesture that ended must
-be described, or the bench fails.
+time, all N at once, phases spread over a frame; each frame encoded once before the round and
+its stamp put in as it is sent, the bytes encoding it then would give), the workstation's fleet
+processes start a run for each, and per gesture the clock starts when the frame that lets the
+segmenter decide the gesture is over is published (found offline by the same segmenter,
+bench/pipeline.py) and stops when the gesture's description is taken off Zenoh for that robot.
+Every gesture that ended must be described, or the bench fails.
 
 Three cases: a person each (`own`: each robot its own synthetic person, a seed each: gestures
 of their own lengths at their own times, as in a lab), aligned (every robot the same stream, so
@@ -34,7 +35,8 @@ the processes that map it), and their CPU time over the round (cores); next to t
 three services as one process set for one robot (`beyond up`'s way before fleets), started and
 measured in the same run with one robot: N robots that way cost N of those; and the CPU of this
 script itself (the robots' simulated sources and its observers, which a real fleet would not run
-on the workstation: `sources_cores`). Beside each limit: CPU per robot (cores at the limit / N),
+on the workstation: `sources_cores`; the streams are made before the services start, outside
+it). Beside each limit: CPU per robot (cores at the limit / N),
 memory per added robot (MB, the slope from the case's one-robot round to the limit), and the
 ratios of the process set per robot's figures to those. Where the time goes: per stage, the p99
 of the time from the gesture's deciding frame to its end event leaving the gesture streamer,
