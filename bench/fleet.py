@@ -87,7 +87,7 @@ from beyond_self.runtime.fleet import LEAVE_ENV  # noqa: E402
 from beyond_self.runtime.recording.replay import restamped  # noqa: E402
 from beyond_self.runtime.shard import shard_count  # noqa: E402
 from beyond_self.schemas.codec import encode  # noqa: E402
-from beyond_self.schemas.keys import for_robots, split_key  # noqa: E402
+from beyond_self.schemas.keys import Keys, for_robots, split_key  # noqa: E402
 from beyond_self.services.deployment import Deployment  # noqa: E402
 
 SERVICES = ["gestures", "reasoner", "describer"]
@@ -210,10 +210,12 @@ async def present(bus: Bus, robots: list[str], services: list[str]) -> AsyncIter
     fleet drops their runs before the next round)."""
     views = [bus.for_robot(r) for r in robots]
     tokens = [v.declare_token(v.keys.alive("ingest")) for v in views]
+    # every robot's runs at once: one wait per service, not one per robot and service
+    pattern = bus.config.robots or robots[0]  # the fleet's robots, or the one robot's own set
     try:
-        for v in views:
-            for name in services:
-                await bus.wait_alive(v.keys.alive(name), timeout=60)
+        for name in services:
+            key = for_robots(pattern, Keys().alive(name))
+            await bus.wait_alive(key, count=len(robots), timeout=60)
         yield views
     finally:
         for undeclare in tokens:
@@ -252,8 +254,7 @@ async def serve(bus: Bus, robots: list[str], streams: list[EncodedStream]) -> di
             "segment": [{} for _ in robots],
             "words": [{} for _ in robots],
         }
-        for pub in pubs:
-            await pub.wait_matching(timeout=30)
+        await asyncio.gather(*(pub.wait_matching(timeout=30) for pub in pubs))
         longest = max(len(stream) for stream in streams)
         # per robot, when each frame was sent (wall ns) and each stamp's frame: a gesture's
         # description carries the stamp of its last frame (event time); the segmenter decides
@@ -351,9 +352,7 @@ async def serve_camera(bus: Bus, robots: list[str]) -> dict[str, Any]:
         outs = observe(bus, robots, bus.keys.description, s.Description)
         objects = observe(bus, robots, bus.keys.objects, s.DetectedObjects)
         which = robot_of(robots)
-        for pair in pubs:
-            for pub in pair:
-                await pub.wait_matching(timeout=30)
+        await asyncio.gather(*(pub.wait_matching(timeout=30) for pair in pubs for pub in pair))
         described: list[dict[int, int]] = [{} for _ in robots]
 
         async def receive() -> None:
