@@ -22,7 +22,7 @@ def _malloc_trim() -> Callable[[int], int] | None:
     """glibc's `malloc_trim(pad)`, or None where the C library has none."""
     try:
         trim = ctypes.CDLL(None).malloc_trim
-    except (AttributeError, OSError):
+    except (AttributeError, OSError, TypeError):  # no such symbol, no C library handle
         return None
     trim.argtypes = [ctypes.c_size_t]
     trim.restype = ctypes.c_int
