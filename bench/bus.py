@@ -55,8 +55,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import datetime
 import json
 import os
+import platform
 import socket
 import statistics
 import subprocess
@@ -143,6 +145,7 @@ def receive_raw(config: BusConfig, kind: str, decode: bool) -> dict[str, object]
     key = f"bench/{config.robot}/{kind}"
     lat: list[int] = []
     times: list[int] = []
+    cpu: list[int] = []  # the process's CPU time at the first and the last message of the burst
     done = threading.Event()
 
     def on_sample(sample: zenoh.Sample) -> None:
@@ -157,8 +160,11 @@ def receive_raw(config: BusConfig, kind: str, decode: bool) -> dict[str, object]
         if seq < n_lat:
             lat.append(now - stamp)
         else:
+            if not times:
+                cpu.append(time.process_time_ns())
             times.append(now)
         if len(lat) + len(times) >= n:
+            cpu.append(time.process_time_ns())
             done.set()
 
     sub = session.declare_subscriber(key, on_sample)
@@ -167,7 +173,7 @@ def receive_raw(config: BusConfig, kind: str, decode: bool) -> dict[str, object]
     token.undeclare()
     sub.undeclare()
     session.close()
-    return {"latency_ns": lat, "times_ns": times}
+    return {"latency_ns": lat, "times_ns": times, "cpu_ns": cpu[-1] - cpu[0] if cpu else 0}
 
 
 def receive_typed(
@@ -183,6 +189,7 @@ def receive_typed(
             bus.declare_token(ready or f"bench/{config.robot}/ready")
             lat: list[int] = []
             times: list[int] = []
+            cpu0 = 0
             while len(lat) + len(times) < n:
                 try:
                     received = await sub.recv(timeout=60)
@@ -193,8 +200,11 @@ def receive_typed(
                 if header.seq < n_lat:
                     lat.append(now - header.stamp)
                 else:
+                    if not times:
+                        cpu0 = time.process_time_ns()
                     times.append(now)
-            return {"latency_ns": lat, "times_ns": times, "dropped": sub.dropped}
+            cpu = time.process_time_ns() - cpu0 if times else 0
+            return {"latency_ns": lat, "times_ns": times, "cpu_ns": cpu, "dropped": sub.dropped}
 
     return asyncio.run(go())
 
@@ -316,6 +326,9 @@ def run_pair(mode: str, kind: str) -> dict[str, float]:
         "latency_p99_us": quantile(lat, 0.99) / 1e3,
         "throughput_msgs_per_s": received / span,
         "throughput_mb_per_s": received * size / span / 1e6,
+        # the receiving process's CPU (all its threads, Zenoh's too) per message of the burst:
+        # what the path costs, less moved by the shared machine's other work than the rates
+        "cpu_per_msg_us": result["cpu_ns"] / max(received - 1, 1) / 1e3,
         "received": received + len(lat),
         "sent": n_lat + n_thr,
     }
@@ -604,6 +617,45 @@ REPLAY_LINE = (
 )
 
 
+def git(*argv: str) -> str:
+    done = subprocess.run(["git", *argv], cwd=REPO, capture_output=True, text=True, check=False)
+    return done.stdout.strip()
+
+
+def save(figures: dict[str, float], began: datetime.datetime, load_at_start: float) -> None:
+    """`figures` into bench/results/bus.json with the date, the machine and the provenance,
+    keeping the file's table (its rows are templates over the figures)."""
+    path = REPO / "bench" / "results" / "bus.json"
+    old = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
+    cpuinfo = Path("/proc/cpuinfo").read_text()
+    model = next(
+        (x.split(":", 1)[1].strip() for x in cpuinfo.splitlines() if "model name" in x), ""
+    )
+    commit = git("rev-parse", "--short", "HEAD")
+    dirty = (
+        " with uncommitted changes"
+        if git("status", "--porcelain", "--", "bench/", "beyond_self/")
+        else ""
+    )
+    data = {
+        "script": "bench/bus.py",
+        "date": began.strftime("%Y-%m-%d"),
+        "machine": (
+            f"{os.cpu_count()} cores ({model}), Linux {platform.release()}, Python "
+            f"{platform.python_version()}; load average {load_at_start:.2f} at the start, "
+            f"{os.getloadavg()[0]:.2f} at the end (one-minute figure)"
+        ),
+        "provenance": (
+            f"printed by `.venv/bin/python bench/bus.py --save` on {began:%Y-%m-%d} from "
+            f"{began:%H:%M} UTC at commit {commit}{dirty}, its last line kept as `result`"
+        ),
+        "result": figures,
+        "table": old.get("table", []),
+    }
+    path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    print(f"written: {path.relative_to(REPO)}", file=sys.stderr)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--receive", nargs=4, metavar=("MODE", "KIND", "PORT", "ROBOT"))
@@ -611,7 +663,9 @@ def main() -> int:
     parser.add_argument(
         "--only-secure", action="store_true", help="only the secure-path section (quicker)"
     )
+    parser.add_argument("--save", action="store_true", help="write bench/results/bus.json")
     args = parser.parse_args()
+    began, load = datetime.datetime.now(datetime.UTC), os.getloadavg()[0]
     if args.receive_path:  # config from the environment, as a service's
         kind, identity = args.receive_path
         config = load_config()
@@ -653,17 +707,20 @@ def main() -> int:
             "throughput_ratio_vs_raw_decode": (
                 typed["throughput_msgs_per_s"] / dec["throughput_msgs_per_s"]
             ),
+            "cpu_ratio_vs_raw_decode": typed["cpu_per_msg_us"] / dec["cpu_per_msg_us"],
         }
         figures.update({f"{kind}_{k}": round(v, 3) for k, v in ratios.items()})
         print(f"{kind} ({raw['bytes']:.0f} B), median of {REPEATS} interleaved runs:", flush=True)
         for mode in MODES:
             mb = f" ({row[mode]['throughput_mb_per_s']:6.0f} MB/s)"
-            print(_row_line(f"{mode:10s}", row[mode]) + mb, flush=True)
+            cpu = f", receiver CPU {row[mode]['cpu_per_msg_us']:5.2f} us/msg"
+            print(_row_line(f"{mode:10s}", row[mode]) + mb + cpu, flush=True)
         print(
             f"  typed/raw: latency x{ratios['latency_ratio']:.2f} (goal <= 1.2), p99 "
             f"x{ratios['p99_ratio']:.2f}, throughput x{ratios['throughput_ratio']:.2f} "
             f"(goal >= 0.8); typed/raw+decode: latency x{ratios['latency_ratio_vs_raw_decode']:.2f}"
-            f", throughput x{ratios['throughput_ratio_vs_raw_decode']:.2f}",
+            f", throughput x{ratios['throughput_ratio_vs_raw_decode']:.2f}, CPU per message "
+            f"x{ratios['cpu_ratio_vs_raw_decode']:.2f}",
             flush=True,
         )
     for measure, line in ((handoff_floor, HANDOFF_LINE), (replay_speed, REPLAY_LINE)):
@@ -672,6 +729,8 @@ def main() -> int:
         print(line.format_map(measured), flush=True)
     figures.update(secure_path())
     print(json.dumps(figures))
+    if args.save:
+        save(figures, began, load)
     return 0
 
 
