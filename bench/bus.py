@@ -8,8 +8,8 @@ each run REPEATS times, interleaved, the median run reported (the machine is sha
   Python callback (zenoh-python runs it on its own callback thread); it takes the payload bytes
   (`payload.to_bytes()`) and reads the sequence number and send time from their first 16 bytes.
   It does not decode or validate anything, and nothing wakes another thread.
-- raw+decode (for context, not a goal): the same callback, plus strict msgspec decoding of the
-  real message (`schemas.decode`): what typing costs before any hand-off.
+- raw+decode (the reference for a validating subscriber): the same callback, plus strict msgspec
+  decoding of the real message (`schemas.decode`): what typing costs before any hand-off.
 - typed (ours): `Bus.subscribe(key, Type)` consumed with `await sub.recv()` in an asyncio task:
   the sample crosses to the event loop, is decoded and validated there, and counted.
 
@@ -23,7 +23,9 @@ reliable (congestion control BLOCK), so nothing is dropped.
   the receive time when the receiver's code has it (raw: in the callback; typed: when `recv()`
   returns the decoded message on the event loop);
 - throughput: a burst sent as fast as the sender can; the receiver's rate from the start of the
-  burst to the last message received.
+  burst to the last message received;
+- CPU per message: the receiving process's CPU time (all its threads, Zenoh's included) over the
+  burst, per message. On a shared machine the rates swing with the other work; this hardly does.
 
 Replay: a 10 s recording (skeleton and camera at 30 Hz) replayed as fast as possible by
 `runtime.recording.replay.replay` into a subscriber in another process (as `beyond replay` feeds
@@ -34,17 +36,24 @@ reference publishes the same wire payloads, read into memory beforehand, with ra
 Also measured: the hand-off from a plain thread to a parked consumer with no Zenoh at all
 (another thread; an asyncio task), the floor under any asyncio subscriber's extra latency.
 
-What limits the ratios (measured with py-spy and the figures above, 2-core machine):
-- latency: ours = raw + the wake-up of a drain thread (a thread-to-thread hand-off) + the
-  wake-up of the event loop (the asyncio hand-off) + decoding. The asyncio hand-off alone
-  (handoff_asyncio_eventfd_median_us, typically 30-45 us here) is more than 20% of raw
-  zenoh-python's one-way latency, so no asyncio subscriber can meet "+20%" on this machine;
-  the drain thread adds a thread hand-off (handoff_thread_median_us) and buys throughput.
-- throughput: strict msgspec decoding and validation of a 15-joint skeleton (about 4 us) costs
-  more than raw zenoh-python's whole per-message cost (about 3.5 us), so even raw+decode keeps
-  under half of raw's rate; ours is compared with both. In a profile of our receiver during a
-  burst, decoding is about two thirds of the event loop's busy time and the drain thread is
-  almost always parked in Zenoh's channel. For camera frames both sides are memory-bound:
+What limits the ratios (py-spy profiles and interleaved runs, 2-core machine, 2026-12-07):
+- the per-message path itself is at its floor: the receiver's CPU per skeleton frame is raw's
+  about 2 us, raw+decode's about 6 us (strict decoding and validation, about 4 us, costs twice
+  raw zenoh-python's whole per-message work), and ours x0.9-1.0 of raw+decode's (it was
+  x1.0-1.2 before the typed drain converted inline and the loop took bursts without a coroutine
+  per message). In a profile of our receiver during a burst, decoding is about 87% of the event
+  loop's busy time; the rest is taking the sample from the inbox and making `Received`. The
+  drain thread's own work is Zenoh's channel and the payload copy.
+- throughput: raw+decode keeps under half of raw's rate, so ours against raw cannot reach x0.8;
+  against raw+decode it is the figure to read. Decoding on the event loop while a drain thread
+  takes the next burst overlaps the two a little, so ours can pass raw+decode's rate.
+- latency: ours = raw + decoding + the wake-up of the event loop (the asyncio hand-off); the
+  drain thread's wake-up stands where raw's callback thread's does. The asyncio hand-off alone
+  (handoff_asyncio_eventfd_median_us, 20-45 us here as the machine's load goes) is more than
+  20% of raw zenoh-python's one-way latency (110-150 us here), so no asyncio subscriber meets
+  "+20%" against raw on this machine, and against raw+decode it is at the edge: what is left
+  is the loop's own wake-up (a kernel wake-up of the thread parked in epoll and two turns of
+  the loop to resume the task), not our code. For camera frames both sides are memory-bound:
   decoding copies the 230 kB image once more than raw does.
 - replay: decoding the stored JSON (base64 images) is about 40% of the time, the chunk CRC check
   about 15%; the raw reference publishes pre-encoded payloads and only shows the ceiling set by
