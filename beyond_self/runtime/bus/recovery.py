@@ -4,12 +4,10 @@ Wi-Fi drops and cables are pulled; what is published meanwhile goes nowhere, and
 event means a gesture never described. So derived streams' publishers keep a cache
 (runtime.bus.publisher) and their subscribers here ask every publisher for its history and recover
 gaps from it: delivered in order per publisher, each once, what no cache holds counted as
-`missed`. A plain subscriber beside it witnesses the live samples, so a delivered one it never
-saw is counted as `recovered`; it reads a ring channel, not a callback, to spare Zenoh's thread
-the GIL (docs/decisions.md). The advanced subscriber, too, hands its samples to a channel, which a
-drain thread of its own empties a burst at a time: Zenoh's thread never waits for the GIL, nor
-makes a Python thread state per sample. runtime.bus.history_repair covers a zenoh-ext 1.10
-history bug.
+`missed`. A plain subscriber beside it witnesses the live samples (a ring channel), so a delivered
+one it never saw is counted as `recovered`. Both hand samples to channels, the advanced one's
+emptied by a drain thread a burst at a time: no Zenoh thread waits for the GIL (docs/decisions.md).
+runtime.bus.history_repair covers a zenoh-ext 1.10 history bug.
 """
 
 from __future__ import annotations
