@@ -643,7 +643,7 @@ def save(figures: dict[str, float], began: datetime.datetime, load_at_start: flo
     commit = git("rev-parse", "--short", "HEAD")
     dirty = (
         " with uncommitted changes"
-        if git("status", "--porcelain", "--", "bench/", "beyond_self/")
+        if git("status", "--porcelain", "--", "bench/", "beyond_self/", ":(exclude)bench/results")
         else ""
     )
     data = {
