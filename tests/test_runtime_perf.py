@@ -157,6 +157,23 @@ async def test_a_recovering_subscription_delivers_a_burst_in_order_through_its_d
     assert sub.missed == 0 and sub.dropped == 0
 
 
+@pytest.mark.timeout(60)
+async def test_history_larger_than_the_channel_arrives_whole_when_subscribing(buses) -> None:
+    """A restarted consumer's history (here 600 samples, the drain's channel holds 256) comes as
+    the subscriber is declared: the declaration returns (the channel is drained from the start,
+    not once the rest is set up) and every sample arrives once, in order."""
+    a, b = buses
+    delivery = Delivery(cache=2048, recover=True, history=2048)
+    pub = b.publisher(b.keys.skeleton, s.SkeletonFrame, delivery)
+    frames = skeleton_frames(600)
+    for frame in frames:  # nobody subscribes yet: they wait in the publisher's cache
+        pub.put(frame)
+    sub = a.subscribe(a.keys.skeleton, s.SkeletonFrame, delivery)
+    got = [(await sub.recv(timeout=10)).message for _ in frames]
+    assert got == frames
+    assert sub.missed == 0 and sub.dropped == 0
+
+
 async def test_ready_takes_what_has_arrived_without_waiting(buses) -> None:
     a, b = buses
     bad: list[str] = []

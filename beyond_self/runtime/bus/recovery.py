@@ -90,13 +90,15 @@ class RecoveringSource:
             ),
             recovery=ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
         )
-        self._miss_listener = self._sub.sample_miss_listener(direct_callback(on_miss))
+        # Drained from now on: history may fill the channel at once, and Zenoh's thread, blocked
+        # on a full channel, holds the subscriber's state, which the miss listener waits for.
         threading.Thread(
             target=_drain,
             args=(self._sub.handler, repair.offer),
             name=f"zenoh-drain {key}",
             daemon=True,
         ).start()
+        self._miss_listener = self._sub.sample_miss_listener(direct_callback(on_miss))
 
     def _delivered(self, ident: tuple[str, int]) -> None:
         with self._lock:
