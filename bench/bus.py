@@ -39,11 +39,12 @@ Also measured: the hand-off from a plain thread to a parked consumer with no Zen
 What limits the ratios (py-spy profiles and interleaved runs, 2-core machine, 2026-12-07):
 - the per-message path itself is at its floor: the receiver's CPU per skeleton frame is raw's
   about 2 us, raw+decode's about 6 us (strict decoding and validation, about 4 us, costs twice
-  raw zenoh-python's whole per-message work), and ours x0.9-1.0 of raw+decode's (it was
-  x1.0-1.2 before the typed drain converted inline and the loop took bursts without a coroutine
-  per message). In a profile of our receiver during a burst, decoding is about 87% of the event
-  loop's busy time; the rest is taking the sample from the inbox and making `Received`. The
-  drain thread's own work is Zenoh's channel and the payload copy.
+  raw zenoh-python's whole per-message work), and ours x0.91 of raw+decode's (median of ten
+  interleaved runs, 0.76-1.03; x1.04 before the typed drain converted inline and the loop took
+  bursts without a coroutine per message). In a profile of our receiver during a burst,
+  decoding is about 87% of the event loop's busy time; the rest is taking the sample from the
+  inbox and making `Received`. The drain thread's own work is Zenoh's channel and the payload
+  copy.
 - throughput: raw+decode keeps under half of raw's rate, so ours against raw cannot reach x0.8;
   against raw+decode it is the figure to read. Decoding on the event loop while a drain thread
   takes the next burst overlaps the two a little, so ours can pass raw+decode's rate.
