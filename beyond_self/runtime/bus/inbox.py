@@ -84,9 +84,11 @@ class Inbox(Generic[T]):
             return
         self._fd_read, self._fd_write = read, write
 
-    def _on_wakeup_fd(self) -> None:  # loop thread
-        with contextlib.suppress(OSError):  # BlockingIOError: already read
+    def _on_wakeup_fd(self) -> None:  # loop thread, on every wake-up: no context manager
+        try:  # noqa: SIM105 - suppress() is a context manager per wake-up
             os.read(self._fd_read, 8 if self._fd_read == self._fd_write else 4096)
+        except OSError:  # BlockingIOError: already read
+            pass
         self._wake()
 
     def _close_wakeup_fd(self) -> None:  # loop thread
@@ -106,8 +108,10 @@ class Inbox(Generic[T]):
         if self._fd_write >= 0:
             with self._fd_lock:
                 if self._fd_write >= 0:
-                    with contextlib.suppress(OSError):  # full counter/pipe: a wake is pending
+                    try:  # noqa: SIM105 - as in _on_wakeup_fd
                         os.write(self._fd_write, _EVENTFD_ONE)
+                    except OSError:  # full counter/pipe: a wake is pending
+                        pass
                     return
         # RuntimeError: the loop is closed, nobody is listening any more.
         with contextlib.suppress(RuntimeError):

@@ -4,9 +4,10 @@ A subscription receives through a Zenoh FIFO channel, not a Python callback, so 
 thread never takes the GIL (a callback there makes a Python thread state per sample: 3x fewer
 samples per second). One drain thread per subscription blocks in `recv()` with the GIL released
 and hands each burst to the inbox (runtime.bus.inbox); a recovering delivery uses a zenoh-ext
-advanced subscriber instead (runtime.bus.recovery). Decoding happens on the event loop when the
-consumer takes the sample, so no Zenoh thread runs user code. bench/bus.py measures it against
-raw zenoh-python.
+advanced subscriber and a drain thread of its own instead (runtime.bus.recovery). Decoding happens
+on the event loop when the consumer takes the sample, so no Zenoh thread runs user code; a
+consumer takes every sample ready with one wake-up (`consume`, `Subscription.ready`).
+bench/bus.py measures it against raw zenoh-python.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
+import msgspec
 import zenoh
 
 from beyond_self.runtime.bus.delivery import RELIABLE, Delivery
@@ -53,9 +55,9 @@ class RawSample:
     received_ns: int  # wall clock (ns since epoch) when the sample was taken off Zenoh
 
 
-@dataclass(slots=True, frozen=True)
-class Received(Generic[M]):
-    """A decoded message and where/when it arrived."""
+class Received(msgspec.Struct, Generic[M], frozen=True, gc=False):
+    """A decoded message and where/when it arrived. A msgspec struct, not a dataclass: one is
+    made for every message, and a frozen dataclass's `__init__` costs ten times as much."""
 
     key: str
     message: M
@@ -87,13 +89,50 @@ def _drain(
         inbox.extend(batch)
 
 
+def _drain_typed(
+    handler: zenoh.handlers.Handler[zenoh.Sample], inbox: Inbox[WirePayload], key: str
+) -> None:
+    """`_drain` for a typed subscription, its conversion inline (the hot path): (key, payload,
+    received_ns), the key the subscription's own unless it is a wildcard, one clock reading
+    per burst (its samples were all taken off Zenoh then)."""
+    recv, try_recv, now = handler.recv, handler.try_recv, time.time_ns
+    wildcard = "*" in key or "$" in key
+    while True:
+        try:
+            sample: zenoh.Sample | None = recv()  # blocks with the GIL released
+        except Exception:  # zenoh.ZError: channel closed, the subscriber is gone
+            return
+        at = now()
+        batch: list[WirePayload] = []
+        while sample is not None:
+            payload = sample.payload
+            batch.append(
+                (
+                    str(sample.key_expr) if wildcard else key,
+                    payload.to_bytes() if len(payload) <= _COPY_ON_LOOP else payload,
+                    at,
+                )
+            )
+            if len(batch) >= _BURST:
+                break
+            try:
+                sample = try_recv()
+            except Exception:  # closed while draining a burst: deliver what came, then leave
+                sample = None
+        inbox.extend(batch)
+
+
 def _channel_subscriber(
-    session: zenoh.Session, key: str, inbox: Inbox[T], convert: Callable[[zenoh.Sample, int], T]
+    session: zenoh.Session,
+    key: str,
+    inbox: Inbox[T],
+    drain: Callable[[zenoh.handlers.Handler[zenoh.Sample]], None],
 ) -> zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]:
-    """Declare a subscriber on `key` whose samples reach `inbox` through a drain thread."""
+    """Declare a subscriber on `key` whose samples reach `inbox` through a drain thread running
+    `drain(channel)`."""
     sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(_CHANNEL_CAPACITY))
     thread = threading.Thread(
-        target=_drain, args=(sub.handler, inbox, convert), name=f"zenoh-drain {key}", daemon=True
+        target=drain, args=(sub.handler,), name=f"zenoh-drain {key}", daemon=True
     )
     thread.start()
     return sub
@@ -116,22 +155,6 @@ def _raw_wire(sample: zenoh.Sample, received_ns: int) -> RawWire:
     return (str(sample.key_expr), _wire_payload(sample), str(sample.encoding), received_ns)
 
 
-def _sample_converter(key: str) -> Callable[[zenoh.Sample, int], WirePayload]:
-    """Drain-thread conversion for a typed subscription: (key, payload, received_ns), the
-    payload as bytes, or for a large one still as Zenoh's ZBytes."""
-    if "*" in key or "$" in key:  # a wildcard: each sample says which key it came on
-
-        def convert(sample: zenoh.Sample, received_ns: int) -> WirePayload:
-            return (str(sample.key_expr), _wire_payload(sample), received_ns)
-
-    else:  # one key: no need to build its string for every sample
-
-        def convert(sample: zenoh.Sample, received_ns: int) -> WirePayload:
-            return (key, _wire_payload(sample), received_ns)
-
-    return convert
-
-
 async def _until_closed(recv: Callable[[], Awaitable[T]]) -> AsyncIterator[T]:
     """What `recv()` returns, one after the other, until the inbox is closed and drained."""
     while True:
@@ -150,7 +173,12 @@ class RawSubscription:
     ) -> None:
         self.keys = keys
         self._inbox: Inbox[RawWire] = Inbox(loop, maxsize, wakeup_fd=True)
-        self._subs = [_channel_subscriber(session, key, self._inbox, _raw_wire) for key in keys]
+        inbox = self._inbox
+
+        def drain(handler: zenoh.handlers.Handler[zenoh.Sample]) -> None:
+            _drain(handler, inbox, _raw_wire)
+
+        self._subs = [_channel_subscriber(session, key, inbox, drain) for key in keys]
 
     @property
     def dropped(self) -> int:
@@ -203,8 +231,12 @@ class Subscription(Generic[M]):
             self._recovering = RecoveringSource(session, key, self._inbox, delivery)
             self._sub: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = None
         else:
-            self._inbox = Inbox(loop, delivery.queue, wakeup_fd=True)
-            self._sub = _channel_subscriber(session, key, self._inbox, _sample_converter(key))
+            inbox = self._inbox = Inbox(loop, delivery.queue, wakeup_fd=True)
+
+            def drain(handler: zenoh.handlers.Handler[zenoh.Sample]) -> None:
+                _drain_typed(handler, inbox, key)
+
+            self._sub = _channel_subscriber(session, key, inbox, drain)
 
     @property
     def dropped(self) -> int:
@@ -240,6 +272,16 @@ class Subscription(Generic[M]):
             return None
         self.received += 1
         return Received(key, message, received_ns)
+
+    def ready(self) -> Received[M] | None:
+        """The next well-formed message already received, without waiting (None: none is):
+        a consumer takes a burst with one wake-up and no coroutine per message."""
+        items = self._inbox.items
+        while items:
+            got = self._accept(*items.popleft())
+            if got is not None:
+                return got
+        return None
 
     async def recv(self, timeout: float | None = None) -> Received[M]:
         """The next well-formed message (malformed ones are counted and skipped)."""
@@ -279,15 +321,23 @@ async def consume(
     until it closes: the one handler loop of services, players and views. What the handler
     raises goes to `on_error(key, exc)` and the loop goes on: one bad message must not stop a
     stream. `before`/`after` see every message, also one whose handler failed; a message
-    `accept` refuses (handled already) is seen by `before` only."""
-    async for received in sub:
+    `accept` refuses (handled already) is seen by `before` only. What is ready is taken without
+    a coroutine or an async iterator step per message; the loop waits only when none is."""
+    ready, recv = sub.ready, sub.recv
+    while True:
+        received = ready()
+        if received is None:
+            try:
+                received = await recv()
+            except EOFError:  # closed and drained
+                return
         if before is not None:
             before(received)
         if accept is not None and not accept(received):
             continue
         try:
             result = handler(received.message)
-            if inspect.isawaitable(result):
+            if result is not None and inspect.isawaitable(result):
                 await result
         except asyncio.CancelledError:
             raise
