@@ -376,6 +376,58 @@ def results_files() -> list[Path]:
     return sorted((ROOT / "bench" / "results").glob("*.json"))
 
 
+SIZING_CASES = (  # a limit's name, its rounds' name, what its robots do
+    ("own", "fleet", "a person each (gestures at their own times)"),
+    ("aligned", "fleet_aligned", "a burst (every robot's gestures end within one frame)"),
+    ("camera", "fleet_camera", "a 15 fps camera each (object segmenter in the fleet)"),
+)
+
+
+def sizing_section(result: Mapping[str, Any]) -> list[str]:
+    """How to size a workstation, from the fleet bench's limits: what one more robot costs in
+    each case, so a reader can scale the measured machine to theirs."""
+    limits = result.get("limits") or {}
+    rows = []
+    for case, rounds, what in SIZING_CASES:
+        limit = limits.get(case)
+        if not limit or not result.get(rounds):
+            continue
+        one = result[rounds][0]
+        at_least = "at least " if limit.get("lower_bound") else ""
+        per_core = 1 / limit["cores_per_added_robot"] if limit["cores_per_added_robot"] else 0
+        rows.append(
+            f"| {what} | {at_least}{limit['robots']} (p99 {limit['description_p99_ms']} ms) | "
+            f"{limit['cores_per_added_robot']} | {per_core:.0f} | "
+            f"{one['rss_mb']:.0f} MB | {limit['mb_per_added_robot']} MB | {limit['cpu_ratio']} |"
+        )
+    if not rows:
+        return []
+    return [
+        "## Sizing a workstation",
+        "",
+        "From `bench/results/fleet.json` (its machine and provenance are in the table below):",
+        "what one more robot costs the workstation's fleet processes (the gesture streamer, the",
+        "reasoner, the describer, and the object segmenter with a camera), measured as the slope",
+        "from one robot to the limit. Robots' own sources are not on a real workstation; the",
+        "bench runs them on the same machine, so a real workstation has that CPU to spare.",
+        "",
+        "| robots | limit on the bench machine, description p99 < 33 ms | cores per added robot "
+        "| robots per core (CPU) | memory at one robot | memory per added robot "
+        "| CPU of one process set per robot, × |",
+        "|---|---|---|---|---|---|---|",
+        *rows,
+        "",
+        "To size a workstation: robots ≈ cores × 0.7 ÷ cores per added robot (a margin: the p99 "
+        "grows fast as the cores fill up), and (memory − memory at one robot) ÷ memory per "
+        "added robot; take the smaller. The steady cases are bound by CPU. A burst is bound "
+        "by latency: a stage's robots are served one after another in its process, so give "
+        "every core to each stage with `--shards auto` ([fleets](concepts/fleets.md)). Then "
+        "measure on the machine itself: `.venv/bin/python bench/fleet.py --quick` searches "
+        "each case's limit there.",
+        "",
+    ]
+
+
 def performance_page() -> str:
     """The performance page: its notes (docs/performance.md), then tables made from the results
     files the bench scripts' JSON lines were kept in."""
@@ -413,6 +465,9 @@ def performance_page() -> str:
             f"| `{path.relative_to(ROOT)}` | {data['date']} | {_cell(data['machine'])} | "
             f"{_cell(data['provenance'])} |"
         )
+    fleet = ROOT / "bench" / "results" / "fleet.json"
+    if fleet.exists():
+        lines += ["", *sizing_section(json.loads(fleet.read_text(encoding="utf-8"))["result"])]
     lines += [
         "",
         "## Where each figure comes from",

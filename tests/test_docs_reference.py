@@ -154,6 +154,25 @@ def test_a_goal_is_marked_from_the_figure(gen: dict[str, Any]) -> None:
     assert met({"value": "{r[y][z]!m}", "max": 30}, {"y": {"z": 0.031}}) == "✗"
 
 
+def test_the_sizing_section_scales_what_one_more_robot_costs(gen: dict[str, Any]) -> None:
+    limit = {
+        "robots": 40,
+        "lower_bound": False,
+        "description_p99_ms": 20.5,
+        "cores_per_added_robot": 0.02,
+        "mb_per_added_robot": 1.5,
+        "cpu_ratio": 3.0,
+    }
+    result = {"limits": {"own": limit}, "fleet": [{"rss_mb": 150.0}]}
+    text = "\n".join(gen["sizing_section"](result))
+    row = next(line for line in text.splitlines() if line.startswith("| a person each"))
+    assert "| 40 (p99 20.5 ms) | 0.02 | 50 | 150 MB | 1.5 MB | 3.0 |" in row
+    assert "a burst" not in text  # a case the bench did not search has no row
+    assert gen["sizing_section"]({"limits": {}}) == []
+    page = gen["performance_page"]()  # the committed results give the page its section
+    assert "## Sizing a workstation" in page
+
+
 @pytest.mark.numeric
 def test_the_science_figures_are_what_beyond_reproduce_writes(
     shared_data: Path, tmp_path: Path
