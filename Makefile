@@ -10,6 +10,8 @@ STAMP := $(VENV)/.installed
 # PYTHONDONTWRITEBYTECODE set (as container images often set it) each service, CLI call and
 # test subprocess compiled every module it imported again, 0.3 CPU-s a process.
 RUN := env -u PYTHONDONTWRITEBYTECODE
+# this file, for the steps `make test` runs through make again (`make -f FILE test` included)
+SELF := $(firstword $(MAKEFILE_LIST))
 
 .PHONY: demo test lint typecheck docs numeric-other-kernel numeric-other-kernel-held pytest bench clean
 
@@ -28,11 +30,11 @@ demo: $(STAMP)
 # idle part of the time. The numeric run's output is printed whole when it ends (a minute in),
 # so pytest's summary still ends the output. Any step failing fails `make test`.
 test: $(STAMP)
-	$(MAKE) --no-print-directory -j3 --output-sync=target lint typecheck docs
-	$(MAKE) --no-print-directory -j2 numeric-other-kernel-held pytest
+	$(MAKE) -f $(SELF) --no-print-directory -j3 --output-sync=target lint typecheck docs
+	$(MAKE) -f $(SELF) --no-print-directory -j2 numeric-other-kernel-held pytest
 
 numeric-other-kernel-held: $(STAMP)
-	$(MAKE) --no-print-directory --output-sync=target numeric-other-kernel
+	$(MAKE) -f $(SELF) --no-print-directory --output-sync=target numeric-other-kernel
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -36,7 +36,7 @@ def make_targets(makefile: str, target: str) -> list[list[str]]:
     recipe = re.search(rf"^{target}:.*\n((?:\t.*\n)+)", makefile, re.M)
     assert recipe is not None, f"no recipe for {target}"
     return [
-        [word for word in line.split()[1:] if not word.startswith("-")]
+        [word for word in line.split()[1:] if not word.startswith(("-", "$("))]
         for line in recipe[1].splitlines()
         if line.strip().startswith("$(MAKE)")
     ]
