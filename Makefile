@@ -10,8 +10,10 @@ STAMP := $(VENV)/.installed
 # PYTHONDONTWRITEBYTECODE set (as container images often set it) each service, CLI call and
 # test subprocess compiled every module it imported again, 0.3 CPU-s a process.
 RUN := env -u PYTHONDONTWRITEBYTECODE
+# this file, for the steps `make test` runs through make again (`make -f FILE test` included)
+SELF := $(firstword $(MAKEFILE_LIST))
 
-.PHONY: demo test lint typecheck docs numeric-other-kernel pytest bench clean
+.PHONY: demo test lint typecheck docs numeric-other-kernel numeric-other-kernel-held pytest bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,7 +24,17 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(RUN) $(BIN)/beyond demo
 
-test: $(STAMP) lint typecheck docs numeric-other-kernel pytest
+# The checks side by side, not one after the other: lint, mypy and the docs build together first
+# (seconds, and a failure shows before the long run), then the numeric tests under another
+# kernel beside the main pytest run, whose services, podman and paced replays leave the cores
+# idle part of the time. The numeric run's output is printed whole when it ends (a minute in),
+# so pytest's summary still ends the output. Any step failing fails `make test`.
+test: $(STAMP)
+	$(MAKE) -f $(SELF) --no-print-directory -j3 --output-sync=target lint typecheck docs
+	$(MAKE) -f $(SELF) --no-print-directory -j2 numeric-other-kernel-held pytest
+
+numeric-other-kernel-held: $(STAMP)
+	$(MAKE) -f $(SELF) --no-print-directory --output-sync=target numeric-other-kernel
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -1,4 +1,4 @@
-"""`make test` runs the numeric tests on a second OpenBLAS kernel, before its main run
+"""`make test` runs the numeric tests on a second OpenBLAS kernel, beside its main run
 (tests/other_kernel.py): the kernel it picks is really another one, and the step is there."""
 
 from __future__ import annotations
@@ -31,13 +31,28 @@ def test_a_set_coretype_is_the_main_runs_and_is_not_picked_again() -> None:
     assert choice.coretype != "Prescott" and choice.kernel != choice.current
 
 
-def test_make_test_runs_the_numeric_tests_on_it_before_its_last_step() -> None:
+def make_targets(makefile: str, target: str) -> list[list[str]]:
+    """The targets each `$(MAKE)` line of `target`'s recipe runs, in the recipe's order."""
+    recipe = re.search(rf"^{target}:.*\n((?:\t.*\n)+)", makefile, re.M)
+    assert recipe is not None, f"no recipe for {target}"
+    return [
+        [word for word in line.split()[1:] if not word.startswith(("-", "$("))]
+        for line in recipe[1].splitlines()
+        if line.strip().startswith("$(MAKE)")
+    ]
+
+
+def test_make_test_runs_the_numeric_tests_on_it_beside_its_last_step() -> None:
     makefile = (REPO / "Makefile").read_text(encoding="utf-8")
-    steps = re.search(r"^test: (.*)$", makefile, re.M)
-    assert steps is not None
-    order = steps[1].split()
+    steps = make_targets(makefile, "test")
+    assert steps, "`make test` runs no step"
+    order = [target for step in steps for target in step]
     assert order[-1] == "pytest"  # its summary line ends the output CI reads
-    assert "numeric-other-kernel" in order
+    assert {"lint", "typecheck", "docs"} <= set(order)
+    # the numeric run, beside pytest, holds its output until it ends: pytest's summary is last
+    (held,) = [t for t in steps[-1] if t.startswith("numeric-other-kernel")]
+    assert make_targets(makefile, held) == [["numeric-other-kernel"]]
+    assert "--output-sync=target" in re.search(rf"^{held}:.*\n\t(.*)$", makefile, re.M)[1]  # type: ignore[index]
     recipe = re.search(r"^numeric-other-kernel:.*\n\t(.*)$", makefile, re.M)
     assert recipe is not None and "tests/other_kernel.py" in recipe[1]
 
