@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from busutil_net import env_for, private_config, skeleton_frames
 from mcap.reader import make_reader
+from third_party_readers import doctor
 
 import beyond_self.schemas as s
 from beyond_self.core.errors import InputError
@@ -300,3 +301,28 @@ def test_a_scan_finds_what_inspect_finds_without_decoding(path: Path) -> None:
     assert scanned.messages == info.messages > 0
     assert (scanned.start, scanned.end, scanned.channels) == (info.start, info.end, info.channels)
     assert scanned.metadata == info.metadata and not scanned.losses.any
+
+
+def test_a_late_message_never_puts_a_chunk_back_in_time(tmp_path: Path) -> None:
+    """A frame later than the flushes wait for is logged at its channel's last time; a message of
+    another channel stamped between the two, written in the same flush, follows it, so the
+    chunk's log times never step back (`mcap doctor` reads a chunk in order)."""
+    frames = skeleton_frames(6)
+    stamps = [f.header.stamp for f in frames]
+    skeleton, report = ROBOT_KEYS.skeleton, ROBOT_KEYS.progress("x")
+    path = tmp_path / "late.mcap"
+    with RecordingWriter(path, flush_interval=3600.0) as w:
+        for i in (0, 1, 2, 3, 5):
+            w.write_wire(skeleton, s.encode(frames[i]), s.wire_encoding(s.SkeletonFrame), 0)
+        w.flush()
+        w.flush()  # frame 5 is written; frame 4 comes later than the flushes wait for
+        w.write_wire(skeleton, s.encode(frames[4]), s.wire_encoding(s.SkeletonFrame), 0)
+        header = s.Header(version=1, source="x", seq=0, stamp=stamps[4] + 1)
+        between = s.Progress(header=header, service="x", handled={})
+        w.write_wire(report, s.encode(between), s.wire_encoding(s.Progress), 0)
+    with open(path, "rb") as f:
+        written = [(c.topic, m.log_time) for _, c, m in make_reader(f).iter_messages(
+            log_time_order=False)]  # fmt: skip
+    assert written[-2:] == [(report, stamps[4] + 1), (skeleton, stamps[5])]  # one chunk, in order
+    codes = [f["code"] for f in doctor(path)["findings"]]
+    assert "NON_MONOTONIC_LOG_TIME" not in codes, codes

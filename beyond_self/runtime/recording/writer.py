@@ -295,6 +295,9 @@ class RecordingWriter:
             ready = [r for r in waiting if cut is not None and r.log_time <= cut]
             self._aging = [r for r in waiting if cut is None or r.log_time > cut]
         self._pending = []
+        # in the log times the records will be written at (a late one at its channel's last),
+        # so a chunk's messages never step back across channels either (`mcap doctor` checks)
+        ready.sort(key=lambda r: max(r.log_time, self._logged.get(r.channel, r.log_time)))
         for record in ready:
             self._put(record)
         if ready:
