@@ -3,10 +3,11 @@
 Every per-gesture and per-frame output has an identity (schemas.identity). Three rules, applied
 by the Service base, make a killed and restarted service neither stall nor repeat anything
 (docs/concepts/exactly-once.md): a consumer acts on each identity once (`Handled`); a restarted
-producer does not send again what every consumer of its key has handled (`Ledger`s published
-and kept by everyone, `LedgerBook`); and a service whose handling is a side effect takes its
-predecessor's `Handled` for those inputs (`once`). What a service has handled only grows, so
-several copies of one ledger are merged; its `resume` numbers come from the newest copy.
+producer does not send again what every consumer of its key has handled, once its gesture is
+said (`Ledger`s published and kept by everyone, `LedgerBook`); and a service whose handling is
+a side effect takes its predecessor's `Handled` for those inputs (`once`). What a service has
+handled only grows, so several copies of one ledger are merged; its `resume` numbers come from
+the newest copy.
 """
 
 from __future__ import annotations
