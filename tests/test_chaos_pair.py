@@ -3,8 +3,10 @@ once"): the gesture streamer with the reasoner, once the reasoner's ledger, as e
 hears it, says it has the gesture's final belief but not yet the object's effects, so the
 gesture is not described. The object segmenter is frozen (SIGSTOP) shortly before the
 gesture's end, which holds that moment open; the pair is frozen, then SIGKILLed; the segmenter
-goes on; the deployment restarts the pair. The restarted streamer derives the final belief
-again and the reasoner's successor, which has nothing, needs it. The lines equal `beyond
+goes on; the deployment restarts the pair, the reasoner's successor held (SIGSTOP) until the
+streamer's has ended the gesture again, so that the successor is not heard of before. The
+restarted streamer derives the final belief again and the reasoner's successor, which has
+nothing, needs it. The lines equal `beyond
 analyse`'s, the sentence is said once. Before docs/decisions.md's "a result is withheld only
 once its gesture is said", the streamer withheld the final belief on the dead reasoner's word
 and the gesture was never described.
