@@ -3,10 +3,11 @@
 Every per-gesture and per-frame output has an identity (schemas.identity). Three rules, applied
 by the Service base, make a killed and restarted service neither stall nor repeat anything
 (docs/concepts/exactly-once.md): a consumer acts on each identity once (`Handled`); a restarted
-producer does not send again what every consumer of its key has handled (`Ledger`s published
-and kept by everyone, `LedgerBook`); and a service whose handling is a side effect takes its
-predecessor's `Handled` for those inputs (`once`). What a service has handled only grows, so
-several copies of one ledger are merged; its `resume` numbers come from the newest copy.
+producer does not send again what every consumer of its key has handled, once its gesture is
+said (`Ledger`s published and kept by everyone, `LedgerBook`); and a service whose handling is
+a side effect takes its predecessor's `Handled` for those inputs (`once`). What a service has
+handled only grows, so several copies of one ledger are merged; its `resume` numbers come from
+the newest copy.
 """
 
 from __future__ import annotations
@@ -444,12 +445,25 @@ class Keeper:
         return done
 
     def suppressed(self, key: str, message: Message) -> bool:
-        """Every consumer of `key` has handled `message` already: do not send it again. A
-        gesture's start, end or cancel is always sent (two a gesture): a consumer restarted
-        at the same moment may not be heard of yet, and it cannot rebuild without them."""
+        """Every consumer of `key` has handled `message` already, and its gesture is said: do
+        not send it again. A consumer's ledger can be ahead of what outlives it: killed at the
+        same moment as this producer, its successor (not heard of yet) has nothing of a
+        gesture under way and needs all of it again, from this producer's cache. Only a
+        gesture whose description every consumer of descriptions has is beyond that (nothing
+        is withheld when nobody takes descriptions). A gesture's start, end or cancel is always
+        sent (two a gesture): a consumer cannot rebuild without them."""
         if not self.book.taken(key, self.name):
             return False
         ident = identify(key, message)
         if ident is None or ident.kind in SEGMENT_EVENTS:
             return False
-        return self.book.consumers_have(key, ident, self.name)
+        if not self.book.consumers_have(key, ident, self.name):
+            return False
+        return ident.segment_id in self.said()
+
+    def said(self) -> set[int]:
+        """Gestures whose description every consumer of descriptions has handled (in any of its
+        instances: a sentence said, a line printed, is kept by their own records)."""
+        if not self.said_key or not self.book.taken(self.said_key, self.name):
+            return set()
+        return self.book.done(self.said_key, "description", self.name)
