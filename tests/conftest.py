@@ -159,6 +159,7 @@ LONG_FILES = (
     "test_package.py",
     "test_fleet.py",
     "test_fleet_shards.py",  # twelve processes start, one shard is killed mid-burst
+    "test_chaos_pair.py",  # a producer and its consumer killed at once, a restart held
     "test_ros2_drivers.py",
     "test_cli_hostile.py",
     "test_bus_fuzz.py",
