@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pytest
 from busutil_net import env_for, private_config
 
 from beyond_self.commands.analyse import _inputs, default_run
@@ -202,3 +203,27 @@ def check(seed: int, run: dict[str, Any], expected: list[str]) -> None:
         {int(line.split()[1].rstrip(":")) for line in expected if line.endswith('"')}
     )
     assert said == described, why
+
+
+def seed_tests(seeds: list[int]) -> tuple[Any, Any, Any]:
+    """A chaos file's fixtures and test for its `seeds`: `analyse`'s lines, every seed's run
+    (chaos.AT_ONCE at a time) and one test per seed checking its own. The seeds are split
+    over files so that xdist hands them to different workers."""
+
+    @pytest.fixture(scope="module")
+    def expected() -> list[str]:
+        return offline_lines()
+
+    @pytest.fixture(scope="module")
+    def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[int, dict[str, Any]]:
+        return run_seeds(seeds, tmp_path_factory.mktemp("chaos"))
+
+    @pytest.mark.slow
+    @pytest.mark.timeout(600)  # the first test's set-up runs every seed
+    @pytest.mark.parametrize("seed", seeds)
+    def test_chaos_changes_nothing(
+        seed: int, expected: list[str], runs: dict[int, dict[str, Any]]
+    ) -> None:
+        check(seed, runs[seed], expected)
+
+    return expected, runs, test_chaos_changes_nothing
