@@ -68,7 +68,6 @@ import asyncio
 import datetime
 import json
 import os
-import platform
 import socket
 import statistics
 import subprocess
@@ -81,9 +80,11 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))  # results_file
 
 import msgspec  # noqa: E402
 import numpy as np  # noqa: E402
+import results_file  # noqa: E402
 import zenoh  # noqa: E402
 
 import beyond_self.schemas as s  # noqa: E402
@@ -627,45 +628,6 @@ REPLAY_LINE = (
 )
 
 
-def git(*argv: str) -> str:
-    done = subprocess.run(["git", *argv], cwd=REPO, capture_output=True, text=True, check=False)
-    return done.stdout.strip()
-
-
-def save(figures: dict[str, float], began: datetime.datetime, load_at_start: float) -> None:
-    """`figures` into bench/results/bus.json with the date, the machine and the provenance,
-    keeping the file's table (its rows are templates over the figures)."""
-    path = REPO / "bench" / "results" / "bus.json"
-    old = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
-    cpuinfo = Path("/proc/cpuinfo").read_text()
-    model = next(
-        (x.split(":", 1)[1].strip() for x in cpuinfo.splitlines() if "model name" in x), ""
-    )
-    commit = git("rev-parse", "--short", "HEAD")
-    dirty = (
-        " with uncommitted changes"
-        if git("status", "--porcelain", "--", "bench/", "beyond_self/", ":(exclude)bench/results")
-        else ""
-    )
-    data = {
-        "script": "bench/bus.py",
-        "date": began.strftime("%Y-%m-%d"),
-        "machine": (
-            f"{os.cpu_count()} cores ({model}), Linux {platform.release()}, Python "
-            f"{platform.python_version()}; load average {load_at_start:.2f} at the start, "
-            f"{os.getloadavg()[0]:.2f} at the end (one-minute figure)"
-        ),
-        "provenance": (
-            f"printed by `.venv/bin/python bench/bus.py --save` on {began:%Y-%m-%d} from "
-            f"{began:%H:%M} UTC at commit {commit}{dirty}, its last line kept as `result`"
-        ),
-        "result": figures,
-        "table": old.get("table", []),
-    }
-    path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
-    print(f"written: {path.relative_to(REPO)}", file=sys.stderr)
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--receive", nargs=4, metavar=("MODE", "KIND", "PORT", "ROBOT"))
@@ -740,7 +702,7 @@ def main() -> int:
     figures.update(secure_path())
     print(json.dumps(figures))
     if args.save:
-        save(figures, began, load)
+        results_file.save("bus", figures, began, load)
     return 0
 
 

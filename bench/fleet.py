@@ -63,8 +63,6 @@ import datetime
 import functools
 import json
 import os
-import platform
-import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator
@@ -76,6 +74,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))  # the pipeline bench's skeleton stream and figures
 
+import results_file  # noqa: E402
 from pipeline import CAMERA, QUIET, _p, scene_gestures, stream_frames, vision_scene  # noqa: E402
 
 import beyond_self.schemas as s  # noqa: E402
@@ -705,49 +704,6 @@ def print_table(result: dict[str, Any]) -> None:
     print(f"wall time: {result['wall_minutes']} minutes")
 
 
-def git(*argv: str) -> str:
-    done = subprocess.run(["git", *argv], cwd=REPO, capture_output=True, text=True, check=False)
-    return done.stdout.strip()
-
-
-def machine(load_at_start: float) -> str:
-    """The machine as the results files describe it."""
-    cpuinfo = Path("/proc/cpuinfo").read_text()
-    model = next(
-        (x.split(":", 1)[1].strip() for x in cpuinfo.splitlines() if "model name" in x), ""
-    )
-    return (
-        f"{os.cpu_count()} cores ({model}), Linux {platform.release()}, Python "
-        f"{platform.python_version()}; load average {load_at_start:.2f} at the start, "
-        f"{os.getloadavg()[0]:.2f} at the end (one-minute figure; it counts the fleet's own "
-        "processes)"
-    )
-
-
-def save(result: dict[str, Any], began: datetime.datetime, load_at_start: float) -> None:
-    """`result` into bench/results/fleet.json with its date, machine and provenance, keeping the
-    file's table (its rows are templates over `result`)."""
-    path = REPO / "bench" / "results" / "fleet.json"
-    old = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
-    commit = git("rev-parse", "--short", "HEAD")
-    dirty = " with uncommitted changes" if git("status", "--porcelain", "--", "bench/") else ""
-    command = " ".join([".venv/bin/python", "bench/fleet.py", *sys.argv[1:]])
-    data = {
-        "script": "bench/fleet.py",
-        "date": began.strftime("%Y-%m-%d"),
-        "machine": machine(load_at_start),
-        "provenance": (
-            f"printed by `{command}` ({result['mode']} search, {result['gestures']} gestures per "
-            f"robot; {result['wall_minutes']} minutes) on {began:%Y-%m-%d} from "
-            f"{began:%H:%M} UTC at commit {commit}{dirty}, its last line kept as `result`"
-        ),
-        "result": result,
-        "table": old.get("table", []),
-    }
-    path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
-    print(f"written: {path.relative_to(REPO)}", file=sys.stderr)
-
-
 def shards_option(text: str) -> int:
     try:
         return shard_count(text)
@@ -791,7 +747,13 @@ def main() -> None:
     began, load = datetime.datetime.now(datetime.UTC), os.getloadavg()[0]
     result = asyncio.run(main_async(args))
     if args.save:
-        save(result, began, load)
+        how = (
+            f" ({result['mode']} search, {result['gestures']} gestures per robot; "
+            f"{result['wall_minutes']} minutes)"
+        )
+        results_file.save(
+            "fleet", result, began, load, how=how, load_note="; it counts the fleet's own processes"
+        )
     print_table(result)
     print(json.dumps(result))
 
