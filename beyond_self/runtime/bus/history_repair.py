@@ -39,7 +39,7 @@ class _Repair:
 
 class HistoryRepair:
     """Sits between zenoh-ext's advanced subscriber and `deliver`: `offer` every sample it
-    delivers (from one thread, serially: the subscription's drain thread)."""
+    delivers (on Zenoh's thread, serially)."""
 
     def __init__(
         self,
@@ -84,7 +84,7 @@ class HistoryRepair:
         assert info is not None
         sid = info.source_id
         selector = f"{sample.key_expr}/@adv/*/{sid.zid}/{sid.eid}/**?_sn=..{sn - 1}"
-        # not on the drain thread: the samples behind this one must not wait for the query
+        # not from this callback, which runs under zenoh-ext's own lock
         threading.Thread(
             target=self._ask_cache, args=(source, repair, selector), daemon=True
         ).start()

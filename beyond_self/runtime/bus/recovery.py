@@ -4,10 +4,9 @@ Wi-Fi drops and cables are pulled; what is published meanwhile goes nowhere, and
 event means a gesture never described. So derived streams' publishers keep a cache
 (runtime.bus.publisher) and their subscribers here ask every publisher for its history and recover
 gaps from it: delivered in order per publisher, each once, what no cache holds counted as
-`missed`. A plain subscriber beside it witnesses the live samples (a ring channel), so a delivered
-one it never saw is counted as `recovered`. Both hand samples to channels, the advanced one's
-emptied by a drain thread a burst at a time: no Zenoh thread waits for the GIL (docs/decisions.md).
-runtime.bus.history_repair covers a zenoh-ext 1.10 history bug.
+`missed`. A plain subscriber beside it witnesses the live samples, so a delivered one it never
+saw is counted as `recovered`; it reads a ring channel, not a callback, to spare Zenoh's thread
+the GIL (docs/decisions.md). runtime.bus.history_repair covers a zenoh-ext 1.10 history bug.
 """
 
 from __future__ import annotations
@@ -16,7 +15,6 @@ import logging
 import threading
 import time
 from collections import OrderedDict, deque
-from collections.abc import Callable
 
 import zenoh
 from zenoh import ext
@@ -35,10 +33,6 @@ _WITNESS_MEMORY = 16384  # live (source, sn) pairs remembered for that compariso
 # a sample held back that long counts as recovered either way. Every slot the ring has cycled
 # through stays resident (1,024 cost a 64-robot streamer 68 MB).
 _WITNESS_CHANNEL = 128
-# Samples the advanced subscriber has delivered and the drain thread not yet taken: as a plain
-# subscription's channel (runtime.bus.subscription), a full one makes Zenoh's thread wait.
-_CHANNEL_CAPACITY = 256
-_BURST = 256  # samples taken with the GIL held once at most
 
 
 class RecoveringSource:
@@ -82,7 +76,7 @@ class RecoveringSource:
         self._sub = ext.declare_advanced_subscriber(
             session,
             key,
-            zenoh.handlers.FifoChannel(_CHANNEL_CAPACITY),
+            direct_callback(repair.offer),
             history=ext.HistoryConfig(
                 detect_late_publishers=True,
                 max_samples=delivery.history,
@@ -90,14 +84,6 @@ class RecoveringSource:
             ),
             recovery=ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
         )
-        # Drained from now on: history may fill the channel at once, and Zenoh's thread, blocked
-        # on a full channel, holds the subscriber's state, which the miss listener waits for.
-        threading.Thread(
-            target=_drain,
-            args=(self._sub.handler, repair.offer),
-            name=f"zenoh-drain {key}",
-            daemon=True,
-        ).start()
         self._miss_listener = self._sub.sample_miss_listener(direct_callback(on_miss))
 
     def _delivered(self, ident: tuple[str, int]) -> None:
@@ -144,27 +130,3 @@ class RecoveringSource:
             self._closed = True
         for entity in (self._miss_listener, self._sub, self._witness):
             undeclare(entity)
-
-
-def _drain(
-    handler: zenoh.handlers.Handler[zenoh.Sample], offer: Callable[[zenoh.Sample], None]
-) -> None:
-    """Body of a recovering subscription's drain thread: every sample the advanced subscriber
-    delivers, in its order, to `offer` (the history repair), a burst per taking of the GIL,
-    until the subscriber is undeclared (then `recv` raises)."""
-    recv, try_recv = handler.recv, handler.try_recv
-    while True:
-        try:
-            sample: zenoh.Sample | None = recv()  # blocks with the GIL released
-        except Exception:  # zenoh.ZError: channel closed, the subscriber is gone
-            return
-        taken = 0
-        while sample is not None:
-            offer(sample)
-            taken += 1
-            if taken >= _BURST:
-                break
-            try:
-                sample = try_recv()
-            except Exception:  # closed while draining a burst: what came is delivered
-                sample = None
