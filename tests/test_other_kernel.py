@@ -1,4 +1,4 @@
-"""`make test` runs the numeric tests on a second OpenBLAS kernel, beside its main run
+"""`make test` runs the numeric tests on a second OpenBLAS kernel, before its main run
 (tests/other_kernel.py): the kernel it picks is really another one, and the step is there."""
 
 from __future__ import annotations
@@ -74,3 +74,24 @@ def test_the_numeric_tests_are_the_sciences_figures() -> None:
         "test_gesture_models.py",  # the HMMs' training
         "test_gesture_streaming.py",
     } <= marked
+
+
+def test_with_no_other_kernel_the_numeric_tests_still_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The main run leaves the numeric tests to this one: where no other kernel can be picked
+    (another CPU family, no OpenBLAS), they run on the machine's own rather than nowhere."""
+    import other_kernel
+
+    ran: list[list[str]] = []
+
+    class Done:
+        returncode = 3
+
+    def run(command: list[str], **_: object) -> Done:
+        ran.append(command)
+        return Done()
+
+    monkeypatch.setattr(other_kernel, "choose", lambda env: "no kernel differs here")
+    monkeypatch.setattr(other_kernel.subprocess, "run", run)
+    assert other_kernel.main(["-q"]) == 3  # its status is the run's
+    (command,) = ran
+    assert command[-4:] == ["numeric", "-p", "no:cacheprovider", "-q"]
