@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 from beyond_self.core.errors import InputError
 from beyond_self.runtime import process
 from beyond_self.runtime.bus.config import BusConfig
+from beyond_self.runtime.bus.demux import SharedStreams
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.log import event
 from beyond_self.runtime.self_report import health_header, restarts
@@ -129,6 +130,7 @@ class Fleet:
         self._unserved_since: dict[str, float] = {}  # robot -> when its takeover wait began
         self._server_tokens: dict[str, Callable[[], None]] = {}
         self._stop = asyncio.Event()
+        self._shared: SharedStreams | None = None  # the primary robots' streams, while running
         self._health_seq = 0
         self.started_at = time.monotonic()
         self.log = logging.getLogger(f"beyond.{self.name}")
@@ -147,6 +149,11 @@ class Fleet:
             self._bus = Bus.open(self.config)
         bus = self._bus
         installed = process.install_signals(self.stop) if install_signals else []
+        assert self.pattern is not None  # checked at construction
+        # A secure robot's router lets through declarations on its own robot's keys only: a
+        # subscriber on the whole pattern would never be matched there
+        if self.config.secure is None:
+            self._shared = SharedStreams(bus.session, self.pattern, self._keeps)
         try:
             for pattern in self._patterns:
                 keys = Keys()  # any robot's: for_robots puts the pattern in its place
@@ -169,6 +176,9 @@ class Fleet:
             for handle in timers:
                 handle.cancel()
             await asyncio.gather(*(self._drop(robot) for robot in list(self.runs)))
+            if self._shared is not None:
+                self._shared.close()
+                self._shared = None
             for sig in installed:
                 asyncio.get_running_loop().remove_signal_handler(sig)
             if owns:
@@ -205,6 +215,11 @@ class Fleet:
 
     def _primary(self, robot: str) -> bool:
         return self.pattern is not None and robot_matches(self.pattern, robot)
+
+    def _keeps(self, robot: str) -> bool:
+        """Whether the shared streams keep a robot's samples until its run subscribes: a robot
+        this process serves first-hand (a standby's robots have runs of their own streams)."""
+        return self._primary(robot) and (self.shard is None or self.shard.serves(robot))
 
     def _presence(self, key: str, present: bool) -> None:
         split = split_key(key)
@@ -312,7 +327,7 @@ class Fleet:
         asyncio.get_running_loop().create_task(self._drop(robot))
 
     def _start(self, robot: str) -> None:
-        bus = self._host_bus().for_robot(robot)
+        bus = self._host_bus().for_robot(robot, self._shared if self._keeps(robot) else None)
         config = self.config.with_(robot=robot, robots=None, standby=None)
         service = self.cls(config=config, bus=bus, **self.options)
         service._fleet_member = True

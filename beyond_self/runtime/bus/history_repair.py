@@ -39,7 +39,8 @@ class _Repair:
 
 class HistoryRepair:
     """Sits between zenoh-ext's advanced subscriber and `deliver`: `offer` every sample it
-    delivers (on Zenoh's thread, serially)."""
+    delivers (serially: on Zenoh's thread, or a shared source's drain thread); `missed(count,
+    key)` is told what no cache held any more."""
 
     def __init__(
         self,
@@ -47,7 +48,7 @@ class HistoryRepair:
         key: str,
         delivery: Delivery,
         deliver: Callable[[zenoh.Sample], None],
-        missed: Callable[[int], None],
+        missed: Callable[[int, str], None],
     ) -> None:
         self._session = session
         self._key = key
@@ -136,13 +137,14 @@ class HistoryRepair:
                 found = [(sn, s) for sn, s in found if _sent_after(s, oldest)]
             if found:
                 expected = found[0][0]
+                key = str(repair.held[0].key_expr)
                 for sn, sample in found:
                     if sn > expected:
-                        self._missed(sn - expected)
+                        self._missed(sn - expected, key)
                     self._deliver(sample)
                     expected = sn + 1
                 if repair.first > expected:
-                    self._missed(repair.first - expected)
+                    self._missed(repair.first - expected, key)
                 log.info(
                     "%d samples on %s recovered that zenoh-ext's history had dropped",
                     len(found),

@@ -137,6 +137,18 @@ class Inbox(Generic[T]):
         if self._waiter is not None and not self._wake_pending:
             self._signal()
 
+    def extend_local(self, batch: Iterable[T]) -> None:  # loop thread
+        """`extend` from the event loop's own thread (runtime.bus.demux hands a process-wide
+        stream's burst to each run): the parked consumer is woken directly, with no eventfd."""
+        items, maxsize = self.items, self._maxsize
+        for item in batch:
+            if len(items) >= maxsize:
+                items.popleft()
+                self.dropped += 1
+            items.append(item)
+        if self._waiter is not None:
+            self._wake()
+
     def _wake(self) -> None:  # loop thread
         self._wake_pending = False
         waiter, self._waiter = self._waiter, None

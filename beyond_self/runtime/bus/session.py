@@ -28,6 +28,7 @@ from beyond_self.runtime.bus.config import (
     zenoh_config,
 )
 from beyond_self.runtime.bus.delivery import RELIABLE, Delivery
+from beyond_self.runtime.bus.demux import SharedStreams
 from beyond_self.runtime.bus.inbox import undeclare
 from beyond_self.runtime.bus.publisher import Publisher, ZenohPublisher, declare_zenoh_publisher
 from beyond_self.runtime.bus.queries import ErrorHandler, PlainQueryHandler, QueryHandler
@@ -38,7 +39,7 @@ from beyond_self.runtime.bus.subscription import (
     Subscription,
 )
 from beyond_self.schemas.base import Message
-from beyond_self.schemas.keys import Keys
+from beyond_self.schemas.keys import Keys, split_key
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
@@ -73,16 +74,20 @@ class Bus:
         self._owns_session = owns_session
         self._closers: list[Callable[[], None]] = []
         self._tasks: set[asyncio.Task[None]] = set()
+        self._shared: SharedStreams | None = None
 
-    def for_robot(self, robot: str) -> Bus:
+    def for_robot(self, robot: str, shared: SharedStreams | None = None) -> Bus:
         """The same session seen as robot `robot`'s bus (its keys), for one robot a fleet's
         service serves (runtime.fleet): closing it undeclares what was opened through it, and
-        leaves the session open (the caller closes it when the robot leaves)."""
+        leaves the session open (the caller closes it when the robot leaves). With `shared`,
+        its subscriptions to the robot's own keys are fed by the fleet process's shared streams
+        (runtime.bus.demux)."""
         view = Bus(
             self.session,
             self.config.with_(robot=robot, robots=None, standby=None),
             owns_session=False,
         )
+        view._shared = shared
         return view
 
     @classmethod
@@ -140,9 +145,14 @@ class Bus:
     ) -> Subscription[M]:
         """Messages of type `cls` on `key`, received as `delivery` says; call from the event
         loop that will consume them."""
+        shared, robot = None, self.keys.robot
+        split = split_key(key) if self._shared is not None else None
+        if self._shared is not None and split and split[0] == robot and self._shared.covers(robot):
+            shared = self._shared.stream(split[1], delivery)
         sub = Subscription(
-            self.session, key, cls, asyncio.get_running_loop(), delivery, on_malformed
-        )
+            self.session, key, cls, asyncio.get_running_loop(), delivery, on_malformed,
+            shared=shared, robot=robot,
+        )  # fmt: skip
         self.on_close(sub.close)
         return sub
 

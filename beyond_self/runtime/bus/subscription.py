@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 import msgspec
 import zenoh
@@ -29,6 +29,9 @@ from beyond_self.runtime.bus.recovery import RecoveringSource
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import SchemaError, decode, type_from_encoding
 from beyond_self.schemas.keys import type_for_key
+
+if TYPE_CHECKING:
+    from beyond_self.runtime.bus.demux import SharedStream
 
 M = TypeVar("M", bound=Message)
 T = TypeVar("T")
@@ -138,6 +141,17 @@ def _channel_subscriber(
     return sub
 
 
+def typed_channel_subscriber(
+    session: zenoh.Session, key: str, inbox: Inbox[WirePayload]
+) -> zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]:
+    """A plain subscriber on `key` feeding a typed subscription's `inbox` (`_drain_typed`)."""
+
+    def drain(handler: zenoh.handlers.Handler[zenoh.Sample]) -> None:
+        _drain_typed(handler, inbox, key)
+
+    return _channel_subscriber(session, key, inbox, drain)
+
+
 # Payloads above Zenoh's batch size were reassembled into a buffer of their own, so keeping the
 # sample pins nothing else; they are copied out on the loop, right before decoding reads them.
 _COPY_ON_LOOP = 64 * 1024
@@ -208,7 +222,9 @@ class Subscription(Generic[M]):
     decoding (a payload that does not decode is counted in `malformed`, reported to
     `on_malformed(key, error)` and skipped), counting, async iteration. With `delivery.recover`,
     messages lost to a cut link or a late start come back from the publishers' caches, in order
-    per publisher, once each; `recovered` counts those, `missed` those no cache held any more."""
+    per publisher, once each; `recovered` counts those, `missed` those no cache held any more.
+    With `shared` (a fleet process's stream of every robot, runtime.bus.demux), robot `robot`'s
+    samples come from it and nothing is declared here."""
 
     def __init__(
         self,
@@ -218,6 +234,9 @@ class Subscription(Generic[M]):
         loop: asyncio.AbstractEventLoop,
         delivery: Delivery = RELIABLE,
         on_malformed: MalformedHandler | None = None,
+        *,
+        shared: SharedStream | None = None,
+        robot: str = "",
     ) -> None:
         self.key = key
         self.cls = cls
@@ -226,17 +245,18 @@ class Subscription(Generic[M]):
         self.received = 0
         self._on_malformed = on_malformed
         self._recovering: RecoveringSource | None = None
-        if delivery.recover:
+        self._sub: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = None
+        self._shared = shared
+        self._robot = robot
+        if shared is not None:
             self._inbox: Inbox[WirePayload] = Inbox(loop, delivery.queue)
+            shared.attach(robot, self._inbox)
+        elif delivery.recover:
+            self._inbox = Inbox(loop, delivery.queue)
             self._recovering = RecoveringSource(session, key, self._inbox, delivery)
-            self._sub: zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]] | None = None
         else:
-            inbox = self._inbox = Inbox(loop, delivery.queue, wakeup_fd=True)
-
-            def drain(handler: zenoh.handlers.Handler[zenoh.Sample]) -> None:
-                _drain_typed(handler, inbox, key)
-
-            self._sub = _channel_subscriber(session, key, inbox, drain)
+            self._inbox = Inbox(loop, delivery.queue, wakeup_fd=True)
+            self._sub = typed_channel_subscriber(session, key, self._inbox)
 
     @property
     def dropped(self) -> int:
@@ -245,11 +265,15 @@ class Subscription(Generic[M]):
     @property
     def recovered(self) -> int:
         """Messages that came from a publisher cache, not off the wire (0 without recovery)."""
+        if self._shared is not None:
+            return self._shared.recovered_of(self._robot)
         return 0 if self._recovering is None else self._recovering.recovered
 
     @property
     def missed(self) -> int:
         """Messages no publisher cache could give back any more (0 without recovery)."""
+        if self._shared is not None:
+            return self._shared.missed_of(self._robot)
         return 0 if self._recovering is None else self._recovering.missed
 
     @property
@@ -302,6 +326,8 @@ class Subscription(Generic[M]):
                 self._recovering.close()
             if self._sub is not None:
                 undeclare(self._sub)
+            if self._shared is not None:
+                self._shared.detach(self._robot, self._inbox)
             self._inbox.close()
 
 
