@@ -60,9 +60,17 @@ async def test_each_robot_gets_its_own_samples_from_one_subscriber() -> None:
             assert sub1.ready() is None and sub1.missed == 0 and sub2.missed == 0
             # one subscriber and one drain thread for every robot's stream
             assert drain_threads(stream.expr) == 1
-            sub1.close()  # lab-1's run ends: lab-2's goes on
+            sub1.close()  # lab-1's run ends: lab-2's goes on, lab-1's samples wait again
+            pubs[lab1].put(words(5))
             pubs[lab2].put(words(15))
             assert await segments(sub2, 1) == [15]
+            for _ in range(200):
+                if "lab-1" in stream.waiting:
+                    break
+                await asyncio.sleep(0.02)
+            assert [m[0] for m in stream.waiting["lab-1"].items] == [lab1.keys.words]
+            shared.forget("lab-1")  # the fleet no longer expects to serve it
+            assert "lab-1" not in stream.waiting
         finally:
             shared.close()
 

@@ -219,7 +219,8 @@ class Fleet:
     def _keeps(self, robot: str) -> bool:
         """Whether the shared streams keep a robot's samples until its run subscribes: a robot
         this process serves first-hand (a standby's robots have runs of their own streams)."""
-        return self._primary(robot) and (self.shard is None or self.shard.serves(robot))
+        mine = self.shard is None or self.shard.serves(robot)
+        return mine and self._primary(robot) and not self.served_by.get(robot)
 
     def _presence(self, key: str, present: bool) -> None:
         split = split_key(key)
@@ -365,6 +366,8 @@ class Fleet:
         run.bus.close()
 
     def _no_longer_serving(self, robot: str) -> None:
+        if self._shared is not None:
+            self._shared.forget(robot)
         undeclare = self._server_tokens.pop(robot, None)
         if undeclare is not None:
             undeclare()

@@ -93,6 +93,10 @@ class SharedStream:
         if not inboxes:
             self.runs.pop(robot, None)
 
+    def forget(self, robot: str) -> None:
+        """Drop what waits for `robot` (the fleet no longer expects to serve it)."""
+        self.waiting.pop(robot, None)
+
     def recovered_of(self, robot: str) -> int:
         return 0 if self.recovering is None else self.recovering.recovered_of(robot)
 
@@ -135,6 +139,11 @@ class SharedStreams:
         self._tasks.add(task)
         self._streams[(suffix, delivery)] = stream
         return stream
+
+    def forget(self, robot: str) -> None:
+        """Drop every stream's samples waiting for `robot`."""
+        for stream in self._streams.values():
+            stream.forget(robot)
 
     def close(self) -> None:
         for closer in self._closers:
