@@ -126,26 +126,24 @@ class Inbox(Generic[T]):
         if self._waiter is not None and not self._wake_pending:
             self._signal()
 
-    def extend(self, batch: Iterable[T]) -> None:  # any thread
-        """Push several items with at most one wake-up."""
+    def _append(self, batch: Iterable[T]) -> None:  # the oldest dropped beyond the bound
         items, maxsize = self.items, self._maxsize
         for item in batch:
             if len(items) >= maxsize:
                 items.popleft()
                 self.dropped += 1
             items.append(item)
+
+    def extend(self, batch: Iterable[T]) -> None:  # any thread
+        """Push several items with at most one wake-up."""
+        self._append(batch)
         if self._waiter is not None and not self._wake_pending:
             self._signal()
 
     def extend_local(self, batch: Iterable[T]) -> None:  # loop thread
         """`extend` from the event loop's own thread (runtime.bus.demux hands a process-wide
         stream's burst to each run): the parked consumer is woken directly, with no eventfd."""
-        items, maxsize = self.items, self._maxsize
-        for item in batch:
-            if len(items) >= maxsize:
-                items.popleft()
-                self.dropped += 1
-            items.append(item)
+        self._append(batch)
         if self._waiter is not None:
             self._wake()
 
