@@ -35,11 +35,10 @@ from fleet import (  # noqa: E402
     SERVICES,
     _with_children,
     process_cost,
-    robot_stream,
     serve,
     streams_for,
 )
-from pipeline import QUIET, _p  # noqa: E402
+from pipeline import QUIET, _p, stream_frames  # noqa: E402
 
 from beyond_self.cognition.descriptions import nbest_exact  # noqa: E402
 from beyond_self.cognition.episodes import (  # noqa: E402
@@ -59,7 +58,7 @@ from beyond_self.services.deployment import Deployment  # noqa: E402
 def science_ms(gestures: int, nbest: int = 5) -> dict[str, float]:
     """One robot's stream through the three stages' library calls, in this process: CPU ms per
     stage (this thread's), as the services call them (a tracker and a join per robot)."""
-    frames, _ = robot_stream(7, gestures)
+    frames, _ = stream_frames(seed=7, gestures=gestures)
     models, network = shared.gesture_models(None), shared.network(None)
     actions = list(models.actions)
     tracker: GestureTracker[None] = GestureTracker(models)

@@ -154,3 +154,16 @@ def test_a_robots_frames_are_sent_as_the_frames_encoded_at_their_stamps(
         assert stream.payload(i, stamp) == encode(fleet.live_frame(frames[i], i, stamp))
     with pytest.raises(ValueError, match="2\\^32"):
         stream.payload(0, 2**32 - 1)
+
+
+def test_the_burst_bench_times_each_stages_science_on_one_stream() -> None:
+    """bench/burst.py's reference (the science alone, in the bench's own process) runs on the
+    fleet bench's streams as they are now: a stream made for the fleet bench once broke it."""
+    spec = importlib.util.spec_from_file_location("burst_bench", REPO / "bench" / "burst.py")
+    assert spec is not None and spec.loader is not None
+    burst = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = burst
+    spec.loader.exec_module(burst)
+    spent = burst.science_ms(1)
+    assert set(spent) == {"gestures", "reasoner", "describer"}
+    assert all(ms > 0 for ms in spent.values()), spent
