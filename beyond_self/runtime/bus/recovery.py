@@ -38,8 +38,9 @@ _WITNESS_CHANNEL = 128
 # A fleet process's one subscriber for every robot (runtime.bus.demux): zenoh-ext hands it the
 # history of every publisher at once, on the declaring thread, before its drain thread can start;
 # a bounded channel that history overfills would block that thread for ever. Zenoh's FIFO channel
-# allocates as it fills, so this bound costs nothing until used; the witness sees every robot.
-_SHARED_CHANNEL = 1 << 24
+# allocates as it fills, so this bound costs nothing until used: a thousand robots' full skeleton
+# caches (1,024 frames each) at the declaration. The witness sees every robot.
+_SHARED_CHANNEL = 1 << 20
 _SHARED_WITNESS = 4096
 _BURST = 256  # samples taken with the GIL held once at most
 
