@@ -6,12 +6,14 @@ intermediate ones do too (marked not final), for a robot that comments while it 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from beyond_self.cognition.descriptions import nbest_exact
 from beyond_self.runtime.bus.delivery import EVENTS
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import Description, Evidence, ScoredSentence, WordProbabilities
+from beyond_self.services import shared
 
 
 class DescriptionGenerator(Service):
@@ -28,6 +30,10 @@ class DescriptionGenerator(Service):
         self.nbest = nbest
         self.legacy_offset = legacy_offset
         self.unfolding = unfolding
+
+    @classmethod
+    def warm(cls, options: Mapping[str, Any]) -> None:
+        shared.warm_descriptions(options.get("nbest", 5))
 
     async def setup(self) -> None:
         keys = self.bus.keys

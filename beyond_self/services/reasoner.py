@@ -58,7 +58,7 @@ class AffordanceReasoner(Service):
 
     @classmethod
     def warm(cls, options: Mapping[str, Any]) -> None:
-        shared.network(options.get("model"))  # learned from the synthetic data without a file
+        shared.warm_fusion(options.get("model"))  # a network file's, or learned (no file)
 
     async def setup(self) -> None:
         self.model: BayesNet = shared.network(self.model_path)

@@ -4,7 +4,9 @@ A fleet's workstation runs each service once for many robots, a run per robot; t
 run reads (the Affordance–Words network, the gesture HMMs, the colour and shape clusters) never
 change while it runs, and the object segmenter's frame describer is a process of its own. Each
 is loaded once per process, by path, and shared: a robot that joins costs its per-run state,
-not another copy of the models (0.7 s to learn the default network) or another process.
+not another copy of the models (0.7 s to learn the default network) or another process. The
+tables the science makes on its first call (the network's first query, the grammar's layout) are
+made before the process joins the bus too (`warm_*`, called by the services' `warm`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from beyond_self.cognition.bn import BayesNet, learn_network, load_model, synthetic_dataset
+from beyond_self.cognition.descriptions import nbest_exact
+from beyond_self.cognition.descriptions.space import SentenceSpace
+from beyond_self.cognition.episodes import FusionJoin
+from beyond_self.cognition.fusion import ACTION
 from beyond_self.cognition.gestures import GestureModels
 from beyond_self.cognition.gestures.default_models import pipeline_models
 
@@ -26,6 +32,26 @@ if TYPE_CHECKING:  # the object segmenter's alone: imported when it first asks
 def network(path: str | None) -> BayesNet:
     """The reasoner's network: the file's, or learned from the synthetic data."""
     return load_model(Path(path)) if path else learn_network(synthetic_dataset())
+
+
+@functools.cache
+def warm_fusion(path: str | None) -> None:
+    """One gesture through fusion, so that the network's first query (about 4 ms of tables
+    made once per process) is not paid by the first robot to end a gesture."""
+    model = network(path)
+    join: FusionJoin[None] = FusionJoin(model, expect_objects=False)
+    actions = model.definition[ACTION].values
+    join.started(1, 1)
+    join.belief(1, 1, 2, dict.fromkeys(actions, 1 / len(actions)), None, True)
+    join.ended(1, 1, 2)
+
+
+@functools.cache
+def warm_descriptions(n: int) -> None:
+    """One N-best search, so that the grammar's tables (about 4 ms, once per process) are made
+    before the first robot's words come."""
+    vocabulary = SentenceSpace.of().vocabulary
+    nbest_exact(dict.fromkeys(vocabulary, 0.5), n)
 
 
 @functools.cache
