@@ -22,6 +22,7 @@ from beyond_self.cognition.episodes.objects import WatchSnapshot
 from beyond_self.cognition.vision.pipeline import DetectedObject as FoundObject
 from beyond_self.runtime.bus.delivery import CAMERA, EVENTS, FRAMES
 from beyond_self.runtime.bus.subscription import Subscription
+from beyond_self.runtime.process import native_heap
 from beyond_self.runtime.recording.images import CameraMessage, image_from_message
 from beyond_self.runtime.service import Service
 from beyond_self.runtime.service_frames import FrameSchedule, Steps
@@ -38,7 +39,7 @@ from beyond_self.schemas import (
     StreamEnd,
 )
 from beyond_self.services import shared
-from beyond_self.services.frame_describer import FrameDescriber
+from beyond_self.services.frame_describer import HEAP_KEPT_BYTES, FrameDescriber
 from beyond_self.services.object_messages import effects_message, gesture_object
 
 
@@ -77,6 +78,8 @@ class ObjectSegmenter(Service):
     @classmethod
     def warm(cls, options: Mapping[str, Any]) -> None:
         shared.clusters(options.get("clusters"))
+        # the gestures' windows segment frames in this process: their arrays stay in its heap
+        native_heap.keep_freed(HEAP_KEPT_BYTES)
 
     async def setup(self) -> None:
         self.watch: ObjectWatch[Header] = ObjectWatch(

@@ -150,11 +150,37 @@ def _components(mask: np.ndarray) -> tuple[np.ndarray, list[tuple[slice, slice]]
     return labels, [s for s in ndimage.find_objects(labels) if s is not None] if n else []
 
 
-def _blob(labels: np.ndarray, index: int, sl: tuple[slice, slice], shape: tuple[int, int]) -> Blob:
+def _blob(
+    labels: np.ndarray,
+    index: int,
+    sl: tuple[slice, slice],
+    shape: tuple[int, int],
+    at: tuple[int, int] = (0, 0),
+) -> Blob:
+    """Component `index` of `labels`, which cover the image from row, column `at` on."""
     ys, xs = sl
     mask = labels[sl] == index
-    border = ys.start == 0 or xs.start == 0 or ys.stop == shape[0] or xs.stop == shape[1]
-    return Blob((xs.start, ys.start, xs.stop, ys.stop), mask, border)
+    y0, x0, y1, x1 = ys.start + at[0], xs.start + at[1], ys.stop + at[0], xs.stop + at[1]
+    border = y0 == 0 or x0 == 0 or y1 == shape[0] or x1 == shape[1]
+    return Blob((x0, y0, x1, y1), mask, border)
+
+
+def _around(pads: list[tuple[slice, slice]]) -> tuple[slice, slice]:
+    """The box around every one of `pads`: what is labelled again after the first labelling
+    (labelling a box gives the components and the order of the whole frame's, at a fraction of
+    the cost)."""
+    return (
+        slice(min(p[0].start for p in pads), max(p[0].stop for p in pads)),
+        slice(min(p[1].start for p in pads), max(p[1].stop for p in pads)),
+    )
+
+
+def _within(pad: tuple[slice, slice], box: tuple[slice, slice]) -> tuple[slice, slice]:
+    ys, xs = pad
+    return (
+        slice(ys.start - box[0].start, ys.stop - box[0].start),
+        slice(xs.start - box[1].start, xs.stop - box[1].start),
+    )
 
 
 def _chromaticity(pixels: np.ndarray) -> np.ndarray:
@@ -181,8 +207,11 @@ def segment(
         raise InputError(f"frame is {shape[1]}x{shape[0]} pixels; valid: at least 16x16")
     if int(img.max()) - int(img.min()) < 3:
         raise InputError("frame is blank (every pixel has the same colour); valid: a camera image")
-    bg = background or BackgroundModel.from_frame(img)
-    alpha, cd = bg.compare(img)
+    if background is None:
+        bg, alpha, cd = BackgroundModel.estimate(img)
+    else:
+        bg = background
+        alpha, cd = bg.compare(img)
     low = max(p.chroma_low, 3.0 * bg.noise)
     strong = (alpha < p.dark) | (alpha > p.bright)
     cand = (cd > low) | strong
@@ -203,17 +232,24 @@ def segment(
 
     hand_mask = np.zeros(shape, dtype=bool)
     hand_blob: Blob | None = None
-    if p.skin is not None and regions:
+    if not regions:
+        return Segmentation(shape, [], None, np.zeros(shape, dtype=bool), hand_mask, cand, bg)
+    box = _around([pad for pad, _ in regions])  # every region: all that is labelled from here
+    at = (box[0].start, box[1].start)
+    if p.skin is not None:
+        skinned = False
         for pad, comp in regions:
             skin = comp & p.skin.mask(img[pad].astype(np.float32))
             if skin.sum() >= min_area:
                 hand_mask[pad] |= _open(skin)
-        hand_blob = _pick_hand(hand_mask, shape, hand_px, p)
-        hand_mask[:] = False
+                skinned = True
+        if skinned:
+            hand_blob = _pick_hand(hand_mask[box], shape, hand_px, p, at)
+            hand_mask[box] = False
         if hand_blob is not None:
             hand_mask[hand_blob.slices] = hand_blob.mask
 
-    kept = np.zeros(shape, dtype=bool)
+    kept = np.zeros((box[0].stop - box[0].start, box[1].stop - box[1].start), dtype=bool)
     core_thr = max(p.chroma_core, 2.0 * low)
     for pad, comp in regions:
         mask = comp & ~hand_mask[pad] if hand_blob is not None else comp
@@ -225,13 +261,13 @@ def segment(
             continue  # a faint region: shadow edge, table texture
         if p.refine:
             mask = _refine(img[pad], bg.mean[pad], mask, core, strong[pad])
-        kept[pad] |= mask
+        kept[_within(pad, box)] |= mask
     objects: list[Blob] = []
     if kept.any():
         labels, slices = _components(kept)
         thick = max(1.0, shape[1] * p.min_thickness_frac)
         for i, sl in enumerate(slices, start=1):
-            blob = _blob(labels, i, sl, shape)
+            blob = _blob(labels, i, sl, shape, at)
             if blob.area < min_area or (p.drop_border and blob.touches_border):
                 continue
             blob.mask = ndimage.binary_fill_holes(blob.mask)
@@ -250,13 +286,16 @@ def _pick_hand(
     shape: tuple[int, int],
     hand_px: tuple[float, float] | None,
     p: SegmentParams,
+    at: tuple[int, int] = (0, 0),
 ) -> Blob | None:
+    """The hand among the skin components of `hand_mask`, which covers the image of `shape`
+    from row, column `at` on."""
     labels, slices = _components(hand_mask)
     min_area = max(p.min_area(shape), round(shape[0] * shape[1] * p.min_hand_area_frac))
     thick = shape[1] * p.min_hand_thickness_frac
     best: tuple[float, Blob] | None = None
     for i, sl in enumerate(slices, start=1):
-        blob = _blob(labels, i, sl, shape)
+        blob = _blob(labels, i, sl, shape, at)
         area = blob.area
         if area < min_area or _thickness(blob.mask) < thick:
             continue

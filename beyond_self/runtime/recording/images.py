@@ -26,7 +26,9 @@ def image_from_message(msg: CameraMessage) -> np.ndarray:
 
         try:
             with Image.open(io.BytesIO(msg.data)) as img:
-                return np.asarray(img.convert("RGB"))
+                img.load()
+                # an RGB image as it is: its conversion to RGB is a copy (as costly as decoding)
+                return np.asarray(img if img.mode == "RGB" else img.convert("RGB"))
         except (UnidentifiedImageError, OSError, ValueError) as exc:
             raise InputError(
                 f"compressed camera frame ({msg.format}) does not decode: {exc}"
