@@ -1,16 +1,11 @@
 """One Zenoh subscriber per stream for a whole fleet process, each sample handed to its robot's run.
 
-A fleet's service process runs one single-robot service per robot (runtime.fleet). Declared per
-run, each robot's streams had a subscriber, a wake-up of the event loop and, for a recovering
-stream, a Zenoh thread taking the GIL, for every sample: at 32 robots, most of the message path's
-cost. Here a stream (a key below the robot, and its `Delivery`) is declared once for every robot
-the fleet's pattern names; its samples come a burst at a time to one hub on the loop, which hands
-each robot's to that run's subscription inbox (`Inbox.extend_local`, no further wake-up of the
-loop). Everything after the inbox (decoding, ledgers, event time) is the run's, as before.
-
-A robot's samples that come before its run subscribes (a run starts when the robot's presence is
-seen; a restarted process's history comes at once) wait for it, up to the delivery's queue, the
-oldest dropped and counted; a robot the fleet does not serve (another shard's) is not kept.
+Declared per run, every robot's sample cost a subscriber, a Zenoh thread taking the GIL and a
+wake-up of the loop. Here a stream (a key below the robot, one `Delivery`) is declared once for
+every robot of the fleet's pattern; its bursts reach one hub on the loop, which hands each robot's
+samples to that run's inbox (`Inbox.extend_local`). Decoding, ledgers and event time stay the
+run's. Samples that come before a robot's run subscribes (a restarted process gets every robot's
+history at once) wait for it, up to the stream's queue; another shard's robots are not kept.
 """
 
 from __future__ import annotations

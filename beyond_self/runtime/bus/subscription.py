@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Generic, TypeVar
+from typing import Generic, Protocol, TypeVar
 
 import msgspec
 import zenoh
@@ -29,9 +29,6 @@ from beyond_self.runtime.bus.recovery import RecoveringSource
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import SchemaError, decode, type_from_encoding
 from beyond_self.schemas.keys import type_for_key
-
-if TYPE_CHECKING:
-    from beyond_self.runtime.bus.demux import SharedStream
 
 M = TypeVar("M", bound=Message)
 T = TypeVar("T")
@@ -46,6 +43,15 @@ RawWire = tuple[str, bytes | zenoh.ZBytes, str, int]  # (key, payload, encoding,
 # (when it is full, Zenoh's network thread waits, as it did for the GIL with a callback).
 _CHANNEL_CAPACITY = 256
 _BURST = 256  # samples handed to the inbox per wake-up at most
+
+
+class SharedSource(Protocol):
+    """A stream of every robot that feeds one robot's subscription (runtime.bus.demux)."""
+
+    def attach(self, robot: str, inbox: Inbox[WirePayload]) -> None: ...
+    def detach(self, robot: str, inbox: Inbox[WirePayload]) -> None: ...
+    def recovered_of(self, robot: str) -> int: ...
+    def missed_of(self, robot: str) -> int: ...
 
 
 @dataclass(slots=True, frozen=True)
@@ -235,7 +241,7 @@ class Subscription(Generic[M]):
         delivery: Delivery = RELIABLE,
         on_malformed: MalformedHandler | None = None,
         *,
-        shared: SharedStream | None = None,
+        shared: SharedSource | None = None,
         robot: str = "",
     ) -> None:
         self.key = key
