@@ -215,6 +215,12 @@ def _service_chunk(service: str) -> str:
     return service if service == "*" else check_name("service", service)
 
 
+def robot_of(key: str) -> str:
+    """The robot chunk of a concrete `beyond/<robot>/...` key (`split_key`'s first part, for
+    keys known to be a robot's: a fleet's shared streams take it for every sample)."""
+    return key.split("/", 2)[1]
+
+
 def split_key(key: str) -> tuple[str, str] | None:
     """(robot, suffix) of a concrete `beyond/<robot>/<suffix>` key, else None."""
     parts = key.split("/", 2)

@@ -20,9 +20,9 @@ import zenoh
 
 from beyond_self.runtime.bus.delivery import Delivery
 from beyond_self.runtime.bus.inbox import Inbox, undeclare
-from beyond_self.runtime.bus.recovery import RecoveringSource, robot_of
+from beyond_self.runtime.bus.recovery import RecoveringSource
 from beyond_self.runtime.bus.subscription import WirePayload, typed_channel_subscriber
-from beyond_self.schemas.keys import PREFIX, robot_matches
+from beyond_self.schemas.keys import PREFIX, robot_matches, robot_of, split_key
 
 # The hub is emptied by the loop at every wake-up, so it holds one burst at most; a run's inbox is
 # the bound that drops (each its delivery's queue).
@@ -111,9 +111,13 @@ class SharedStreams:
         self._closers: list[Callable[[], None]] = []
         self._tasks: set[asyncio.Task[None]] = set()
 
-    def covers(self, robot: str) -> bool:
-        """Whether `robot`'s keys are in the shared streams' expressions."""
-        return robot_matches(self._pattern, robot)
+    def stream_of(self, key: str, robot: str, delivery: Delivery) -> SharedStream | None:
+        """The shared stream that feeds robot `robot`'s subscription to `key`; None when `key`
+        is not one of that robot's own or the robot is not one of the pattern's."""
+        split = split_key(key)
+        if split is None or split[0] != robot or not robot_matches(self._pattern, robot):
+            return None
+        return self.stream(split[1], delivery)
 
     def stream(self, suffix: str, delivery: Delivery) -> SharedStream:
         """The shared stream of `beyond/<robot>/<suffix>` for every robot, declared if new."""

@@ -24,6 +24,7 @@ from zenoh import ext
 from beyond_self.runtime.bus.delivery import Delivery
 from beyond_self.runtime.bus.history_repair import HistoryRepair
 from beyond_self.runtime.bus.inbox import Inbox, direct_callback, undeclare
+from beyond_self.schemas.keys import robot_of
 
 log = logging.getLogger("beyond.recovery")
 
@@ -43,11 +44,6 @@ _WITNESS_CHANNEL = 128
 _SHARED_CHANNEL = 1 << 20
 _SHARED_WITNESS = 4096
 _BURST = 256  # samples taken with the GIL held once at most
-
-
-def robot_of(key: str) -> str:
-    """The robot chunk of a `beyond/<robot>/...` key (runtime.bus.demux's unit of delivery)."""
-    return key.split("/", 2)[1]
 
 
 class RecoveringSource:

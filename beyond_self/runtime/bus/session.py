@@ -39,7 +39,7 @@ from beyond_self.runtime.bus.subscription import (
     Subscription,
 )
 from beyond_self.schemas.base import Message
-from beyond_self.schemas.keys import Keys, split_key
+from beyond_self.schemas.keys import Keys
 
 M = TypeVar("M", bound=Message)
 Q = TypeVar("Q", bound=Message)
@@ -145,10 +145,8 @@ class Bus:
     ) -> Subscription[M]:
         """Messages of type `cls` on `key`, received as `delivery` says; call from the event
         loop that will consume them."""
-        shared, robot = None, self.keys.robot
-        split = split_key(key) if self._shared is not None else None
-        if self._shared is not None and split and split[0] == robot and self._shared.covers(robot):
-            shared = self._shared.stream(split[1], delivery)
+        robot = self.keys.robot
+        shared = None if self._shared is None else self._shared.stream_of(key, robot, delivery)
         sub = Subscription(
             self.session, key, cls, asyncio.get_running_loop(), delivery, on_malformed,
             shared=shared, robot=robot,
