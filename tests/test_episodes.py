@@ -457,6 +457,40 @@ def test_a_lost_final_belief_gives_its_gesture_up_and_holds_nothing_back(network
     assert join.belief(1, 1, 10, belief, 1, final=True) == []
 
 
+def test_a_lost_object_or_effects_message_gives_its_gesture_up(network: Any) -> None:
+    """While the object segmenter is alive a gesture waits for its object and its effects;
+    one of those lost for good (a chaos run: a gesture object no cache held) held every later
+    gesture back for ever, and `up` never ended. Told so with the next message of the same
+    stream, the join gives the gesture up (`Lost`) and goes on."""
+    belief = {"tap": 0.9, "grasp": 0.05, "touch": 0.05}
+    labels = {"Color": "green1"}
+
+    def whole_but(join: FusionJoin[int], segment_id: int, start: int, piece: str) -> list[Any]:
+        out = join.started(segment_id, start)
+        if piece != "object":
+            out += join.object_seen(segment_id, labels)
+        out += join.belief(segment_id, 0, start, belief, 0, final=True)
+        out += join.ended(segment_id, start, start + 10)
+        if piece != "effects":
+            out += join.effects_seen(segment_id, labels, {})
+        return out
+
+    for piece, told in (("object", "objects_missed"), ("effects", "effects_missed")):
+        join: FusionJoin[int] = FusionJoin(network)
+        join.objects_alive(True)
+        out = whole_but(join, 1, 0, piece) + whole_but(join, 2, 20, "")
+        assert not [o for o in out if isinstance(o, Outcome | Lost)], piece  # 1 holds 2 back
+        out = getattr(join, told)(3, 1) + whole_but(join, 3, 40, "")
+        said = [(type(o).__name__, o.segment_id) for o in out if isinstance(o, Outcome | Lost)]
+        assert said == [("Lost", 1), ("Outcome", 2), ("Outcome", 3)], piece
+        assert f"its {piece} was lost (1 " in next(o.reason for o in out if isinstance(o, Lost))
+        # a gesture that has the piece is not given up by a later loss of it
+        out = join.started(4, 60) + join.object_seen(4, labels) + join.effects_seen(4, labels, {})
+        assert getattr(join, told)(9, 2) == [], piece
+        out = join.belief(4, 0, 60, belief, 0, final=True) + join.ended(4, 60, 70)
+        assert [o.segment_id for o in out if isinstance(o, Outcome)] == [4], piece
+
+
 def test_a_cancel_after_the_end_changes_nothing(network: Any) -> None:
     """A restarted streamer that lost its frames cancels each gesture its consumers had not
     yet told it ended (their ledgers lag): one whose end has arrived is whole, and is

@@ -10,7 +10,7 @@ With `objects: false` nothing waits for vision; an absent segmenter is waited ou
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from beyond_self.cognition.bn import BayesNet
@@ -19,6 +19,7 @@ from beyond_self.cognition.episodes import Anticipation, FusionJoin, Lost, Outco
 from beyond_self.cognition.episodes.join import Prediction
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import EVENTS, FRAMES
+from beyond_self.runtime.bus.subscription import Subscription
 from beyond_self.runtime.service import Service
 from beyond_self.schemas import (
     ActionPosterior,
@@ -34,6 +35,8 @@ from beyond_self.schemas import (
     WordProbabilities,
 )
 from beyond_self.services import shared
+
+Outputs = list[Anticipation[Header] | Outcome[Header] | Lost]
 
 
 class AffordanceReasoner(Service):
@@ -71,13 +74,13 @@ class AffordanceReasoner(Service):
         self.join.done(self.downstream(keys.words).done("words"))
         self.predictions = self.publisher(keys.affordance, AffordancePrediction, FRAMES)
         self.words_out = self.publisher(keys.words, WordProbabilities, EVENTS)
-        self.subscribe(keys.gesture_object, GestureObject, self.on_object, EVENTS)
+        self.objects = self.subscribe(keys.gesture_object, GestureObject, self.on_object, EVENTS)
         self.beliefs = self.subscribe(
             keys.gesture_posterior, ActionPosterior, self.on_posterior, FRAMES
         )
-        self.beliefs_missed = 0  # beliefs no publisher cache held, so far
         self.subscribe(keys.gesture_segment, GestureSegment, self.on_segment, EVENTS)
-        self.subscribe(keys.effects, ObjectEffects, self.on_effects, EVENTS)
+        self.effects = self.subscribe(keys.effects, ObjectEffects, self.on_effects, EVENTS)
+        self._missed_told: dict[str, int] = {}  # per input: samples no cache held, told so far
         self.queryable(keys.ask, AffordanceQuery, self.on_ask)
         self._segmenters: set[str] = set()
         self.watch_tokens(keys.alive("objects"), self.on_objects_alive)
@@ -88,13 +91,24 @@ class AffordanceReasoner(Service):
 
     # -- inputs ---------------------------------------------------------------------------
 
+    def tell_missed(
+        self, sub: Subscription[Any], tell: Callable[[int, int], Outputs], before: int
+    ) -> None:
+        """Tell the join what `sub` lost for good since last told, before gesture `before`:
+        one publisher's samples arrive in order, so the gestures before it lacking what `sub`
+        carries are given up instead of waited for."""
+        missed = sub.missed
+        told = self._missed_told.get(sub.key, 0)
+        if missed > told:
+            self._missed_told[sub.key] = missed
+            self.emit(tell(before, missed - told))
+
     def on_object(self, msg: GestureObject) -> None:
+        self.tell_missed(self.objects, self.join.objects_missed, msg.segment_id)
         self.emit(self.join.object_seen(msg.segment_id, msg.labels))
 
     def on_posterior(self, msg: ActionPosterior) -> None:
-        if (missed := self.beliefs.missed) > self.beliefs_missed:
-            self.emit(self.join.beliefs_missed(msg.segment_id, missed - self.beliefs_missed))
-            self.beliefs_missed = missed
+        self.tell_missed(self.beliefs, self.join.beliefs_missed, msg.segment_id)
         belief = dict(zip(msg.actions, msg.posterior, strict=True))
         self.emit(
             self.join.belief(
@@ -111,6 +125,7 @@ class AffordanceReasoner(Service):
             self.emit(self.join.ended(msg.segment_id, msg.start_stamp, msg.end_stamp))
 
     def on_effects(self, msg: ObjectEffects) -> None:
+        self.tell_missed(self.effects, self.join.effects_missed, msg.segment_id)
         first = msg.effects[0] if msg.measured and msg.effects else None
         self.emit(
             self.join.effects_seen(
@@ -122,10 +137,10 @@ class AffordanceReasoner(Service):
 
     # -- outputs --------------------------------------------------------------------------
 
-    def emit(self, outputs: list[Anticipation[Header] | Outcome[Header] | Lost]) -> None:
+    def emit(self, outputs: Outputs) -> None:
         for out in outputs:
             if isinstance(out, Lost):  # not described: the watcher counts it lost
-                self.report_error("beliefs", InputError(f"gesture {out.segment_id}: {out.reason}"))
+                self.report_error("lost", InputError(f"gesture {out.segment_id}: {out.reason}"))
                 continue
             final = isinstance(out, Outcome)
             self.predictions.put(

@@ -95,10 +95,10 @@ class FusionJoin(Generic[R]):
         self.segment_time = -1  # starts and ends (one publisher, in order)
         self.belief_time = -1  # posteriors (another publisher, in order)
         self.objects_present = False  # the object segmenter is alive (told by the caller)
-        # beliefs no cache held came before one about this gesture: the ones before it that
-        # still lack their final belief will never have it (`beliefs_missed`)
-        self.beliefs_lost_before = -1
-        self.beliefs_lost_why = ""
+        # per piece a gesture needs (its final belief, its object, its effects): samples no
+        # cache held came before one about this gesture, so the gestures before it still
+        # lacking that piece will never have it (`beliefs_missed`, `objects_missed`, ...)
+        self.lost_before: dict[str, tuple[int, str]] = {}
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -166,10 +166,22 @@ class FusionJoin(Generic[R]):
         one about gesture `before`. One publisher's beliefs arrive in order, so a gesture before
         `before` still lacking its final belief will never have it: it is given up (`Lost`) now,
         instead of holding back every gesture after it."""
-        self.beliefs_lost_before = max(self.beliefs_lost_before, before)
-        self.beliefs_lost_why = (
-            f"its final belief was lost ({count} belief(s) no publisher cache held any more)"
-        )
+        return self._missed("final belief", "belief(s)", before, count)
+
+    def objects_missed(self, before: int, count: int) -> list[Output[R]]:
+        """As `beliefs_missed`, for the object segmenter's object of each gesture: while the
+        segmenter is alive a gesture waits for its object, so one lost would hold back every
+        gesture after it for ever."""
+        return self._missed("object", "object message(s)", before, count)
+
+    def effects_missed(self, before: int, count: int) -> list[Output[R]]:
+        """As `objects_missed`, for the effects measured after each gesture."""
+        return self._missed("effects", "effects message(s)", before, count)
+
+    def _missed(self, piece: str, what: str, before: int, count: int) -> list[Output[R]]:
+        earlier = self.lost_before.get(piece, (-1, ""))[0]
+        why = f"its {piece} was lost ({count} {what} no publisher cache held any more)"
+        self.lost_before[piece] = (max(earlier, before), why)
         return self._flush()
 
     def skeleton_at(self, stamp: int) -> list[Output[R]]:
@@ -205,6 +217,15 @@ class FusionJoin(Generic[R]):
             return False
         return stamp is not None and self.skeleton_time >= stamp + self.deadline_ns
 
+    def _lost_piece(self, segment_id: int, g: _Gesture[R]) -> str | None:
+        """Why gesture `segment_id` can never be complete (a piece it lacks was lost), or None."""
+        lacking = {"final belief": g.final, "object": g.features, "effects": g.effects}
+        for piece, have in lacking.items():
+            before, why = self.lost_before.get(piece, (-1, ""))
+            if have is None and segment_id < before:
+                return why
+        return None
+
     def _abandoned(self, g: _Gesture[R]) -> bool:
         """Incomplete, and the stream that would complete it has moved on by the deadline: the
         piece is lost. Not any stream's time: a late reasoner gets each stream's history as a
@@ -223,8 +244,8 @@ class FusionJoin(Generic[R]):
         outputs: list[Output[R]] = []
         for segment_id in sorted(self.gestures):
             g = self.gestures[segment_id]
-            if g.final is None and segment_id < self.beliefs_lost_before:
-                outputs.append(Lost(segment_id, self.beliefs_lost_why))
+            if (lost := self._lost_piece(segment_id, g)) is not None:
+                outputs.append(Lost(segment_id, lost))
                 del self.gestures[segment_id]
                 self.finished.add(segment_id)
                 continue
