@@ -238,13 +238,15 @@ async def test_a_standby_stage_takes_over_once_its_consumers_new_runs_are_there(
         task = asyncio.get_running_loop().create_task(fleet.run(install_signals=False))
         robot = robots.for_robot("lab-a1")
         sink_key = robot.keys.alive("sink")
-        robot.declare_token(robot.keys.alive("ingest"))
         try:
             gone = dead.declare_token(sink_key)  # the dead host's consumer served the robot
             await wait_until("the consumer seen", lambda: "sink" in fleet.consumers_alive.get(
                 "lab-a1", set()))  # fmt: skip
             gone()
             await wait_until("the consumer gone", lambda: not fleet.consumers_alive["lab-a1"])
+            # the robot unserved only now: the standby's 0.2 s wait cannot end before it has
+            # heard of the consumer, however late a loaded machine delivers the tokens
+            robot.declare_token(robot.keys.alive("ingest"))
             await wait_until("the standby's wait over", lambda: "lab-a1" in fleet._latest)
             assert fleet.robots == [] and fleet.takeovers == 0  # waiting on the consumer
             if consumer_returns:
