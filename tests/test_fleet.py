@@ -9,6 +9,7 @@ import asyncio
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from busutil_net import private_config
@@ -134,8 +135,13 @@ class Voice(Service):
     publishes = ()
     serves = ()
 
-    async def setup(self) -> None:
+    def __init__(self, **base: Any) -> None:
+        super().__init__(**base)
+        # before setup: a loaded machine may start the fleets' runs before this one has asked
+        # for its ledgers, and the test reads what was said from then on
         self.said: list[int] = []
+
+    async def setup(self) -> None:
         keys = self.bus.keys
         self.subscribe(keys.description, Description, self.on_description, EVENTS, once=True)
 
