@@ -15,8 +15,8 @@ from typing import Any
 
 from beyond_self.cognition.bn import BayesNet
 from beyond_self.cognition.bn.evidence import Evidence, build_evidence
-from beyond_self.cognition.episodes import Anticipation, FusionJoin, Lost, Outcome
-from beyond_self.cognition.episodes.join import Prediction
+from beyond_self.cognition.episodes import FusionJoin, Lost, Outcome
+from beyond_self.cognition.episodes.join import Output, Prediction
 from beyond_self.core.errors import InputError
 from beyond_self.runtime.bus.delivery import EVENTS, FRAMES
 from beyond_self.runtime.bus.subscription import Subscription
@@ -35,8 +35,6 @@ from beyond_self.schemas import (
     WordProbabilities,
 )
 from beyond_self.services import shared
-
-Outputs = list[Anticipation[Header] | Outcome[Header] | Lost]
 
 
 class AffordanceReasoner(Service):
@@ -92,7 +90,7 @@ class AffordanceReasoner(Service):
     # -- inputs ---------------------------------------------------------------------------
 
     def tell_missed(
-        self, sub: Subscription[Any], tell: Callable[[int, int], Outputs], before: int
+        self, sub: Subscription[Any], tell: Callable[[int, int], list[Output[Header]]], before: int
     ) -> None:
         """Tell the join what `sub` lost for good since last told, before gesture `before`:
         one publisher's samples arrive in order, so the gestures before it lacking what `sub`
@@ -137,7 +135,7 @@ class AffordanceReasoner(Service):
 
     # -- outputs --------------------------------------------------------------------------
 
-    def emit(self, outputs: Outputs) -> None:
+    def emit(self, outputs: list[Output[Header]]) -> None:
         for out in outputs:
             if isinstance(out, Lost):  # not described: the watcher counts it lost
                 self.report_error("lost", InputError(f"gesture {out.segment_id}: {out.reason}"))

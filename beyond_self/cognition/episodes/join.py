@@ -219,6 +219,8 @@ class FusionJoin(Generic[R]):
 
     def _lost_piece(self, segment_id: int, g: _Gesture[R]) -> str | None:
         """Why gesture `segment_id` can never be complete (a piece it lacks was lost), or None."""
+        if not self.lost_before:  # nothing lost: the common case, checked per belief
+            return None
         lacking = {"final belief": g.final, "object": g.features, "effects": g.effects}
         for piece, have in lacking.items():
             before, why = self.lost_before.get(piece, (-1, ""))
