@@ -13,8 +13,7 @@ import pytest
 from busutil_net import EXAMPLES, env_for, health_report, private_config, skeleton_frames
 
 import beyond_self.schemas as s
-from beyond_self.runtime.bus import inbox as inbox_module
-from beyond_self.runtime.bus.inbox import HandOffPacer, Inbox
+from beyond_self.runtime.bus.inbox import Inbox
 from beyond_self.runtime.bus.session import Bus
 from beyond_self.runtime.service import Service
 
@@ -46,29 +45,6 @@ async def buses():
     yield a, b
     a.close()
     b.close()
-
-
-def test_a_drain_hands_off_once_a_millisecond_at_most_and_a_sparse_stream_never_waits(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """HandOffPacer on a clock the test moves: a sample that comes within the gap after the
-    last hand-off waits out the rest of it; one that comes later (a lone robot at 30 Hz) does
-    not wait at all."""
-    now = [100.0]
-    slept: list[float] = []
-    monkeypatch.setattr(inbox_module.time, "monotonic", lambda: now[0])
-    monkeypatch.setattr(inbox_module.time, "sleep", slept.append)
-    pacer = HandOffPacer(gap_s=0.001)
-    pacer.wait()  # the first sample ever
-    pacer.handed_off()
-    now[0] += 0.0004  # the next one 0.4 ms later: waits 0.6 ms for what follows it
-    pacer.wait()
-    assert slept == [pytest.approx(0.0006)]
-    now[0] += 0.0006
-    pacer.handed_off()
-    now[0] += 1 / 30  # a frame later
-    pacer.wait()
-    assert len(slept) == 1
 
 
 async def test_typed_pub_sub_across_sessions(buses) -> None:

@@ -13,7 +13,6 @@ import asyncio
 import contextlib
 import os
 import threading
-import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Generic, Protocol, TypeVar
@@ -41,32 +40,6 @@ def direct_callback(fn: Callable[[T], None]) -> zenoh.handlers.Callback[T]:
     Python thread. For the low-rate streams (queries, liveliness, matching, recovery);
     plain subscriptions use channels and a drain thread (runtime.bus.subscription)."""
     return zenoh.handlers.Callback(fn, indirect=False)
-
-
-HAND_OFF_GAP_S = 0.001  # docs/decisions.md#paced-hand-off
-
-
-class HandOffPacer:
-    """At most one hand-off per `gap_s` from a drain thread: a sample that comes sooner after
-    the last burst waits out the rest of the gap (the GIL released) with whatever comes
-    meanwhile. A stream of many robots then wakes its drain thread, the GIL and the event loop
-    once a millisecond instead of once a sample; a sparse stream (one robot at 30 Hz) never
-    waits. Only when a message is handed over changes, never its order."""
-
-    __slots__ = ("_last", "gap_s")
-
-    def __init__(self, gap_s: float = HAND_OFF_GAP_S) -> None:
-        self.gap_s = gap_s
-        self._last = float("-inf")
-
-    def wait(self) -> None:
-        """Call when a sample has come, before draining the channel's burst."""
-        left = self._last + self.gap_s - time.monotonic()
-        if left > 0:
-            time.sleep(left)
-
-    def handed_off(self) -> None:
-        self._last = time.monotonic()
 
 
 class Inbox(Generic[T]):

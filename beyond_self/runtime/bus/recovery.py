@@ -23,7 +23,7 @@ from zenoh import ext
 
 from beyond_self.runtime.bus.delivery import Delivery
 from beyond_self.runtime.bus.history_repair import HistoryRepair
-from beyond_self.runtime.bus.inbox import HandOffPacer, Inbox, direct_callback, undeclare
+from beyond_self.runtime.bus.inbox import Inbox, direct_callback, undeclare
 from beyond_self.schemas.keys import robot_of
 
 log = logging.getLogger("beyond.recovery")
@@ -214,13 +214,11 @@ def _drain(
     delivers, in its order, to `offer` (the history repair), then `flush` once per burst, until
     the subscriber is undeclared (then `recv` raises)."""
     recv, try_recv = handler.recv, handler.try_recv
-    pacer = HandOffPacer()
     while True:
         try:
             sample: zenoh.Sample | None = recv()  # blocks with the GIL released
         except Exception:  # zenoh.ZError: channel closed, the subscriber is gone
             return
-        pacer.wait()
         taken = 0
         while sample is not None:
             offer(sample)
@@ -232,4 +230,3 @@ def _drain(
             except Exception:  # closed while draining a burst: what came is delivered
                 sample = None
         flush()
-        pacer.handed_off()

@@ -24,7 +24,7 @@ import msgspec
 import zenoh
 
 from beyond_self.runtime.bus.delivery import RELIABLE, Delivery
-from beyond_self.runtime.bus.inbox import HandOffPacer, Inbox, undeclare
+from beyond_self.runtime.bus.inbox import Inbox, undeclare
 from beyond_self.runtime.bus.recovery import RecoveringSource
 from beyond_self.schemas.base import Message
 from beyond_self.schemas.codec import SchemaError, decode, type_from_encoding
@@ -81,13 +81,11 @@ def _drain(
     """Body of a subscription's drain thread: channel -> inbox, a burst at a time, until the
     subscriber is undeclared (then `recv` raises)."""
     recv, try_recv, now = handler.recv, handler.try_recv, time.time_ns
-    pacer = HandOffPacer()
     while True:
         try:
             sample = recv()  # blocks with the GIL released
         except Exception:  # zenoh.ZError: channel closed, the subscriber is gone
             return
-        pacer.wait()
         batch = [convert(sample, now())]
         while len(batch) < _BURST:
             try:
@@ -98,7 +96,6 @@ def _drain(
                 break
             batch.append(convert(more, now()))
         inbox.extend(batch)
-        pacer.handed_off()
 
 
 def _drain_typed(
@@ -109,13 +106,11 @@ def _drain_typed(
     per burst (its samples were all taken off Zenoh then)."""
     recv, try_recv, now = handler.recv, handler.try_recv, time.time_ns
     wildcard = "*" in key or "$" in key
-    pacer = HandOffPacer()
     while True:
         try:
             sample: zenoh.Sample | None = recv()  # blocks with the GIL released
         except Exception:  # zenoh.ZError: channel closed, the subscriber is gone
             return
-        pacer.wait()
         at = now()
         batch: list[WirePayload] = []
         while sample is not None:
@@ -134,7 +129,6 @@ def _drain_typed(
             except Exception:  # closed while draining a burst: deliver what came, then leave
                 sample = None
         inbox.extend(batch)
-        pacer.handed_off()
 
 
 def _channel_subscriber(
