@@ -142,6 +142,8 @@ def main(keystore: Path, foreign: Path) -> int:
     for name, s in intruder_sessions.items():  # puts from outside, while the bus is busy
         s.put(f"{ROOT}/language/description", f"fake-{name}".encode())
         s.put(skeleton, f"fake-{name}".encode())
+    for name in intruder_sessions:  # each hears its own puts (locally), however loaded
+        intruder_seen[name].wait(skeleton)
 
     before = dict(seen.keys)
     describer.put(skeleton, b"fake-describer-skeleton")
