@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import os
 import signal
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -196,11 +197,11 @@ async def test_a_shard_killed_mid_burst_repeats_nothing_and_loses_nothing(
     tmp_path: Path,
 ) -> None:
     """Two shards of each stage on one workstation; three robots whose last gestures end on one
-    frame, their sources started together. Once a last gesture has started, the reasoner of
-    shard 1 is paused (so none of its robots can have its last gesture described before the
-    kill); once every robot's last gesture has ended (the burst in flight), it is SIGKILLed. Its
-    supervisor starts it again; each robot's lines are `beyond analyse`'s of its own recording,
-    each of its sentences said once, and nothing is left running."""
+    frame, their sources started together. Once one of shard 1's robots has said its first
+    gesture, the reasoner of shard 1 is paused (so none of its robots can have its last gesture
+    described before the kill); once every robot's last gesture has ended (the burst in flight),
+    it is SIGKILLed. Its supervisor starts it again; each robot's lines are `beyond analyse`'s
+    of its own recording, each of its sentences said once, and nothing is left running."""
     recordings = burst_recordings(tmp_path)
     expected = {robot: analysed(path) for robot, path in recordings.items()}
     assert len({last_end(path) for path in recordings.values()}) == 1  # a burst
@@ -224,7 +225,9 @@ async def test_a_shard_killed_mid_burst_repeats_nothing_and_loses_nothing(
     monitors: dict[str, PipelineMonitor] = {}
     seen: dict[tuple[str, str], set[int]] = {}  # (robot, segment event) -> its gestures
     victim: ServiceProcess | None = None
+    mine = [r for r in robots if shard_of(r, 2) == KILLED]
     guns: list[Callable[[], None]] = []
+    give_up = threading.Event()
     bus = await workstation.open()
     segments = bus.subscribe(for_robots("lab-$*", Keys().gesture_segment), GestureSegment, FRAMES)
 
@@ -248,10 +251,14 @@ async def test_a_shard_killed_mid_burst_repeats_nothing_and_loses_nothing(
         for robot in robots:  # each robot's runs, on its shard
             for stage in STAGES:
                 await bus.wait_alive(Keys(robot).alive(stage), timeout=60)
+        pauser = threading.Thread(
+            target=pause_once_said, args=(victim, tmp_path, mine, 1, give_up), daemon=True
+        )
+        pauser.start()
         guns = [bus.declare_token(Keys(robot).alive(GO)) for robot in robots]
         began = time.monotonic()
-        await wait_until("a last gesture started", lambda: bool(robots_at("start", 2)), 60)
-        victim.process.send_signal(signal.SIGSTOP)
+        await asyncio.to_thread(pauser.join, 60)
+        assert not pauser.is_alive(), "waiting for a first gesture of the killed shard's said"
         await wait_until("every last gesture ended", lambda: len(robots_at("end", 2)) == 3, 60)
         said_at_kill = {r: said(tmp_path, r) for r in robots}
         victim.process.kill()
@@ -260,6 +267,7 @@ async def test_a_shard_killed_mid_burst_repeats_nothing_and_loses_nothing(
         started += [sp for sp in workstation.processes if sp not in started]
         assert not [n for side in sides for n in side.exited()]
     finally:
+        give_up.set()
         if victim is not None:  # paused, it would not hear SIGTERM
             with contextlib.suppress(ProcessLookupError):
                 victim.process.send_signal(signal.SIGCONT)
@@ -276,12 +284,23 @@ async def test_a_shard_killed_mid_burst_repeats_nothing_and_loses_nothing(
     restarts = {n: r.count for n, r in workstation.restarts.items() if r.count}
     assert restarts == {victim.name: 1}, restarts
     # mid-burst: every robot's last gesture had ended, and the killed shard's had not been said
-    mine = [r for r in robots if shard_of(r, 2) == KILLED]
     assert mine and all(2 not in said_at_kill[r] for r in mine), said_at_kill
     for robot in robots:
         assert lines[robot] == expected[robot], (robot, lines[robot], expected[robot])
         assert said(tmp_path, robot) == [1, 2], said_lines(tmp_path, robot)  # each once
     assert descendants([sp.process.pid for sp in started]) == []  # nothing left behind
+
+
+def pause_once_said(
+    victim: ServiceProcess, folder: Path, robots: list[str], gesture: int, give_up: threading.Event
+) -> None:
+    """SIGSTOP `victim` as soon as one of `robots` has said `gesture`, polled from a thread of
+    its own: the test's loop, busy with its monitors, would see it late, and the pipeline could
+    say the next gesture first. Returns unpaused once `give_up` is set."""
+    while not give_up.wait(0.005):
+        if any(gesture in said(folder, r) for r in robots):
+            victim.process.send_signal(signal.SIGSTOP)
+            return
 
 
 def said_lines(folder: Path, robot: str) -> list[str]:
