@@ -126,6 +126,10 @@ async def test_a_named_monitor_is_a_consumer_a_restarted_producer_sends_what_it_
         book.heard(reasoner.ledger())
         assert book.consumers_have(key, ident, "gestures"), "the services alone: withheld"
         told = producing.subscribe(producing.keys.ledger("monitor"), Ledger, STATUS)
+        # the monitor announces its ledger once on start: its session must know `told` by then
+        probe = watching.publisher(watching.keys.ledger("monitor"), Ledger, STATUS)
+        await probe.wait_matching(timeout=30)
+        probe.close()
         monitor = PipelineMonitor(watching, lambda line: None, name="monitor")
         monitor.start()
         book.heard((await told.recv(timeout=10)).message)
