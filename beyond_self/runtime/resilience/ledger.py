@@ -84,6 +84,11 @@ class Handled:
             ranges = segments[segment] = []
             if len(segments) > SEGMENTS_KEPT:
                 del segments[min(segments)]
+        if ranges and ranges[-1][0] <= first <= ranges[-1][1] + 1:
+            # the next frame of a stream (every message but a restart's): it extends the last
+            # range, and ranges are disjoint and sorted, so no other range is touched
+            ranges[-1][1] = max(ranges[-1][1], last)
+            return
         i = bisect.bisect_left(ranges, [first, first])
         ranges.insert(i, [first, last])
         merged: list[list[int]] = []
@@ -137,11 +142,13 @@ class LedgerBook:
         self.positions: dict[str, tuple[int, list[InputPosition]]] = {}  # service -> (stamp, ...)
         self.last: dict[str, Ledger] = {}  # as heard, to answer for the service
         self.past: dict[str, int] = {}  # service -> its newest instance known to be dead
+        self.version = 0  # one more with every ledger heard: what was derived from it is stale
 
     def heard(self, ledger: Ledger, *, alive: bool = True) -> None:
         """Take `ledger` in; `alive=False`: kept on disk by an instance that died (the whole
         deployment was killed), so what it handled is done but nothing it has now."""
         name = ledger.service
+        self.version += 1
         self.handled.setdefault(name, Handled()).merge(ledger.handled)
         if not alive:
             # not answered for (`last`): whoever heard it from us would take it for alive, and
@@ -263,6 +270,9 @@ class Keeper:
         self.file: LedgerFile | None = None  # kept on this machine too (a state folder)
         self.kept = Handled()  # what its predecessors handled, as its state folder says
         self.said_key = ""  # the descriptions' key: a gesture is done once it is said
+        self._identified: tuple[str, Message | None, Identity | None] = ("", None, None)
+        # said() as of (book version, said_key)
+        self._said: tuple[int, str, frozenset[int]] = (-1, "", frozenset())
 
     async def ask(self, bus: Bus, log: logging.Logger, *, restarted: bool = False) -> None:
         """What the others know (their ledgers, and the copies they kept of everyone's, this
@@ -395,9 +405,18 @@ class Keeper:
 
     # -- the checks -------------------------------------------------------------------------
 
+    def _identify(self, key: str, message: Message) -> Identity | None:
+        """`identify`, once per message: a message is checked (`duplicate`) before its handler
+        and recorded (`record`) after it."""
+        last_key, last_message, ident = self._identified
+        if message is not last_message or key != last_key:
+            ident = identify(key, message)
+            self._identified = (key, message, ident)
+        return ident
+
     def duplicate(self, key: str, message: Message) -> Identity | None:
         """The identity of a message already handled on `key` (counted), else None."""
-        ident = identify(key, message)
+        ident = self._identify(key, message)
         if ident is not None and self.handled.has(key, ident):
             self.duplicates += 1
             return ident
@@ -406,7 +425,7 @@ class Keeper:
     def record(self, key: str, message: Message) -> bool:
         """`message` on `key` has been handled (a per-gesture one is told at once): whether
         it is new (False: handled already, or it has no identity)."""
-        ident = identify(key, message)
+        ident = self._identify(key, message)
         if ident is None or not self.handled.add(key, ident):
             return False
         if ident.per_gesture:
@@ -452,18 +471,22 @@ class Keeper:
         gesture whose description every consumer of descriptions has is beyond that (nothing
         is withheld when nobody takes descriptions). A gesture's start, end or cancel is always
         sent (two a gesture): a consumer cannot rebuild without them."""
-        if not self.book.taken(key, self.name):
+        said = self.said()
+        if not said or not self.book.taken(key, self.name):
             return False
         ident = identify(key, message)
-        if ident is None or ident.kind in SEGMENT_EVENTS:
+        if ident is None or ident.kind in SEGMENT_EVENTS or ident.segment_id not in said:
             return False
-        if not self.book.consumers_have(key, ident, self.name):
-            return False
-        return ident.segment_id in self.said()
+        return self.book.consumers_have(key, ident, self.name)
 
-    def said(self) -> set[int]:
+    def said(self) -> frozenset[int]:
         """Gestures whose description every consumer of descriptions has handled (in any of its
-        instances: a sentence said, a line printed, is kept by their own records)."""
-        if not self.said_key or not self.book.taken(self.said_key, self.name):
-            return set()
-        return self.book.done(self.said_key, "description", self.name)
+        instances: a sentence said, a line printed, is kept by their own records). Asked before
+        every put, it is worked out again only when a ledger has been heard since."""
+        version, key, said = self._said
+        if version != self.book.version or key != self.said_key:
+            said = frozenset()
+            if self.said_key and self.book.taken(self.said_key, self.name):
+                said = frozenset(self.book.done(self.said_key, "description", self.name))
+            self._said = (self.book.version, self.said_key, said)
+        return said
